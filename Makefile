@@ -1,0 +1,27 @@
+# User entry points. Every target does its own set-up first (scripts/bootstrap.sh, idempotent).
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+
+.PHONY: setup demo test lint format bench clean
+
+setup:
+	@./scripts/bootstrap.sh
+
+demo: setup  ## the main job
+	@$(VENV)/bin/friction-demo $(ARGS)
+
+test: setup  ## the full test suite (lint + pytest)
+	@./scripts/run-tests.sh $(ARGS)
+
+lint: setup
+	@$(VENV)/bin/ruff check . && $(VENV)/bin/ruff format --check .
+
+format: setup
+	@$(VENV)/bin/ruff check --fix . ; $(VENV)/bin/ruff format .
+
+bench: setup  ## every benchmark; figures to bench/results/*.json
+	@./scripts/run-benchmarks.sh $(ARGS)
+
+clean:
+	rm -rf build install log .pytest_cache

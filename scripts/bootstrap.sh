@@ -1,0 +1,73 @@
+#!/usr/bin/env bash
+# Idempotent set-up of the development environment (no ROS apt repository needed):
+#   1. .venv with pinned ROS 2 Jazzy wheels and Python dependencies (requirements.txt)
+#   2. the CMake path fix for the wheels' exported targets (see README "Layout")
+#   3. colcon build of the interface package msg_defs/friction_msgs, installed into the venv prefix
+#   4. friction_ros installed in editable mode so its entry points are on the venv PATH
+# Every step is skipped when its inputs did not change, so a second run takes about a second.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+ROOT=$(pwd)
+VENV="$ROOT/.venv"
+PY=${PYTHON:-python3}
+STAMPS="$VENV/.friction_ros_stamps"
+
+say() { printf '[bootstrap] %s\n' "$*"; }
+hash_of() { cat "$@" | sha256sum | cut -d' ' -f1; }
+stamp_ok() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
+stamp_set() { mkdir -p "$STAMPS"; echo "$2" > "$STAMPS/$1"; }
+
+if [ ! -x "$VENV/bin/python" ]; then
+  say "creating $VENV with $($PY --version)"
+  "$PY" -m venv "$VENV"
+fi
+VPY="$VENV/bin/python"
+SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
+
+req_hash=$(hash_of requirements.txt)
+if ! stamp_ok requirements "$req_hash"; then
+  say "installing pinned dependencies (ROS 2 Jazzy wheels, numpy, scipy, python-can, mcap ...)"
+  mkdir -p "$ROOT/build"
+  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.txt > build/pip-requirements.log 2>&1 \
+    || { grep -v '^WARNING: Location' build/pip-requirements.log | tail -20; say "pip install failed"; exit 1; }
+  "$VPY" -c 'import rclpy, numpy, scipy, can, mcap' || { say "dependency install failed"; exit 1; }
+  # The message wheels' exported CMake targets name include folders of the machine that built
+  # them; point them at this venv's Python headers and numpy (reference: ros-jazzy-from-pip.md).
+  PYINC=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["include"])')
+  NPINC=$("$VPY" -c 'import numpy; print(numpy.get_include())')
+  grep -rlZ --include='*.cmake' '/opt/python/cp311-cp311' "$VENV/share" 2>/dev/null | xargs -0 -r sed -i \
+    -e "s#/opt/python/cp311-cp311/lib/python3.11/site-packages/numpy/_core/include#$NPINC#g" \
+    -e "s#/opt/python/cp311-cp311/include/python3.11#$PYINC#g" || true
+  stamp_set requirements "$req_hash"
+  rm -f "$STAMPS/msgs" "$STAMPS/package"
+fi
+
+mkdir -p "$ROOT/build"
+msg_hash=$(hash_of msg_defs/friction_msgs/package.xml msg_defs/friction_msgs/CMakeLists.txt msg_defs/friction_msgs/msg/*.msg)
+if ! stamp_ok msgs "$msg_hash"; then
+  say "building msg_defs/friction_msgs with colcon into the venv prefix"
+  export AMENT_PREFIX_PATH="$VENV" CMAKE_PREFIX_PATH="$VENV"
+  # Installed into the venv prefix: the ROS wheels' start-up hook already puts <venv>/lib on the
+  # library path and <venv>/share on the ament index, so the messages import with no extra set-up.
+  (cd "$ROOT" && PATH="$VENV/bin:$PATH" "$VENV/bin/colcon" --log-base build/colcon-log build \
+     --base-paths msg_defs --build-base build/colcon --install-base "$VENV" --merge-install \
+     --cmake-args -DBUILD_TESTING=OFF -DPython3_EXECUTABLE="$VPY" \
+     --event-handlers console_direct- summary+ > build/colcon-msgs.log 2>&1) \
+    || { tail -40 build/colcon-msgs.log; say "colcon build of friction_msgs failed (log: build/colcon-msgs.log)"; exit 1; }
+  "$VPY" -c 'from friction_msgs.msg import DriveState, FrictionEstimate, ControllerState, ExperimentEvent' \
+    || { say "friction_msgs built but does not import"; exit 1; }
+  stamp_set msgs "$msg_hash"
+fi
+
+pkg_hash=$(hash_of setup.py setup.cfg package.xml)
+if ! stamp_ok package "$pkg_hash"; then
+  say "installing friction_ros (editable) and its console scripts"
+  "$VPY" -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e "$ROOT" \
+    > build/pip-friction_ros.log 2>&1 || { tail -20 build/pip-friction_ros.log; say "pip install -e . failed"; exit 1; }
+  (cd / && "$VPY" -c 'import friction_ros') || { say "friction_ros does not import"; exit 1; }
+  # setup.cfg installs console scripts to <prefix>/lib/friction_ros (where `ros2 run` looks);
+  # link them into the venv's bin so they are on PATH after `source .venv/bin/activate`.
+  for exe in "$VENV"/lib/friction_ros/*; do [ -f "$exe" ] && ln -sf "$exe" "$VENV/bin/$(basename "$exe")"; done
+  stamp_set package "$pkg_hash"
+fi
+say "ready: $VENV"

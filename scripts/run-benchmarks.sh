@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Run every bench/*.py with the project's venv; each prints a table and writes bench/results/<name>.json.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+./scripts/bootstrap.sh
+mkdir -p bench/results
+for b in bench/*.py; do
+  [ "$(basename "$b")" = "_common.py" ] && continue
+  echo "== $b"
+  .venv/bin/python "$b" "$@"
+done

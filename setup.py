@@ -1,0 +1,31 @@
+"""ament_python package friction_ros (also pip-installable for the venv set-up)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "friction_ros"
+
+# Console scripts: ROS nodes (ros2 run friction_ros <name>) and user CLIs.
+ENTRY_POINTS = [
+    "friction-doctor = friction_ros.cli.doctor:main",
+]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(include=[PACKAGE, f"{PACKAGE}.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/params", glob("params/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.launch.py")),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="friction_ros maintainers",
+    maintainer_email="maintainers@friction-ros.org",
+    description="Friction identification and compensation for geared servo joints (ROS 2 Jazzy).",
+    license="Apache-2.0",
+    entry_points={"console_scripts": ENTRY_POINTS},
+)
