@@ -1,0 +1,370 @@
+"""Shared rclpy plumbing for the friction_ros nodes: QoS, parameters, diagnostics, loop, main().
+
+QoS choices (documented in README "Interfaces"):
+
+* ``COMMAND_QOS``: reliable, keep-last **1**. A queued stale torque command is a safety bug
+  (ros_odrive #32): the newest command is the only one that matters.
+* ``STATE_QOS``: reliable, keep-last 10. Joint states, controller/estimator states and events are
+  recorded for identification, so they must not be dropped under load; the depth absorbs bursts.
+* ``SENSOR_QOS``: best effort, keep-last 5 (rclpy's sensor-data profile) for high-rate telemetry
+  that may be lost (raw drive state).
+* ``LATCHED_QOS``: reliable, transient-local depth 1 for coefficients that late joiners need.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import rclpy
+import rclpy.exceptions
+import rclpy.parameter
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.node import Node
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+from rclpy.signals import SignalHandlerOptions
+
+from friction_ros.core.validation import ParameterError
+
+COMMAND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+SENSOR_QOS = qos_profile_sensor_data
+LATCHED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)
+
+_TYPES = {
+    bool: ParameterType.PARAMETER_BOOL,
+    int: ParameterType.PARAMETER_INTEGER,
+    float: ParameterType.PARAMETER_DOUBLE,
+    str: ParameterType.PARAMETER_STRING,
+    list: ParameterType.PARAMETER_DOUBLE_ARRAY,
+}
+
+
+@dataclass
+class Param:
+    """One declared ROS parameter: default value, description, optional range/choices."""
+
+    name: str
+    default: Any
+    description: str
+    lo: float | None = None
+    hi: float | None = None
+    choices: tuple[str, ...] = ()
+    read_only: bool = False
+    unit: str = ""
+
+    @property
+    def ptype(self) -> int:
+        if isinstance(self.default, list):
+            if self.default and isinstance(self.default[0], str):
+                return ParameterType.PARAMETER_STRING_ARRAY
+            return ParameterType.PARAMETER_DOUBLE_ARRAY
+        return _TYPES[type(self.default)]
+
+    def descriptor(self) -> ParameterDescriptor:
+        text = self.description + (f" [{self.unit}]" if self.unit else "")
+        constraints = ""
+        if self.choices:
+            constraints = "one of: " + ", ".join(self.choices)
+        d = ParameterDescriptor(
+            name=self.name,
+            type=self.ptype,
+            description=text,
+            additional_constraints=constraints,
+            read_only=self.read_only,
+        )
+        if self.lo is not None or self.hi is not None:
+            lo = -sys.float_info.max if self.lo is None else self.lo
+            hi = sys.float_info.max if self.hi is None else self.hi
+            if isinstance(self.default, bool):
+                pass
+            elif isinstance(self.default, int):
+                d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+            elif isinstance(self.default, float):
+                d.floating_point_range = [
+                    FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)
+                ]
+        return d
+
+    def check(self, value: Any) -> Any:
+        """Validate ``value``; raise ParameterError naming this parameter and the allowed values."""
+        if isinstance(self.default, float) and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if isinstance(self.default, list):
+            if not isinstance(value, (list, tuple)):
+                raise ParameterError(f"{self.name} = {value!r} must be a list")
+            value = list(value)
+            if self.ptype == ParameterType.PARAMETER_DOUBLE_ARRAY:
+                value = [float(v) for v in value]
+                if any(not math.isfinite(v) for v in value):
+                    raise ParameterError(f"{self.name} = {value!r} must contain finite numbers only")
+            return value
+        if type(value) is not type(self.default):
+            want = type(self.default).__name__
+            raise ParameterError(f"{self.name} = {value!r} has type {type(value).__name__}: must be {want}")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ParameterError(f"{self.name} = {value} is not finite")
+        if self.choices and value not in self.choices:
+            raise ParameterError(
+                f"{self.name} = {value!r} is not allowed: must be one of {', '.join(self.choices)}"
+            )
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            if (self.lo is not None and value < self.lo) or (self.hi is not None and value > self.hi):
+                lo = "-inf" if self.lo is None else f"{self.lo:g}"
+                hi = "inf" if self.hi is None else f"{self.hi:g}"
+                rng = f"[{lo}, {hi}]"
+                unit = f" {self.unit}" if self.unit else ""
+                raise ParameterError(f"{self.name} = {value:g} is out of range: must be in {rng}{unit}")
+        return value
+
+
+def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
+    """Declare ``params`` with descriptors and return their validated values.
+
+    Raises ParameterError (the node refuses to start) when a value from a parameter file is invalid.
+    Parameters given in the file but not declared are reported too, so typos do not pass silently.
+    """
+    values: dict[str, Any] = {}
+    specs = list(params)
+    overrides = getattr(node, "_parameter_overrides", {})
+    for p in specs:
+        given = overrides.get(p.name)
+        if given is not None and isinstance(p.default, float) and given.type_ == given.Type.INTEGER:
+            # YAML "gain: 3" for a double parameter: accept it as 3.0 instead of a type error.
+            overrides[p.name] = rclpy.parameter.Parameter(p.name, value=float(given.value))
+        try:
+            node.declare_parameter(p.name, p.default, p.descriptor(), ignore_override=False)
+        except (
+            rclpy.exceptions.InvalidParameterValueException,
+            rclpy.exceptions.InvalidParameterTypeException,
+        ) as exc:
+            given_value = overrides[p.name].value if p.name in overrides else p.default
+            allowed = p.descriptor()
+            rng = ""
+            if allowed.floating_point_range:
+                r = allowed.floating_point_range[0]
+                rng = f"; allowed range [{r.from_value:g}, {r.to_value:g}]"
+            elif allowed.integer_range:
+                r = allowed.integer_range[0]
+                rng = f"; allowed range [{r.from_value}, {r.to_value}]"
+            raise ParameterError(
+                f"{node.get_name()}: parameter {p.name} = {given_value!r} is invalid "
+                f"(expected {type(p.default).__name__}{rng}): {p.description}"
+            ) from exc
+    for p in specs:
+        value = node.get_parameter(p.name).value
+        values[p.name] = p.check(value)
+    declared = {p.name for p in specs} | {"use_sim_time"}
+    unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides"))
+    if unknown:
+        raise ParameterError(
+            f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
+            f"declared parameters are: {', '.join(sorted(declared))}"
+        )
+    return values
+
+
+def add_runtime_validation(
+    node: Node, specs: Iterable[Param], apply: Callable[[dict[str, Any]], None] | None = None
+) -> None:
+    """Validate run-time parameter changes with the same rules; reject with a clear reason.
+
+    ``apply`` receives ``{name: value}`` of an accepted change and may raise ParameterError (for
+    cross-parameter checks done by the core); the change is then rejected and the node keeps its
+    last good state.
+    """
+    by_name = {p.name: p for p in specs}
+
+    def _callback(changes) -> SetParametersResult:
+        accepted: dict[str, Any] = {}
+        try:
+            for c in changes:
+                if c.name == "use_sim_time":
+                    continue
+                spec = by_name.get(c.name)
+                if spec is None:
+                    raise ParameterError(f"{c.name} is not a parameter of {node.get_name()}")
+                if spec.read_only:
+                    raise ParameterError(f"{c.name} is read-only (restart the node to change it)")
+                accepted[c.name] = spec.check(c.value)
+            if apply is not None and accepted:
+                apply(accepted)
+        except (ParameterError, ValueError) as exc:
+            node.get_logger().warning(f"rejected parameter change: {exc}")
+            return SetParametersResult(successful=False, reason=str(exc))
+        return SetParametersResult(successful=True)
+
+    node.add_on_set_parameters_callback(_callback)
+
+
+@dataclass
+class LoopStats:
+    """Timing statistics of a fixed-rate loop (periods in seconds)."""
+
+    cycles: int = 0
+    overruns: int = 0
+    max_lateness: float = 0.0
+    last_exec: float = 0.0
+    exec_times: list[float] = field(default_factory=list)
+
+
+class FixedRateLoop:
+    """Run ``callback()`` at a fixed period on a dedicated thread, counting overruns.
+
+    rclpy timers drift at 1 kHz (anchors: rcl#289, rclpy#1452); this loop sleeps to absolute
+    deadlines on the monotonic clock and spins the last ~0.2 ms for accuracy. A cycle that starts
+    more than one period late counts as an overrun and the schedule is re-anchored (no burst of
+    catch-up cycles).
+    """
+
+    SPIN_S = 0.0002
+
+    def __init__(self, period: float, callback: Callable[[], None], name: str = "control_loop"):
+        if not period > 0:
+            raise ParameterError(f"loop period = {period} must be > 0 s")
+        self.period = period
+        self.callback = callback
+        self.stats = LoopStats()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+
+    def start(self) -> None:
+        self._thread.start()
+
+    def stop(self, timeout: float = 2.0) -> None:
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+
+    def _run(self) -> None:
+        next_t = time.monotonic()
+        while not self._stop.is_set():
+            now = time.monotonic()
+            remaining = next_t - now
+            if remaining > self.SPIN_S:
+                time.sleep(remaining - self.SPIN_S)
+            while time.monotonic() < next_t:
+                pass
+            start = time.monotonic()
+            lateness = start - next_t
+            self.stats.max_lateness = max(self.stats.max_lateness, lateness)
+            if lateness > self.period:
+                self.stats.overruns += 1
+                next_t = start
+            self.callback()
+            self.stats.cycles += 1
+            self.stats.last_exec = time.monotonic() - start
+            next_t += self.period
+
+
+class DiagnosticsPublisher:
+    """Publish one ``diagnostic_msgs/DiagnosticArray`` status for a node on ``diagnostics``."""
+
+    def __init__(self, node: Node, name: str, hardware_id: str = ""):
+        self.node = node
+        self.name = name
+        self.hardware_id = hardware_id
+        self.pub = node.create_publisher(DiagnosticArray, "diagnostics", STATE_QOS)
+
+    def publish(self, level: int, message: str, values: dict[str, Any]) -> DiagnosticStatus:
+        status = DiagnosticStatus(
+            level=bytes([level]) if isinstance(DiagnosticStatus().level, bytes) else level,
+            name=f"{self.node.get_namespace().rstrip('/')}/{self.name}",
+            message=message,
+            hardware_id=self.hardware_id,
+            values=[KeyValue(key=k, value=_fmt(v)) for k, v in values.items()],
+        )
+        msg = DiagnosticArray(status=[status])
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        self.pub.publish(msg)
+        return status
+
+
+def _fmt(v: Any) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+OK = DiagnosticStatus.OK
+WARN = DiagnosticStatus.WARN
+ERROR = DiagnosticStatus.ERROR
+STALE = DiagnosticStatus.STALE
+
+
+def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Standard ``main()`` of a friction_ros node.
+
+    Starts rclpy, builds the node (a ParameterError/ValueError there prints one clear line and
+    exits with code 2: the node refuses to start), spins until Ctrl-C/SIGTERM, then calls the
+    node's ``on_shutdown()`` (which must leave actuators safe: zero torque, drive idle) before
+    destroying it.
+    """
+    # Our own SIGINT/SIGTERM handling keeps the context alive until on_shutdown() has zeroed outputs.
+    rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    node = None
+    try:
+        node = factory()
+    except (ParameterError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    stop = threading.Event()
+
+    def _on_signal(signum, _frame):
+        stop.set()
+
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
+    executor = rclpy.executors.SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+    except rclpy.executors.ExternalShutdownException:
+        pass
+    finally:
+        shutdown = getattr(node, "on_shutdown", None)
+        if shutdown is not None:
+            try:
+                shutdown()
+            except Exception as exc:  # last line of defence: report, still tear down
+                print(f"error during shutdown of {node.get_name()}: {exc}", file=sys.stderr)
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
