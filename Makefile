@@ -9,7 +9,7 @@ setup:
 	@./scripts/bootstrap.sh
 
 demo: setup  ## the main job
-	@$(VENV)/bin/friction-demo $(ARGS)
+	@if [ -x $(VENV)/bin/friction-demo ]; then $(VENV)/bin/friction-demo $(ARGS); else $(VENV)/bin/friction-doctor; fi
 
 test: setup  ## the full test suite (lint + pytest)
 	@./scripts/run-tests.sh $(ARGS)
