@@ -1,0 +1,318 @@
+"""Common machinery of the friction model library: coefficient specs, validation, config round-trip.
+
+Sign convention (docs/architecture.md): a model returns the friction torque that *opposes* motion, so
+in steady sliding ``steady_state(v) * v >= 0`` and the plant applies ``-friction``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from friction_ros.core.validation import ParameterError, check_keys, check_real
+
+from . import _kernels as K
+
+
+@dataclass(frozen=True)
+class Coef:
+    """Specification of one model coefficient (name, default, allowed range, unit, meaning)."""
+
+    name: str
+    default: float | None = None  # None: required
+    lo: float | None = 0.0
+    hi: float | None = None
+    lo_open: bool = False
+    unit: str = ""
+    doc: str = ""
+    is_list: bool = False
+
+
+class FrictionModel:
+    """Base class of every friction model.
+
+    Subclasses declare ``name``, ``COEFS`` (tuple of :class:`Coef`), ``KIND`` (kernel id) and
+    ``is_dynamic``; they implement ``_steady(v)`` (vectorised numpy) and may add cross-checks in
+    ``_validate``.
+    """
+
+    name: ClassVar[str] = "base"
+    COEFS: ClassVar[tuple[Coef, ...]] = ()
+    KIND: ClassVar[int] = K.K_NONE
+    is_dynamic: ClassVar[bool] = False
+    #: True when the model's torque depends on the transmitted (load) torque (gearbox term)
+    load_dependent: ClassVar[bool] = False
+
+    def __init__(self, **coefficients: Any) -> None:
+        check_keys(self.name, coefficients, [c.name for c in self.COEFS])
+        vals: OrderedDict[str, Any] = OrderedDict()
+        for c in self.COEFS:
+            key = f"{self.name}.{c.name}"
+            raw = coefficients.get(c.name, c.default)
+            if raw is None:
+                raise ParameterError(f"{key} is missing: required {self._range_text(c)}")
+            if c.is_list:
+                if isinstance(raw, (str, bytes)) or not isinstance(raw, (Sequence, np.ndarray)):
+                    raise ParameterError(f"{key} = {raw!r} must be a list of numbers (flat float list)")
+                vals[c.name] = [
+                    check_real(f"{key}[{i}]", x, c.lo, c.hi, lo_open=c.lo_open, unit=c.unit)
+                    for i, x in enumerate(list(raw))
+                ]
+                if not vals[c.name]:
+                    raise ParameterError(f"{key} is empty: must hold at least one element")
+            else:
+                vals[c.name] = check_real(key, raw, c.lo, c.hi, lo_open=c.lo_open, unit=c.unit)
+        self._c = vals
+        self._validate()
+        self._p = np.ascontiguousarray(self._kernel_params(), dtype=np.float64)
+        self._state = self.initial_state()
+
+    # ---- helpers -----------------------------------------------------------------------------------
+    @staticmethod
+    def _range_text(c: Coef) -> str:
+        parts = []
+        if c.lo is not None:
+            parts.append(f"{'>' if c.lo_open else '>='} {c.lo:g}")
+        if c.hi is not None:
+            parts.append(f"<= {c.hi:g}")
+        unit = f" [{c.unit}]" if c.unit else ""
+        return (" and ".join(parts) or "finite") + unit
+
+    def _validate(self) -> None:
+        """Cross-coefficient checks (override)."""
+
+    def _require_fs_ge_fc(self, fs: str = "fs", fc: str = "fc") -> None:
+        if self._c[fs] < self._c[fc]:
+            raise ParameterError(
+                f"{self.name}.{fs} = {self._c[fs]:g} is out of range: must be >= {self.name}.{fc} "
+                f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]"
+            )
+
+    def _kernel_params(self) -> list[float]:
+        out: list[float] = []
+        for v in self._c.values():
+            out.extend(v if isinstance(v, list) else [v])
+        return out
+
+    # ---- public interface --------------------------------------------------------------------------
+    @property
+    def coefficients(self) -> OrderedDict[str, Any]:
+        """Ordered mapping coefficient name -> value (float, or list of floats for element arrays)."""
+        return OrderedDict((k, list(v) if isinstance(v, list) else v) for k, v in self._c.items())
+
+    def __getitem__(self, key: str) -> Any:
+        return self.coefficients[key]
+
+    def to_config(self) -> dict:
+        """Return ``{"model": name, <coefficient>: value, ...}`` (one ROS parameter YAML section)."""
+        return {"model": self.name, **self.coefficients}
+
+    def with_coefficients(self, **changes: Any) -> FrictionModel:
+        """Return a new model of the same kind with some coefficients replaced (validated)."""
+        c = dict(self.coefficients)
+        c.update(changes)
+        return type(self)(**c)
+
+    @property
+    def param_names(self) -> list[str]:
+        """Names of the flat parameter vector (lists expanded as ``k[0]``, ``k[1]`` ...)."""
+        names = []
+        for k, v in self._c.items():
+            if isinstance(v, list):
+                names.extend(f"{k}[{i}]" for i in range(len(v)))
+            else:
+                names.append(k)
+        return names
+
+    def param_vector(self) -> np.ndarray:
+        """Flat float vector in ``param_names`` order (the row format of ``simulate_batch``)."""
+        out: list[float] = []
+        for v in self._c.values():
+            out.extend(v if isinstance(v, list) else [v])
+        return np.array(out, dtype=float)
+
+    def from_param_vector(self, vec: Sequence[float]) -> FrictionModel:
+        """Inverse of :meth:`param_vector` for a model of the same structure (validated)."""
+        vec = [float(x) for x in vec]
+        if len(vec) != len(self.param_names):
+            raise ParameterError(
+                f"{self.name} parameter vector has {len(vec)} entries: must have {len(self.param_names)} "
+                f"({', '.join(self.param_names)})"
+            )
+        c: dict[str, Any] = {}
+        i = 0
+        for k, v in self._c.items():
+            if isinstance(v, list):
+                c[k] = vec[i : i + len(v)]
+                i += len(v)
+            else:
+                c[k] = vec[i]
+                i += 1
+        return type(self)(**c)
+
+    def _steady(self, v: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def steady_state(self, v: Any) -> np.ndarray | float:
+        """Vectorised steady-sliding friction torque at velocity ``v`` (scalar or array)."""
+        arr = np.asarray(v, dtype=float)
+        out = self._steady(np.atleast_1d(arr))
+        return float(out[0]) if arr.ndim == 0 else out.reshape(arr.shape)
+
+    def breakaway(self, direction: float = 1.0) -> float:
+        """Friction magnitude just off zero velocity in ``direction`` (the plant's stick threshold)."""
+        return abs(float(self.steady_state(math.copysign(1e-12, direction))))
+
+    def max_stiffness(self) -> float:
+        """Largest presliding stiffness [N*m/rad]; 0 for static models (used to choose sub-steps)."""
+        return 0.0
+
+    # kernel view (used by the plant) ---------------------------------------------------------------
+    @property
+    def kernel_kind(self) -> int:
+        return self.KIND
+
+    @property
+    def kernel_params(self) -> np.ndarray:
+        return self._p
+
+    def initial_state(self) -> np.ndarray:
+        return np.zeros(1)
+
+    def __repr__(self) -> str:
+        inner = ", ".join(f"{k}={v!r}" for k, v in self._c.items())
+        return f"{type(self).__name__}({inner})"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, FrictionModel) and self.to_config() == other.to_config()
+
+    __hash__ = None  # type: ignore[assignment]
+
+
+class StaticModel(FrictionModel):
+    """A memoryless velocity map: ``torque(v)`` is ``steady_state(v)``."""
+
+    is_dynamic = False
+
+    def torque(self, v: Any, load: Any = 0.0) -> np.ndarray | float:
+        """Vectorised friction torque at velocity ``v`` (``load``: transmitted torque, gearbox models)."""
+        return self.steady_state(v)
+
+
+class DynamicModel(FrictionModel):
+    """A model with internal state: ``reset/state/step/simulate/simulate_batch``."""
+
+    is_dynamic = True
+    STATE_NAMES: ClassVar[tuple[str, ...]] = ("z",)
+
+    def reset(self, state: Any = None) -> None:
+        """Reset the internal state (relaxed, zero force) or set it to ``state``."""
+        if state is None:
+            self._state = self.initial_state()
+        else:
+            st = np.array(state, dtype=float).ravel()
+            if st.shape != self.initial_state().shape:
+                raise ParameterError(
+                    f"{self.name} state has {st.size} entries: must have {self.initial_state().size}"
+                )
+            self._state = st
+
+    @property
+    def state(self) -> np.ndarray:
+        """Copy of the internal state vector."""
+        return self._state.copy()
+
+    def step(self, v: float, dt: float) -> float:
+        """Advance the state by ``dt`` at velocity ``v`` (held constant) and return the friction torque."""
+        return float(K.friction_eval(self.KIND, self._p, self._state, float(v), float(dt), 0.0))
+
+    def simulate(self, v_traj: Any, dt: float, reset: bool = True) -> np.ndarray:
+        """Torque after each step of the zero-order-held velocity trajectory ``v_traj`` (from rest)."""
+        v = np.ascontiguousarray(v_traj, dtype=float).ravel()
+        check_real(f"{self.name}.dt", dt, 0.0, lo_open=True, unit="s")
+        if reset:
+            self.reset()
+        out = np.empty(v.size)
+        K.simulate_kernel(self.KIND, self._p, self._state, v, float(dt), out)
+        return out
+
+    def _check_rows(self, pm: np.ndarray) -> None:
+        """Vectorised range check of a parameter matrix (same limits as the constructor)."""
+        names = self.param_names
+        specs = []
+        for c in self.COEFS:
+            n = len(self._c[c.name]) if c.is_list else 1
+            specs.extend([c] * n)
+        for j, (nm, c) in enumerate(zip(names, specs)):
+            col = pm[:, j]
+            bad = ~np.isfinite(col)
+            if c.lo is not None:
+                bad |= col <= c.lo if c.lo_open else col < c.lo
+            if c.hi is not None:
+                bad |= col > c.hi
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise ParameterError(
+                    f"{self.name}.{nm} = {col[r]:g} (row {r}) is out of range: must be {self._range_text(c)}"
+                )
+        if "fs" in names and "fc" in names:
+            fs, fc = pm[:, names.index("fs")], pm[:, names.index("fc")]
+            bad = fs < fc
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise ParameterError(
+                    f"{self.name}.fs = {fs[r]:g} (row {r}) is out of range: must be >= {self.name}.fc = {fc[r]:g}"
+                )
+
+    def batch_kernel_params(self, param_matrix: Any) -> np.ndarray:
+        """Convert rows in ``param_names`` order into kernel parameter rows (override if different)."""
+        return np.ascontiguousarray(param_matrix, dtype=float)
+
+    def simulate_batch(
+        self, param_matrix: Any, v_traj: Any, dt: float, *, use_numba: bool = True
+    ) -> np.ndarray:
+        """Simulate many parameter sets at once from rest.
+
+        ``param_matrix``: (n_sets, len(param_names)) in ``param_names`` order; returns (n_sets, len(v)).
+        Uses the compiled kernel (numba) or, with ``use_numba=False`` / without numba, a pure-numpy
+        path vectorised over the parameter axis.
+        """
+        pm = np.atleast_2d(np.asarray(param_matrix, dtype=float))
+        if pm.shape[1] != len(self.param_names):
+            raise ParameterError(
+                f"{self.name} param_matrix has {pm.shape[1]} columns: must have {len(self.param_names)} "
+                f"({', '.join(self.param_names)})"
+            )
+        self._check_rows(pm)
+        check_real(f"{self.name}.dt", dt, 0.0, lo_open=True, unit="s")
+        v = np.ascontiguousarray(v_traj, dtype=float).ravel()
+        if use_numba and K.HAVE_NUMBA:
+            kp = self.batch_kernel_params(pm)
+            st0 = np.zeros((pm.shape[0], self.initial_state().size))
+            out = np.empty((pm.shape[0], v.size))
+            K.simulate_batch_kernel(self.KIND, kp, st0, v, float(dt), out)
+            return out
+        return self._simulate_batch_numpy(pm, v, float(dt))
+
+    def _simulate_batch_numpy(
+        self, pm: np.ndarray, v: np.ndarray, dt: float
+    ) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+
+def as_array(v: Any) -> np.ndarray:
+    return np.asarray(v, dtype=float)
+
+
+def stribeck_np(av: np.ndarray, fc: Any, fs: Any, vs: Any, delta: Any) -> np.ndarray:
+    """Vectorised Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta)."""
+    return fc + (fs - fc) * np.exp(-((av / vs) ** delta))
+
+
+def merge_mapping(m: Mapping[str, Any] | None) -> dict:
+    return dict(m or {})

@@ -1,0 +1,326 @@
+"""Static (memoryless) friction maps, vectorised over velocity arrays.
+
+Every map is odd in v unless stated (sgn(0) = 0, seed 004 eq. (6)) and returns the torque that
+opposes motion (``F * v >= 0``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from friction_ros.core.validation import ParameterError
+
+from . import _kernels as K
+from .base import Coef, StaticModel, stribeck_np
+
+_FC = Coef("fc", lo=0.0, unit="N*m", doc="Coulomb (kinetic) friction level")
+_FS = Coef("fs", lo=0.0, unit="N*m", doc="static friction (stiction) level")
+_VS = Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity")
+_DELTA = Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck shape exponent")
+_FV = Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient")
+
+
+class ZeroFriction(StaticModel):
+    """No friction: F = 0."""
+
+    name = "none"
+    KIND = K.K_NONE
+
+    def _steady(self, v):
+        return np.zeros_like(v)
+
+
+class Coulomb(StaticModel):
+    """Coulomb friction F = Fc sgn(v) (seed 004 eq. (1); seed 002 eq. (3); seed 001 eq. (2))."""
+
+    name = "coulomb"
+    KIND = K.K_COULOMB
+    COEFS = (_FC,)
+
+    def _steady(self, v):
+        return self._c["fc"] * np.sign(v)
+
+
+class Viscous(StaticModel):
+    """Viscous friction F = Fv v (seed 004 eq. (2); seed 001 eq. (3))."""
+
+    name = "viscous"
+    KIND = K.K_VISCOUS
+    COEFS = (Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),)
+
+    def _steady(self, v):
+        return self._c["fv"] * v
+
+
+class CoulombViscous(StaticModel):
+    """Coulomb + viscous F = Fc sgn(v) + Fv v (seed 004 eq. (3); seed 002 eq. (1) with C_r)."""
+
+    name = "coulomb_viscous"
+    KIND = K.K_COULOMB_VISCOUS
+    COEFS = (_FC, Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"))
+
+    def _steady(self, v):
+        return self._c["fc"] * np.sign(v) + self._c["fv"] * v
+
+
+class Stribeck(StaticModel):
+    """Exponential Stribeck family F = [Fc + (Fs - Fc) exp(-|v/vs|^delta)] sgn(v) + Fv v.
+
+    Seed 004 eq. (5) (delta = 1: Tustin, delta = 2: Gaussian); appendix Z of the seeds 000/002 extract.
+    Requires Fs >= Fc.
+    """
+
+    name = "stribeck"
+    KIND = K.K_STRIBECK
+    COEFS = (_FC, _FS, _VS, _DELTA, _FV)
+
+    def _validate(self):
+        self._require_fs_ge_fc()
+
+    def _steady(self, v):
+        c = self._c
+        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], c["delta"]) * np.sign(v) + c["fv"] * v
+
+
+class Tustin(Stribeck):
+    """Tustin model: the Stribeck family with delta = 1 (seed 004 eq. (5); extract C.5)."""
+
+    name = "tustin"
+    COEFS = (_FC, _FS, _VS, _FV)
+
+    def _kernel_params(self):
+        c = self._c
+        return [c["fc"], c["fs"], c["vs"], 1.0, c["fv"]]
+
+    def _steady(self, v):
+        c = self._c
+        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], 1.0) * np.sign(v) + c["fv"] * v
+
+
+class Gaussian(Tustin):
+    """Gaussian Stribeck model: the Stribeck family with delta = 2 (seed 004 eq. (5))."""
+
+    name = "gaussian"
+
+    def _kernel_params(self):
+        c = self._c
+        return [c["fc"], c["fs"], c["vs"], 2.0, c["fv"]]
+
+    def _steady(self, v):
+        c = self._c
+        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], 2.0) * np.sign(v) + c["fv"] * v
+
+
+class Lorentzian(StaticModel):
+    """Lorentzian (Hess & Soom) F = [Fc + (Fs - Fc) / (1 + (v/vs)^2)] sgn(v) + Fv v (seed 004 eq. (7))."""
+
+    name = "lorentzian"
+    KIND = K.K_LORENTZIAN
+    COEFS = (_FC, _FS, _VS, _FV)
+
+    def _validate(self):
+        self._require_fs_ge_fc()
+
+    def _steady(self, v):
+        c = self._c
+        return (c["fc"] + (c["fs"] - c["fc"]) / (1.0 + (v / c["vs"]) ** 2)) * np.sign(v) + c["fv"] * v
+
+
+class StribeckEps(StaticModel):
+    """Seed 003 Stribeck with a linear zone of width eps (extract A.2.2, corrected reading).
+
+    s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);
+    F = s(v) sgn(v) + Fv v for |v| > eps, F = (v/eps) s(v) + Fv v for |v| <= eps
+    (continuous at |v| = eps, F(0) = 0, odd).
+    """
+
+    name = "stribeck_eps"
+    KIND = K.K_STRIBECK_EPS
+    COEFS = (
+        _FC,
+        _FS,
+        _VS,
+        _DELTA,
+        _FV,
+        Coef("eps", lo=0.0, lo_open=True, unit="rad/s", doc="linear-zone half width"),
+    )
+
+    def _validate(self):
+        self._require_fs_ge_fc()
+
+    def _steady(self, v):
+        c = self._c
+        av = np.abs(v)
+        s = stribeck_np(av, c["fc"], c["fs"], c["vs"], c["delta"])
+        return np.where(av > c["eps"], s * np.sign(v), v / c["eps"] * s) + c["fv"] * v
+
+
+class GAExponential(StaticModel):
+    """Seed 001 modified Exponential model, eq. (21) (the model the GA selected):
+
+    F = (Fc + (Fs - Fc) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v); Fs = F_ST, Fc = F_kmin (Table 5.2).
+    """
+
+    name = "ga_exponential"
+    KIND = K.K_GA_EXPONENTIAL
+    COEFS = (
+        Coef("fs", lo=0.0, unit="N*m", doc="static level F_ST"),
+        Coef("gamma", lo=0.0, lo_open=True, unit="s/rad", doc="inverse Stribeck velocity"),
+        Coef("delta", lo=0.0, lo_open=True, doc="shape exponent"),
+        Coef("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin"),
+        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+    )
+
+    def _steady(self, v):
+        c = self._c
+        av = np.abs(v)
+        return (
+            c["fc"] + (c["fs"] - c["fc"]) * np.exp(-((c["gamma"] * av) ** c["delta"])) + c["sigma"] * av
+        ) * np.sign(v)
+
+
+class GATustin(StaticModel):
+    """Seed 001 modified Tustin model, eq. (22): F = (Ff0 - Ffc [1 - exp(-(|v|/Vc)^x)] + sigma |v|) sgn(v)."""
+
+    name = "ga_tustin"
+    KIND = K.K_GA_TUSTIN
+    COEFS = (
+        Coef("ff0", lo=0.0, unit="N*m", doc="static friction constant"),
+        Coef("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction"),
+        Coef("vc", lo=0.0, lo_open=True, unit="rad/s", doc="threshold velocity"),
+        Coef("x", lo=0.0, lo_open=True, doc="Armstrong exponent"),
+        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+    )
+
+    def _steady(self, v):
+        c = self._c
+        av = np.abs(v)
+        return (
+            c["ff0"] - c["ffc"] * (1.0 - np.exp(-((av / c["vc"]) ** c["x"]))) + c["sigma"] * av
+        ) * np.sign(v)
+
+
+class GANonLinear(StaticModel):
+    """Seed 001 Non-Linear model (Canudas de Wit), eq. (23):
+
+    F = (alpha0 + alpha1 exp(-beta1 |v|) + alpha2 (1 - exp(-beta2 |v|))) sgn(v).
+    """
+
+    name = "ga_nonlinear"
+    KIND = K.K_GA_NONLINEAR
+    COEFS = (
+        Coef("alpha0", lo=0.0, unit="N*m"),
+        Coef("alpha1", lo=0.0, unit="N*m"),
+        Coef("alpha2", lo=0.0, unit="N*m"),
+        Coef("beta1", lo=0.0, unit="s/rad"),
+        Coef("beta2", lo=0.0, unit="s/rad"),
+    )
+
+    def _steady(self, v):
+        c = self._c
+        av = np.abs(v)
+        return (
+            c["alpha0"]
+            + c["alpha1"] * np.exp(-c["beta1"] * av)
+            + c["alpha2"] * (1.0 - np.exp(-c["beta2"] * av))
+        ) * np.sign(v)
+
+
+class GADupont(StaticModel):
+    """Seed 001 Dupont model, eq. (24): F = (c0 + c1 |v| + c2 exp(-(|v|/c3)^c4)) sgn(v)."""
+
+    name = "ga_dupont"
+    KIND = K.K_GA_DUPONT
+    COEFS = (
+        Coef("c0", lo=0.0, unit="N*m"),
+        Coef("c1", lo=0.0, unit="N*m*s/rad"),
+        Coef("c2", lo=0.0, unit="N*m"),
+        Coef("c3", lo=0.0, lo_open=True, unit="rad/s"),
+        Coef("c4", lo=0.0, lo_open=True),
+    )
+
+    def _steady(self, v):
+        c = self._c
+        av = np.abs(v)
+        return (c["c0"] + c["c1"] * av + c["c2"] * np.exp(-((av / c["c3"]) ** c["c4"]))) * np.sign(v)
+
+
+class GASevenParameter(StaticModel):
+    """Seed 001 reduced seven-parameter model, eq. (25), steady-sliding part with sgn(v) restored:
+
+    F = (Fc + Fv |v| + Fs / (1 + (v/vs)^2)) sgn(v). The dwell-time rise F_SF(gamma, t2) and the
+    frictional-lag delay tau_L are not modelled: Fs is F_SF after a long dwell (F_s,inf).
+    """
+
+    name = "ga_seven_parameter"
+    KIND = K.K_GA_SEVEN
+    COEFS = (
+        Coef("fc", lo=0.0, unit="N*m"),
+        Coef("fv", lo=0.0, unit="N*m*s/rad"),
+        Coef("fs", lo=0.0, unit="N*m", doc="Stribeck magnitude F_s,inf (added to fc at rest)"),
+        Coef("vs", lo=0.0, lo_open=True, unit="rad/s"),
+    )
+
+    def _steady(self, v):
+        c = self._c
+        return (c["fc"] + c["fv"] * np.abs(v) + c["fs"] / (1.0 + (v / c["vs"]) ** 2)) * np.sign(v)
+
+
+class Polynomial(StaticModel):
+    """Per-direction polynomial (seed 004 eq. (8), fitted separately for each direction):
+
+    F = sum_j pos[j] v^j for v > 0; F = -sum_j neg[j] |v|^j for v < 0; F(0) = 0.
+    ``pos``/``neg`` are flat lists c0..cn (same length); seed 004 uses c1 = 0 and degree 8.
+    """
+
+    name = "polynomial"
+    KIND = K.K_POLYNOMIAL
+    COEFS = (
+        Coef("pos", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn for v > 0"),
+        Coef("neg", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn of |F| for v < 0"),
+    )
+
+    def _validate(self):
+        if len(self._c["pos"]) != len(self._c["neg"]):
+            raise ParameterError(
+                f"polynomial.neg has {len(self._c['neg'])} elements but polynomial.pos has "
+                f"{len(self._c['pos'])}: must have the same element count"
+            )
+
+    def _kernel_params(self):
+        return [float(len(self._c["pos"]))] + self._c["pos"] + self._c["neg"]
+
+    def _steady(self, v):
+        av = np.abs(v)
+        pp = np.polynomial.polynomial.polyval(av, self._c["pos"])
+        pn = np.polynomial.polynomial.polyval(av, self._c["neg"])
+        return np.where(v > 0, pp, np.where(v < 0, -pn, 0.0))
+
+
+class LoadDependent(StaticModel):
+    """Load-dependent gearbox friction: F = v/(veps + |v|) (fc + fl |tau_load|) + fv v.
+
+    Friction budget grows with the transmitted torque (anchors: TMotorCANControl a3 + a4 |i| and BAM
+    M3-M6). ``veps`` = 0 gives a hard sgn(v). ``load`` is the transmitted torque [N*m].
+    """
+
+    name = "load_dependent"
+    KIND = K.K_LOAD_DEPENDENT
+    load_dependent = True
+    COEFS = (
+        _FC,
+        Coef("fl", 0.0, lo=0.0, doc="friction per unit transmitted torque [-]"),
+        _FV,
+        Coef("veps", 0.0, lo=0.0, unit="rad/s", doc="smoothing velocity of the sign"),
+    )
+
+    def _steady(self, v, load=0.0):
+        c = self._c
+        mag = c["fc"] + c["fl"] * np.abs(load)
+        sg = np.sign(v) if c["veps"] == 0.0 else v / (c["veps"] + np.abs(v))
+        return sg * mag + c["fv"] * v
+
+    def torque(self, v, load=0.0):
+        arr = np.asarray(v, dtype=float)
+        out = self._steady(np.atleast_1d(arr), np.asarray(load, dtype=float))
+        return float(np.ravel(out)[0]) if arr.ndim == 0 and np.ndim(load) == 0 else out
