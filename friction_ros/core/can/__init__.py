@@ -1,0 +1,24 @@
+"""CAN drive protocols (pure codecs), joint conversion, axis safety logic and the drive emulator.
+
+Nothing here imports rclpy; only :mod:`friction_ros.core.can.emulator` touches a python-can bus.
+"""
+
+from friction_ros.core.can.axis import AxisConfig, CycleResult, DriveAxis, JointSample
+from friction_ros.core.can.frame import DecodeStats, Frame
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.can.mit import MitCodec, MitDecoder, MitRanges
+from friction_ros.core.can.odrive import OdriveDecoder
+
+__all__ = [
+    "AxisConfig",
+    "CycleResult",
+    "DecodeStats",
+    "DriveAxis",
+    "Frame",
+    "JointConversion",
+    "JointSample",
+    "MitCodec",
+    "MitDecoder",
+    "MitRanges",
+    "OdriveDecoder",
+]

@@ -1,0 +1,387 @@
+"""Safety and state logic of one drive axis, independent of ROS and of the bus (pure, testable).
+
+:class:`DriveAxis` turns received frames into joint-side samples and a joint torque command into
+the frames to send, with every safety rule of the drive interface in one place:
+
+* command watchdog: no command for ``command_timeout`` -> zero torque (flag, trip counted);
+* NaN/inf commands rejected (the command becomes zero torque, counted);
+* joint torque limit, motor current limit, joint velocity limit (no torque that accelerates further);
+* stale telemetry (no encoder/effort frame within ``telemetry_timeout``) -> no joint sample is
+  produced (never made-up states), and while enabled a latched fault that disables the drive;
+* drive error (ODrive axis_error, MIT error code) -> latched fault, drive disabled;
+* bus fault reported by the adapter -> latched fault.
+
+Latched faults clear only with an explicit :meth:`request_enable`. Disabling means zero torque and
+IDLE (ODrive Set_Axis_State 1) or zero command + exit motor mode (MIT).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+from friction_ros.core.can import mit as mitc
+from friction_ros.core.can import odrive as od
+from friction_ros.core.can.frame import DecodeStats, Frame
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
+
+PROTOCOLS = ("odrive_cansimple", "mit")
+EFFORT_SOURCES = ("current", "torque_estimate")
+
+# Same values as friction_msgs/msg/DriveState FAULT_* (checked by a test).
+FAULT_NONE = 0
+FAULT_TELEMETRY_STALE = 1
+FAULT_DRIVE_ERROR = 2
+FAULT_COMMAND_WATCHDOG = 4
+FAULT_COMMAND_REJECTED = 8
+FAULT_LIMIT = 16
+FAULT_BUS = 32
+LATCHING = FAULT_TELEMETRY_STALE | FAULT_DRIVE_ERROR | FAULT_BUS
+
+FAULT_NAMES = {
+    FAULT_TELEMETRY_STALE: "telemetry_stale",
+    FAULT_DRIVE_ERROR: "drive_error",
+    FAULT_COMMAND_WATCHDOG: "command_watchdog",
+    FAULT_COMMAND_REJECTED: "command_rejected",
+    FAULT_LIMIT: "limit",
+    FAULT_BUS: "bus",
+}
+
+
+def fault_text(flags: int) -> str:
+    return ",".join(name for bit, name in FAULT_NAMES.items() if flags & bit) or "none"
+
+
+@dataclass(frozen=True)
+class AxisConfig:
+    protocol: str = "odrive_cansimple"
+    node_id: int = 0  # ODrive node id (0..63) or MIT motor CAN id
+    mit_master_id: int = 0
+    mit_ranges: mitc.MitRanges = field(default_factory=mitc.MitRanges)
+    conversion: JointConversion = field(default_factory=JointConversion)
+    torque_limit: float = 1.0  # |joint torque| [N*m]
+    current_limit: float = 10.0  # |motor q current| [A]
+    velocity_limit: float = 10.0  # |joint velocity| [rad/s]
+    command_timeout: float = 0.1  # [s]
+    telemetry_timeout: float = 0.01  # [s]
+    effort_source: str = "current"  # ODrive: Iq_Measured * k_t, or the drive's Torque_Estimate
+    request_telemetry: bool = False  # ODrive: send RTR requests for encoder + effort every cycle
+
+    def __post_init__(self):
+        check_choice("protocol", self.protocol, PROTOCOLS)
+        check_choice("effort_source", self.effort_source, EFFORT_SOURCES)
+        if self.protocol == "odrive_cansimple":
+            check_int("node_id", self.node_id, 0, od.NODE_ID_MAX)
+        else:
+            check_int("node_id", self.node_id, 0, 0x7FF)
+            check_int("mit_master_id", self.mit_master_id, 0, 0x7FF)
+            if self.node_id == self.mit_master_id:
+                raise ParameterError(
+                    f"node_id = {self.node_id} equals mit_master_id: must differ (replies go to the master id)"
+                )
+        check_real("torque_limit", self.torque_limit, 0.0, lo_open=True, unit="N*m")
+        check_real("current_limit", self.current_limit, 0.0, lo_open=True, unit="A")
+        check_real("velocity_limit", self.velocity_limit, 0.0, lo_open=True, unit="rad/s")
+        check_real("command_timeout", self.command_timeout, 0.0, lo_open=True, unit="s")
+        check_real("telemetry_timeout", self.telemetry_timeout, 0.0, lo_open=True, unit="s")
+
+
+class JointSample(NamedTuple):
+    position: float  # rad
+    velocity: float  # rad/s
+    effort: float  # N*m joint torque
+    stamp: float  # time of the newest frame used [s, same clock as the caller]
+
+
+@dataclass
+class Telemetry:
+    """Latest motor-side values as reported by the drive (NaN until received)."""
+
+    motor_position: float = math.nan
+    motor_velocity: float = math.nan
+    encoder_time: float | None = None
+    current_setpoint: float = math.nan
+    current_measured: float = math.nan
+    iq_time: float | None = None
+    torque_target: float = math.nan
+    torque_estimate: float = math.nan
+    torque_time: float | None = None
+    bus_voltage: float = math.nan
+    axis_state: int = 0
+    axis_error: int = 0
+    heartbeat_time: float | None = None
+
+
+@dataclass
+class AxisCounters:
+    frames_rx: int = 0
+    encoder_frames: int = 0
+    effort_frames: int = 0
+    heartbeat_frames: int = 0
+    frames_tx: int = 0
+    commands: int = 0
+    commands_rejected: int = 0
+    watchdog_trips: int = 0
+    fault_trips: int = 0
+    limit_hits: int = 0
+    bus_errors: int = 0
+
+
+class CycleResult(NamedTuple):
+    frames: list[Frame]
+    sample: JointSample | None
+    flags: int
+    joint_torque_command: float  # what was sent this cycle [N*m joint], 0 when disabled
+
+
+class DriveAxis:
+    """One axis: decode telemetry, supervise, produce command frames. Thread-safe."""
+
+    ERROR_GRACE_S = 0.05  # error reports sent before the drive processed Clear_Errors are ignored
+
+    def __init__(self, config: AxisConfig):
+        self.cfg = config
+        self.conv = config.conversion
+        self._lock = threading.Lock()
+        self.telemetry = Telemetry()
+        self.counters = AxisCounters()
+        self.enabled = False
+        self.enable_requested = False
+        self.latched = 0
+        self.fault_reason = ""
+        self._cmd = 0.0
+        self._cmd_time: float | None = None
+        self._watchdog_tripped = True
+        self._rejected_pending = False
+        self._last_flags = 0
+        self._ignore_errors_until = -math.inf  # drive errors in flight while clearing are ignored
+        if config.protocol == "odrive_cansimple":
+            self.decoder = od.OdriveDecoder([config.node_id], role="host")
+            self.mit = None
+            self._effort_cmd = od.Cmd.GET_IQ if config.effort_source == "current" else od.Cmd.GET_TORQUES
+        else:
+            self.mit = mitc.MitCodec(config.node_id, config.mit_ranges, config.mit_master_id)
+            self.decoder = mitc.MitDecoder(self.mit, role="host")
+
+    # ---- inputs ------------------------------------------------------------------------------------
+    @property
+    def decode_stats(self) -> DecodeStats:
+        return self.decoder.stats
+
+    def on_frame(
+        self, arb_id: int, data: bytes, is_remote: bool, is_extended: bool, is_error: bool, t: float
+    ):
+        """Feed one received frame (reader thread). ``t`` is the receive time."""
+        msg = self.decoder.decode(arb_id, data, is_remote, is_extended, is_error)
+        if msg is None:
+            return
+        tel = self.telemetry
+        with self._lock:
+            self.counters.frames_rx += 1
+            if isinstance(msg, od.EncoderEstimates):
+                tel.motor_position, tel.motor_velocity, tel.encoder_time = msg.position, msg.velocity, t
+                self.counters.encoder_frames += 1
+            elif isinstance(msg, od.Iq):
+                tel.current_setpoint, tel.current_measured, tel.iq_time = msg.setpoint, msg.measured, t
+                if self.cfg.effort_source == "current":
+                    self.counters.effort_frames += 1
+            elif isinstance(msg, od.Torques):
+                tel.torque_target, tel.torque_estimate, tel.torque_time = msg.target, msg.estimate, t
+                if self.cfg.effort_source == "torque_estimate":
+                    self.counters.effort_frames += 1
+            elif isinstance(msg, od.Heartbeat):
+                tel.axis_state, tel.heartbeat_time = msg.axis_state, t
+                if t >= self._ignore_errors_until:
+                    tel.axis_error = msg.axis_error
+                self.counters.heartbeat_frames += 1
+            elif isinstance(msg, od.BusVoltageCurrent):
+                tel.bus_voltage = msg.voltage
+            elif isinstance(msg, od.DriveError):
+                if t >= self._ignore_errors_until:
+                    tel.axis_error = msg.active_errors
+            elif isinstance(msg, mitc.MitReply):
+                tel.motor_position, tel.motor_velocity, tel.encoder_time = msg.position, msg.velocity, t
+                tel.torque_estimate, tel.torque_time = msg.torque, t
+                tel.current_measured = msg.torque / self.conv.torque_constant
+                if t >= self._ignore_errors_until:
+                    tel.axis_error = msg.error
+                tel.axis_state = 1 if self.enabled else 0
+                self.counters.encoder_frames += 1
+                self.counters.effort_frames += 1
+
+    def set_command(self, joint_torque: float, t: float) -> bool:
+        """Store a joint torque command [N*m]. NaN/inf -> rejected (zero torque), returns False."""
+        with self._lock:
+            self.counters.commands += 1
+            self._cmd_time = t
+            try:
+                ok = math.isfinite(joint_torque)
+            except TypeError:
+                ok = False
+            if not ok:
+                self.counters.commands_rejected += 1
+                self._rejected_pending = True
+                self._cmd = 0.0
+                return False
+            self._cmd = float(joint_torque)
+            self._watchdog_tripped = False
+            return True
+
+    def report_bus_fault(self, reason: str) -> None:
+        """Adapter reports bus-off / repeated send failures: latched fault (drive disabled)."""
+        with self._lock:
+            self.counters.bus_errors += 1
+            self._latch(FAULT_BUS, reason)
+
+    def request_enable(self) -> None:
+        """Clear latched faults and enable as soon as telemetry is fresh (see :meth:`cycle`)."""
+        with self._lock:
+            self.latched = 0
+            self.fault_reason = ""
+            self.enable_requested = True
+            self.telemetry.axis_error = 0  # cleared by the Clear_Errors frame sent on enable
+            self._ignore_errors_until = math.inf
+
+    def request_disable(self) -> list[Frame]:
+        with self._lock:
+            self.enable_requested = False
+            self.enabled = False
+            return self.disable_frames()
+
+    # ---- frames ------------------------------------------------------------------------------------
+    def enable_frames(self) -> list[Frame]:
+        n = self.cfg.node_id
+        if self.mit is not None:
+            return [self.mit.encode_command(), self.mit.encode_enter()]
+        motor_vel_limit = abs(self.conv.motor_velocity(self.cfg.velocity_limit))
+        return [
+            od.encode_clear_errors(n),
+            od.encode_set_limits(n, motor_vel_limit, self.cfg.current_limit),
+            od.encode_set_controller_mode(n, od.ControlMode.TORQUE_CONTROL, od.InputMode.PASSTHROUGH),
+            od.encode_set_input_torque(n, 0.0),
+            od.encode_set_axis_state(n, od.AxisState.CLOSED_LOOP_CONTROL),
+        ]
+
+    def disable_frames(self) -> list[Frame]:
+        """Zero torque, then idle / exit motor mode (what shutdown and every fault send)."""
+        if self.mit is not None:
+            return [self.mit.encode_command(), self.mit.encode_exit()]
+        n = self.cfg.node_id
+        return [od.encode_set_input_torque(n, 0.0), od.encode_set_axis_state(n, od.AxisState.IDLE)]
+
+    # ---- the control-period step ---------------------------------------------------------------------
+    def _latch(self, bit: int, reason: str) -> None:
+        if not self.latched & bit:
+            self.fault_reason = reason
+        self.latched |= bit
+
+    def _fresh(self, t: float) -> tuple[bool, float]:
+        tel = self.telemetry
+        eff_t = (
+            tel.encoder_time
+            if self.mit is not None
+            else (tel.iq_time if self.cfg.effort_source == "current" else tel.torque_time)
+        )
+        if tel.encoder_time is None or eff_t is None:
+            return False, math.inf
+        age = t - min(tel.encoder_time, eff_t)
+        return age <= self.cfg.telemetry_timeout, age
+
+    def cycle(self, t: float) -> CycleResult:
+        """One control period at time ``t``: supervise, and return frames to send + the joint sample."""
+        cfg, conv, tel = self.cfg, self.conv, self.telemetry
+        frames: list[Frame] = []
+        flags = 0
+        with self._lock:
+            fresh, age = self._fresh(t)
+            if not fresh:
+                flags |= FAULT_TELEMETRY_STALE
+                if self.enabled:
+                    what = (
+                        "no telemetry yet"
+                        if math.isinf(age)
+                        else f"newest telemetry is {age * 1e3:.1f} ms old"
+                    )
+                    self._latch(
+                        FAULT_TELEMETRY_STALE,
+                        f"telemetry stale: {what} (timeout {cfg.telemetry_timeout * 1e3:g} ms)",
+                    )
+            if tel.axis_error:
+                flags |= FAULT_DRIVE_ERROR
+                if self.enabled or self.enable_requested:
+                    self._latch(FAULT_DRIVE_ERROR, f"drive reports error 0x{tel.axis_error:X}")
+            flags |= self.latched
+            if self.latched:
+                if self.enabled or self.enable_requested:
+                    self.counters.fault_trips += 1
+                    frames += self.disable_frames()
+                self.enabled = False
+                self.enable_requested = False
+            elif self.enable_requested and not self.enabled and fresh:
+                frames += self.enable_frames()
+                self.enabled = True
+                self._cmd, self._cmd_time, self._watchdog_tripped = 0.0, None, True
+                self._ignore_errors_until = t + self.ERROR_GRACE_S
+
+            sample = None
+            if fresh:
+                pos = conv.joint_position(tel.motor_position)
+                vel = conv.joint_velocity(tel.motor_velocity)
+                if self.mit is not None or cfg.effort_source == "torque_estimate":
+                    eff = conv.joint_torque(tel.torque_estimate)
+                    stamp = tel.encoder_time
+                else:
+                    eff = conv.joint_torque_from_current(tel.current_measured)
+                    stamp = max(tel.encoder_time, tel.iq_time)
+                sample = JointSample(pos, vel, eff, stamp)
+
+            cmd = 0.0
+            if self.enabled:
+                if self._cmd_time is None or t - self._cmd_time > cfg.command_timeout:
+                    flags |= FAULT_COMMAND_WATCHDOG
+                    if not self._watchdog_tripped:
+                        self._watchdog_tripped = True
+                        self.counters.watchdog_trips += 1
+                else:
+                    cmd = self._cmd
+                if self._rejected_pending:
+                    flags |= FAULT_COMMAND_REJECTED
+                    self._rejected_pending = False
+                limited = False
+                if abs(cmd) > cfg.torque_limit:
+                    cmd, limited = math.copysign(cfg.torque_limit, cmd), True
+                i_max_joint = cfg.current_limit * conv.torque_constant * conv.gear_ratio
+                if abs(cmd) > i_max_joint:
+                    cmd, limited = math.copysign(i_max_joint, cmd), True
+                if (
+                    sample is not None
+                    and abs(sample.velocity) > cfg.velocity_limit
+                    and cmd * sample.velocity > 0
+                ):
+                    cmd, limited = 0.0, True
+                if limited:
+                    flags |= FAULT_LIMIT
+                    self.counters.limit_hits += 1
+                motor_torque = conv.motor_torque(cmd)
+                if self.mit is not None:
+                    frames.append(self.mit.encode_command(torque=motor_torque))
+                else:
+                    frames.append(od.encode_set_input_torque(cfg.node_id, motor_torque))
+            elif self.mit is not None:
+                frames.append(self.mit.encode_command())  # MIT drives only report when polled
+            if self.mit is None and cfg.request_telemetry:
+                frames.append(od.encode_rtr(cfg.node_id, od.Cmd.GET_ENCODER_ESTIMATES))
+                frames.append(od.encode_rtr(cfg.node_id, self._effort_cmd))
+            self.counters.frames_tx += len(frames)
+            self._last_flags = flags
+            return CycleResult(frames, sample, flags, cmd)
+
+    def shutdown_frames(self) -> list[Frame]:
+        """Frames that leave the drive safe; marks the axis disabled."""
+        with self._lock:
+            self.enabled = False
+            self.enable_requested = False
+            return self.disable_frames()

@@ -1,0 +1,52 @@
+"""A CAN frame as plain data (no python-can dependency) and decode statistics shared by the codecs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+
+class Frame(NamedTuple):
+    """One classic CAN frame: 11-bit (or 29-bit) id, payload bytes, remote (RTR) flag.
+
+    ``dlc`` is the data length code; for data frames it equals ``len(data)``, for RTR frames it is
+    the length requested (the payload is empty).
+    """
+
+    arbitration_id: int
+    data: bytes
+    is_remote: bool = False
+    is_extended: bool = False
+    dlc: int | None = None
+
+    @property
+    def length(self) -> int:
+        return len(self.data) if self.dlc is None else self.dlc
+
+
+@dataclass
+class DecodeStats:
+    """Counters of a decoder: every frame offered is counted exactly once in one of three bins.
+
+    * ``decoded``: a supported message for one of our ids, well formed -> a message object.
+    * ``ignored``: not for us (other node/protocol id, extended id, error frame, unsupported command).
+    * ``rejected``: addressed to us with a supported command but malformed (wrong length, NaN/inf,
+      out-of-range field).
+    """
+
+    decoded: int = 0
+    ignored: int = 0
+    rejected: int = 0
+    last_reject_reason: str = ""
+
+    @property
+    def total(self) -> int:
+        return self.decoded + self.ignored + self.rejected
+
+    def as_dict(self) -> dict[str, int | str]:
+        return {
+            "decoded": self.decoded,
+            "ignored": self.ignored,
+            "rejected": self.rejected,
+            "last_reject_reason": self.last_reject_reason,
+        }

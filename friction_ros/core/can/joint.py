@@ -1,0 +1,58 @@
+"""Motor side <-> joint side conversion (gear ratio, torque constant, direction, zero offset).
+
+The drive reports motor-side quantities (already in SI after the codec); the rest of friction_ros
+works with the joint: position [rad], velocity [rad/s], effort = joint torque [N*m].
+
+    q_joint   = direction * q_motor / gear_ratio - zero_offset
+    dq_joint  = direction * dq_motor / gear_ratio
+    tau_joint = direction * tau_motor * gear_ratio = direction * k_t * i_q * gear_ratio
+
+(ideal gearbox: efficiency and gearbox friction are what the rest of the project identifies).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from friction_ros.core.validation import ParameterError, check_real
+
+
+@dataclass(frozen=True)
+class JointConversion:
+    gear_ratio: float = 1.0  # motor revolutions per joint revolution
+    torque_constant: float = 0.1  # motor N*m per A (q-axis)
+    direction: int = 1  # +1 or -1: sign between motor and joint (REP-103 joint convention)
+    zero_offset: float = 0.0  # joint position [rad] reported when the motor reads 0
+
+    def __post_init__(self):
+        check_real("gear_ratio", self.gear_ratio, 0.0, lo_open=True, unit="motor rev / joint rev")
+        check_real("torque_constant", self.torque_constant, 0.0, lo_open=True, unit="N*m/A")
+        check_real("zero_offset", self.zero_offset, unit="rad")
+        if self.direction not in (1, -1):
+            raise ParameterError(f"direction = {self.direction!r} is not allowed: must be one of 1, -1")
+
+    # motor -> joint
+    def joint_position(self, motor_position: float) -> float:
+        return self.direction * motor_position / self.gear_ratio - self.zero_offset
+
+    def joint_velocity(self, motor_velocity: float) -> float:
+        return self.direction * motor_velocity / self.gear_ratio
+
+    def joint_torque(self, motor_torque: float) -> float:
+        return self.direction * motor_torque * self.gear_ratio
+
+    def joint_torque_from_current(self, current: float) -> float:
+        return self.direction * current * self.torque_constant * self.gear_ratio
+
+    # joint -> motor
+    def motor_position(self, joint_position: float) -> float:
+        return self.direction * (joint_position + self.zero_offset) * self.gear_ratio
+
+    def motor_velocity(self, joint_velocity: float) -> float:
+        return self.direction * joint_velocity * self.gear_ratio
+
+    def motor_torque(self, joint_torque: float) -> float:
+        return self.direction * joint_torque / self.gear_ratio
+
+    def motor_current(self, joint_torque: float) -> float:
+        return self.motor_torque(joint_torque) / self.torque_constant
