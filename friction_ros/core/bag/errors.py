@@ -1,0 +1,38 @@
+"""Errors of the bag I/O core.
+
+Every error is a ``ValueError`` subclass whose message names the file/topic/type and the problem, so
+nodes and CLIs can print one clear line instead of a traceback.
+"""
+
+from __future__ import annotations
+
+
+class BagError(ValueError):
+    """Base class: a bag cannot be read or written as requested."""
+
+
+class NotMcapError(BagError):
+    """The file is empty or not an MCAP file (bad magic bytes)."""
+
+
+class TruncatedBagError(BagError):
+    """The file is cut off before any readable message (e.g. header truncated)."""
+
+
+class UnsupportedBagError(BagError):
+    """Valid input in a format this reader does not handle (sqlite3 storage, file compression ...)."""
+
+
+class TopicNotFoundError(BagError, KeyError):
+    """A requested topic is not in the bag."""
+
+    def __str__(self) -> str:  # KeyError would otherwise quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class SchemaError(BagError):
+    """A message definition is missing, unparsable, or does not match the expected type."""
+
+
+class CdrError(BagError):
+    """A CDR payload does not match its message definition."""
