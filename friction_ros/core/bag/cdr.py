@@ -190,8 +190,9 @@ class _Columns:
                 col = np.empty(self.n, dtype=object)
                 for idx, v, c in parts:
                     if c:
-                        for i in idx:
-                            col[i] = v
+                        one = np.empty(1, dtype=object)
+                        one[0] = v
+                        col[idx] = one
                     else:
                         for j, i in enumerate(idx):
                             col[i] = v[j]
@@ -222,7 +223,8 @@ def decode_batch(
     templates = 0
     for length in np.unique(lengths):
         gidx = np.flatnonzero(lengths == length)
-        mat = buf[starts[gidx, None] + np.arange(length)]
+        # rows = payloads of this length; a sliding-window view avoids an (n, length) index matrix
+        mat = np.lib.stride_tricks.sliding_window_view(buf, int(length))[starts[gidx]]
         remaining = np.arange(len(gidx))
         while len(remaining):
             r0 = remaining[0]
@@ -235,11 +237,14 @@ def decode_batch(
             order, maxalign = _header(row)
             rec = _Rec()
             _decode_struct(defs, tname, _Cur(row, order, maxalign, rec), "")
-            fixed = [0, 1] + [j for a, b in rec.struct for j in range(a, b)]
-            sub = mat[remaining]
-            ok = (sub[:, fixed] == row[fixed]).all(axis=1)
-            members = remaining[ok]
-            block = sub[ok]
+            sub = mat if len(remaining) == len(mat) else mat[remaining]
+            ok = np.ones(len(sub), dtype=bool)
+            for a, b in _merge_ranges([(0, 2), *rec.struct]):
+                ok &= (sub[:, a:b] == row[a:b]).all(axis=1)
+            if ok.all():
+                members, block = remaining, sub
+            else:
+                members, block = remaining[ok], sub[ok]
             for path, off, dt, count, is_array in rec.numeric:
                 width = np.dtype(dt).itemsize * count
                 vals = np.ascontiguousarray(block[:, off : off + width]).view(dt)
@@ -248,6 +253,16 @@ def decode_batch(
                 cols.add(path, gidx[members], value, True)
             remaining = remaining[~ok]
     return cols.finish()
+
+
+def _merge_ranges(ranges: list[tuple[int, int]]) -> list[tuple[int, int]]:
+    out: list[list[int]] = []
+    for a, b in sorted(r for r in ranges if r[1] > r[0]):
+        if out and a <= out[-1][1]:
+            out[-1][1] = max(out[-1][1], b)
+        else:
+            out.append([a, b])
+    return [(a, b) for a, b in out]
 
 
 def _add_generic(cols: _Columns, defs, tname: str, data, i: int) -> None:

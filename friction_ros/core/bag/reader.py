@@ -435,7 +435,7 @@ class _FileScan:
 
 
 def _gather(big: np.ndarray, pos: np.ndarray, width: int, dtype: str) -> np.ndarray:
-    return np.ascontiguousarray(big[pos[:, None] + np.arange(width)]).view(dtype)[:, 0]
+    return np.ascontiguousarray(np.lib.stride_tricks.sliding_window_view(big, width)[pos]).view(dtype)[:, 0]
 
 
 # ------------------------------------------------------------------------------------------ bag files
