@@ -1,0 +1,47 @@
+"""Compensating controllers (pure core): PID, friction compensation, the seeds' schemes, façade."""
+
+from friction_ros.core.control.compensation import FrictionCompensator, LuGreObserver
+from friction_ros.core.control.controller import (
+    CONTROLLER_DEFAULTS,
+    CONTROLLER_MODES,
+    CompensatingController,
+    ControllerTerms,
+    default_config,
+    flatten,
+    unflatten,
+)
+from friction_ros.core.control.pid import ANTIWINDUP_STRATEGIES, PID_DEFAULTS, Pid, PidOutput
+from friction_ros.core.control.schemes import (
+    DNPF,
+    Cascade,
+    GainScheduling,
+    SlidingMode,
+    describing_damping,
+    describing_stiffness,
+    maxwell_virgin_curve,
+    seed000_relay,
+)
+
+__all__ = [
+    "ANTIWINDUP_STRATEGIES",
+    "CONTROLLER_DEFAULTS",
+    "CONTROLLER_MODES",
+    "PID_DEFAULTS",
+    "DNPF",
+    "Cascade",
+    "CompensatingController",
+    "ControllerTerms",
+    "FrictionCompensator",
+    "GainScheduling",
+    "LuGreObserver",
+    "Pid",
+    "PidOutput",
+    "SlidingMode",
+    "default_config",
+    "describing_damping",
+    "describing_stiffness",
+    "flatten",
+    "maxwell_virgin_curve",
+    "seed000_relay",
+    "unflatten",
+]

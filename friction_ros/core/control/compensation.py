@@ -1,0 +1,235 @@
+"""Friction compensation with any model of the library: feedforward, feedback, blended, observer.
+
+Terms (N*m, added to the command; friction opposes motion so compensation has the model's sign):
+
+* feedforward (seed 003 A.4.1, Fig. 6; seed 004 section 2):
+  ``tau_ff = g_c * w * F_hat(theta_dot_d)``; a dynamic model (LuGre, GMS ...) has its state
+  integrated from the *desired* velocity (seed 003: "model state driven by theta_dot_d").
+* feedback (seed 001 section 6.1: ``c = sat(e + k_c F_hat(omega_hat))``; seed 004 eq. (22)
+  ``u_in = u_c + u_f_hat(theta_dot)``): ``tau_fb = g_c * (1 - w) * F_hat(theta_dot)`` with the
+  measured or estimated velocity; a dynamic model is driven by the measured velocity.
+* blended: both, weights ``w`` = ``blend`` and ``1 - w``.
+* observer: the LuGre observer of Canudas de Wit et al. (1995, IEEE TAC 40(3), eq. (12)):
+  ``dz_hat/dt = v - sigma0 |v| z_hat / g(v) + L e``, ``F_hat = sigma0 z_hat + sigma1 dz_hat/dt + fv v``
+  with ``e = theta_d - theta`` and observer gain ``L >= 0`` (the correction raises the friction
+  estimate while the joint lags the reference). For non-LuGre models ``observer`` falls back to
+  ``feedback``.
+
+``g_c`` is the compensation gain (seed 001 used 0.95 so that a slightly over-estimating model does
+not act as negative friction, extract section 6.1 / 9 item 9).
+
+Smoothing near zero velocity (extract seed 001 section 6.2, seed 002 B-T9; not in the seeds):
+``none`` keeps the model as is (sgn(0) = 0), ``tanh`` uses ``F(v) tanh(|v| / v_eps)``, ``linear``
+replaces the model inside |v| < v_eps by the line ``F(v_eps sgn v) |v| / v_eps`` (the finite-slope
+zone of seed 003 A.2.1). Smoothing applies to static models only (dynamic models are already
+continuous).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
+
+SOURCES = ("none", "feedforward", "feedback", "blended", "observer")
+SMOOTHING = ("none", "tanh", "linear")
+
+COMPENSATION_DEFAULTS: dict[str, Any] = {
+    "model": None,  # model config dict {"model": name, coef: value ...} or None (no compensation)
+    "source": "feedforward",
+    "gain": 1.0,
+    "blend": 0.5,
+    "smoothing": "none",
+    "smoothing_velocity": 1e-3,
+    "observer_gain": 0.0,
+}
+
+
+def build_model(model: Any, name: str = "friction.model"):
+    """Return a fresh library model from a model config dict or a model instance (None -> None)."""
+    if model is None:
+        return None
+    from friction_ros.core.friction import model_from_config
+
+    if hasattr(model, "to_config"):
+        return model_from_config(model.to_config())
+    if not isinstance(model, Mapping):
+        raise ParameterError(f"{name} = {model!r} must be a model config dict with a 'model' key")
+    if not model or model.get("model") in (None, "", "none"):
+        return None
+    return model_from_config(dict(model))
+
+
+def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
+    """Static-model friction at ``v`` with the chosen near-zero smoothing (see module docstring)."""
+    if smoothing == "tanh" and v_eps > 0.0:
+        return float(model.steady_state(v)) * math.tanh(abs(v) / v_eps)
+    if smoothing == "linear" and v_eps > 0.0 and abs(v) < v_eps:
+        return float(model.steady_state(math.copysign(v_eps, v))) * abs(v) / v_eps if v != 0.0 else 0.0
+    return float(model.steady_state(v))
+
+
+class LuGreObserver:
+    """LuGre friction observer after Canudas de Wit et al. (1995), see the module docstring.
+
+    The z equation is integrated exactly over a step with v and e held (it is linear in z),
+    so it stays stable for stiff bristles (sigma0 ~ 1e5 N*m/rad) at 1 ms.
+    """
+
+    def __init__(self, model, gain: float = 0.0):
+        c = model.coefficients
+        for k in ("sigma0", "fc", "fs", "vs"):
+            if k not in c:
+                raise ParameterError(f"LuGre observer needs a LuGre model: coefficient {k!r} missing")
+        self.model = model
+        self.gain = check_real("friction.observer_gain", gain, 0.0)
+        self.z = 0.0
+        self.zdot = 0.0
+
+    def reset(self, z: float = 0.0) -> None:
+        self.z = float(z)
+        self.zdot = 0.0
+
+    def g(self, v: float) -> float:
+        c = self.model.coefficients
+        return c["fc"] + (c["fs"] - c["fc"]) * math.exp(-(abs(v / c["vs"]) ** c.get("delta", 2.0)))
+
+    def step(self, v: float, dt: float, error: float = 0.0) -> float:
+        """Advance z_hat by dt with velocity v and tracking error e; return F_hat."""
+        c = self.model.coefficients
+        s0 = c["sigma0"]
+        a = s0 * abs(v) / self.g(v)
+        b = v + self.gain * error
+        z0 = self.z
+        if a * dt > 1e-9:
+            zs = b / a
+            self.z = zs + (z0 - zs) * math.exp(-a * dt)
+        else:
+            self.z = z0 + b * dt
+        self.zdot = (self.z - z0) / dt
+        s1 = c.get("sigma1", 0.0)
+        vd = c.get("vd", 0.0)
+        if vd > 0.0:
+            s1 *= math.exp(-((v / vd) ** 2))
+        return s0 * self.z + s1 * self.zdot + c.get("fv", 0.0) * v
+
+    @property
+    def state(self) -> np.ndarray:
+        return np.array([self.z])
+
+
+class FrictionCompensator:
+    """Friction compensation term(s) from a library model; see the module docstring."""
+
+    def __init__(self, config: Mapping[str, Any] | None = None, *, prefix: str = "friction", **kwargs):
+        cfg = dict(COMPENSATION_DEFAULTS)
+        given = dict(config or {})
+        given.update(kwargs)
+        check_keys(prefix, given, COMPENSATION_DEFAULTS)
+        cfg.update(given)
+        self.prefix = prefix
+        self.source = check_choice(f"{prefix}.source", cfg["source"], SOURCES)
+        self.gain = check_real(f"{prefix}.gain", cfg["gain"], 0.0, 2.0)
+        self.blend = check_real(f"{prefix}.blend", cfg["blend"], 0.0, 1.0)
+        self.smoothing = check_choice(f"{prefix}.smoothing", cfg["smoothing"], SMOOTHING)
+        self.smoothing_velocity = check_real(
+            f"{prefix}.smoothing_velocity", cfg["smoothing_velocity"], 0.0, unit="rad/s"
+        )
+        self.observer_gain = check_real(f"{prefix}.observer_gain", cfg["observer_gain"], 0.0, unit="1/s")
+        self._install(build_model(cfg["model"], f"{prefix}.model"))
+
+    # -- model management -------------------------------------------------------------------------
+    def _install(self, model) -> None:
+        self.model = model
+        self._ff_model = build_model(model) if model is not None else None
+        self._fb_model = build_model(model) if model is not None else None
+        self._observer = None
+        if model is not None and self.source == "observer" and model.name == "lugre":
+            self._observer = LuGreObserver(self._fb_model, self.observer_gain)
+
+    def config(self) -> dict[str, Any]:
+        return {
+            "model": None if self.model is None else self.model.to_config(),
+            "source": self.source,
+            "gain": self.gain,
+            "blend": self.blend,
+            "smoothing": self.smoothing,
+            "smoothing_velocity": self.smoothing_velocity,
+            "observer_gain": self.observer_gain,
+        }
+
+    def set_model(self, model) -> None:
+        """Replace the model (config dict or instance); validated before anything changes.
+
+        Dynamic states restart from the new model's initial state.
+        """
+        self._install(build_model(model, f"{self.prefix}.model"))
+
+    def set_coefficients(self, **coefficients: Any) -> None:
+        """Hot-swap some coefficients of the current model (validated; states are kept if compatible)."""
+        if self.model is None:
+            raise ParameterError(f"{self.prefix}.model is not set: cannot change coefficients")
+        new = self.model.with_coefficients(**coefficients)
+        states = [
+            m.state.copy() if (m is not None and m.is_dynamic) else None
+            for m in (self._ff_model, self._fb_model)
+        ]
+        obs = self._observer.z if self._observer is not None else None
+        self._install(new)
+        for m, s in zip((self._ff_model, self._fb_model), states):
+            if m is not None and s is not None and m.state.shape == s.shape:
+                m.reset(s)
+        if self._observer is not None and obs is not None:
+            self._observer.z = obs
+
+    def reset(self) -> None:
+        for m in (self._ff_model, self._fb_model):
+            if m is not None and m.is_dynamic:
+                m.reset()
+        if self._observer is not None:
+            self._observer.reset()
+
+    @property
+    def weights(self) -> tuple[float, float]:
+        """(feedforward weight, feedback weight) of the chosen source."""
+        return {
+            "none": (0.0, 0.0),
+            "feedforward": (1.0, 0.0),
+            "feedback": (0.0, 1.0),
+            "observer": (0.0, 1.0),
+            "blended": (self.blend, 1.0 - self.blend),
+        }[self.source]
+
+    def _eval(self, m, v: float, dt: float) -> float:
+        if m.is_dynamic:
+            return float(m.step(v, dt))
+        return smoothed_static(m, v, self.smoothing, self.smoothing_velocity)
+
+    def update(self, v_ref: float, v_meas: float, dt: float, error: float = 0.0) -> tuple[float, float]:
+        """Return (friction_feedforward, friction_feedback) in N*m for this period."""
+        if self.model is None:
+            return 0.0, 0.0
+        wff, wfb = self.weights
+        ff = fb = 0.0
+        if wff > 0.0:
+            ff = self.gain * wff * self._eval(self._ff_model, v_ref, dt)
+        if wfb > 0.0:
+            if self._observer is not None:
+                fb = self.gain * wfb * self._observer.step(v_meas, dt, error)
+            else:
+                fb = self.gain * wfb * self._eval(self._fb_model, v_meas, dt)
+        return ff, fb
+
+    @property
+    def state(self) -> np.ndarray:
+        """Internal states (observer z_hat, or the feedback/feedforward model state)."""
+        if self._observer is not None:
+            return self._observer.state
+        for m in (self._fb_model, self._ff_model):
+            if m is not None and m.is_dynamic:
+                return np.asarray(m.state, dtype=float).copy()
+        return np.zeros(0)

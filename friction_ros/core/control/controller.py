@@ -1,0 +1,360 @@
+"""``CompensatingController``: one façade over every controller mode, built from a config dict.
+
+Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
+
+    e      = theta_d - theta,   e_dot = theta_dot_d - theta_dot_hat      (derivative on measurement)
+    u      = feedback(mode) + feedforward_gain theta_dot_d + J_hat theta_ddot_d
+             + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat)
+    command = clamp(u, u_clamp, rate limit)
+
+``theta_dot_hat`` is the measured velocity (``velocity_source = measured``) or the filtered
+backward difference of the measured position (``differentiated``, seed 001 section 6.1, with the
+lost-bit hold filter ``position_jump_limit``: a sample that jumps more than the limit is replaced
+by the previous one).
+
+Modes (``mode``):
+
+``pid``             PID (control_toolbox names, section ``pid``); seed 003's PD (p = 200,
+                    d = 0.15), seed 004's PD + model compensation, seed 001's saturated unity
+                    feedback (p = 1, friction feedback gain 0.95, u_clamp).
+``cascade``         seed 003 classical cascade (section ``cascade``).
+``dnpf``            seed 003 DNPF (section ``dnpf``).
+``gain_scheduling`` seed 003 gain scheduling (section ``gain_scheduling``).
+``sliding_mode``    seed 000 sliding mode / relay (section ``sliding_mode``).
+
+Friction compensation (section ``friction``, :mod:`.compensation`) is added in every mode.
+The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`` and ``terms``
+(a :class:`ControllerTerms`, the fields of friction_msgs/ControllerState).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
+from friction_ros.core.control.pid import PID_DEFAULTS, Pid
+from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
+from friction_ros.core.validation import (
+    ParameterError,
+    check_choice,
+    check_keys,
+    check_real,
+)
+
+CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
+VELOCITY_SOURCES = ("measured", "differentiated")
+
+#: Full default configuration (nested). Sections of modes that are not selected are ignored.
+CONTROLLER_DEFAULTS: dict[str, Any] = {
+    "mode": "pid",
+    "feedforward_gain": 0.0,
+    "inertia": 0.0,
+    "u_clamp_max": math.inf,
+    "u_clamp_min": -math.inf,
+    "rate_limit": math.inf,
+    "velocity_source": "measured",
+    "velocity_filter_time_constant": 0.0,
+    "position_jump_limit": math.inf,
+    "pid": dict(PID_DEFAULTS),
+    "friction": dict(COMPENSATION_DEFAULTS),
+    "dnpf": dict(DNPF.DEFAULTS),
+    "gain_scheduling": {k: v for k, v in GainScheduling.DEFAULTS.items()},
+    "cascade": dict(Cascade.DEFAULTS),
+    "sliding_mode": dict(SlidingMode.DEFAULTS),
+}
+_SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+
+
+@dataclass
+class ControllerTerms:
+    """All terms of one period (friction_msgs/ControllerState fields, SI units)."""
+
+    time: float = 0.0
+    mode: str = "pid"
+    reference_position: float = 0.0
+    reference_velocity: float = 0.0
+    reference_acceleration: float = 0.0
+    position: float = 0.0
+    velocity: float = 0.0
+    error: float = 0.0
+    error_dot: float = 0.0
+    p_term: float = 0.0
+    i_term: float = 0.0
+    d_term: float = 0.0
+    velocity_feedforward: float = 0.0
+    inertia_feedforward: float = 0.0
+    friction_feedforward: float = 0.0
+    friction_feedback: float = 0.0
+    command_unlimited: float = 0.0
+    command: float = 0.0
+    saturated: bool = False
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def unflatten(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Turn ROS-style dotted keys (``pid.p``, ``friction.model.fc``) into a nested dict."""
+    out: dict[str, Any] = {}
+    for key, value in params.items():
+        parts = str(key).split(".")
+        d = out
+        for p in parts[:-1]:
+            nxt = d.setdefault(p, {})
+            if not isinstance(nxt, dict):
+                raise ParameterError(f"{key}: {p!r} is both a value and a section")
+            d = nxt
+        d[parts[-1]] = value
+    return out
+
+
+def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Inverse of :func:`unflatten` (None values are dropped: ROS parameters cannot be None)."""
+    out: dict[str, Any] = {}
+    for k, v in config.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping):
+            out.update(flatten(v, key + "."))
+        elif v is not None:
+            out[key] = v
+    return out
+
+
+def default_config() -> dict[str, Any]:
+    """A deep copy of :data:`CONTROLLER_DEFAULTS`."""
+    return copy.deepcopy(CONTROLLER_DEFAULTS)
+
+
+class VelocityEstimator:
+    """Measured velocity, or a filtered backward difference of position with a jump-hold filter."""
+
+    def __init__(self, source: str, filter_time_constant: float, jump_limit: float):
+        self.source = source
+        self.tf = filter_time_constant
+        self.jump_limit = jump_limit
+        self.reset()
+
+    def reset(self) -> None:
+        self._pos = None
+        self._v = 0.0
+
+    def update(self, position: float, velocity: float | None, dt: float) -> tuple[float, float]:
+        """Return (position used, velocity estimate)."""
+        pos = float(position)
+        if self._pos is not None and abs(pos - self._pos) > self.jump_limit:
+            pos = self._pos  # seed 001 lost-bit hold
+        if self.source == "measured" and velocity is not None:
+            raw = float(velocity)
+        else:
+            raw = 0.0 if self._pos is None else (pos - self._pos) / dt
+        self._pos = pos
+        if self.tf > 0.0:
+            self._v += dt / (self.tf + dt) * (raw - self._v)
+        else:
+            self._v = raw
+        return pos, self._v
+
+
+class CompensatingController:
+    """Controller façade; see the module docstring and :data:`CONTROLLER_DEFAULTS`."""
+
+    def __init__(self, config: Mapping[str, Any] | None = None):
+        self._build(self._merge(default_config(), config or {}))
+
+    @classmethod
+    def from_parameters(cls, params: Mapping[str, Any]) -> CompensatingController:
+        """Build from flat ROS parameters with dotted names (``pid.p``, ``friction.source`` ...)."""
+        return cls(unflatten(params))
+
+    # -- configuration ---------------------------------------------------------------------------
+    @staticmethod
+    def _merge(base: dict[str, Any], given: Mapping[str, Any]) -> dict[str, Any]:
+        if any("." in str(k) for k in given):
+            given = unflatten(given)
+        check_keys("controller", given, CONTROLLER_DEFAULTS)
+        out = copy.deepcopy(base)
+        for k, v in given.items():
+            if k in _SECTIONS:
+                if v is None:
+                    continue
+                if not isinstance(v, Mapping):
+                    raise ParameterError(f"controller.{k} = {v!r} must be a mapping (a parameter section)")
+                if k == "friction" and "model" in v:
+                    out[k]["model"] = None  # a model replaces the previous one as a whole
+                sec = out[k]
+                for kk, vv in v.items():
+                    sec[kk] = copy.deepcopy(vv)
+            else:
+                out[k] = v
+        return out
+
+    def _build(self, cfg: dict[str, Any]) -> None:
+        mode = check_choice("controller.mode", cfg["mode"], CONTROLLER_MODES)
+        ffg = check_real("controller.feedforward_gain", cfg["feedforward_gain"], 0.0, unit="N*m*s/rad")
+        inertia = check_real("controller.inertia", cfg["inertia"], 0.0, unit="kg*m^2")
+        umax = check_real("controller.u_clamp_max", cfg["u_clamp_max"], allow_inf=True, unit="N*m")
+        umin = check_real("controller.u_clamp_min", cfg["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
+        if umin >= umax:
+            raise ParameterError(f"controller.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
+        rate = check_real(
+            "controller.rate_limit", cfg["rate_limit"], 0.0, lo_open=True, allow_inf=True, unit="N*m/s"
+        )
+        vsrc = check_choice("controller.velocity_source", cfg["velocity_source"], VELOCITY_SOURCES)
+        vtf = check_real(
+            "controller.velocity_filter_time_constant", cfg["velocity_filter_time_constant"], 0.0, unit="s"
+        )
+        jump = check_real(
+            "controller.position_jump_limit",
+            cfg["position_jump_limit"],
+            0.0,
+            lo_open=True,
+            allow_inf=True,
+            unit="rad",
+        )
+        pid = Pid(cfg["pid"], prefix="controller.pid")
+        friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
+        scheme = None
+        if mode == "dnpf":
+            scheme = DNPF(cfg["dnpf"])
+        elif mode == "gain_scheduling":
+            gs = dict(cfg["gain_scheduling"])
+            if gs.get("k") is None and gs.get("model") is None and friction.model is not None:
+                if friction.model.name == "gms":
+                    gs["model"] = friction.model.to_config()
+            scheme = GainScheduling(gs)
+        elif mode == "cascade":
+            scheme = Cascade(cfg["cascade"])
+        elif mode == "sliding_mode":
+            scheme = SlidingMode(cfg["sliding_mode"])
+        # everything validated: commit
+        self._cfg = cfg
+        self.mode = mode
+        self.feedforward_gain = ffg
+        self.inertia = inertia
+        self.u_clamp_max, self.u_clamp_min = umax, umin
+        self.rate_limit = rate
+        self.velocity = VelocityEstimator(vsrc, vtf, jump)
+        self.pid = pid
+        self.friction = friction
+        self.scheme = scheme
+        self._prev_cmd: float | None = None
+        self.terms = ControllerTerms(mode=mode)
+
+    def config(self) -> dict[str, Any]:
+        """The effective configuration (nested dict; round-trips through the constructor)."""
+        cfg = copy.deepcopy(self._cfg)
+        cfg["pid"] = self.pid.config()
+        cfg["friction"] = self.friction.config()
+        return cfg
+
+    def reconfigure(self, changes: Mapping[str, Any]) -> None:
+        """Apply parameter changes (nested or dotted keys); all-or-nothing, resets the states."""
+        self._build(self._merge(self.config(), changes))
+
+    def set_coefficients(self, coefficients: Mapping[str, Any]) -> None:
+        """Hot-swap the friction model without a restart.
+
+        ``coefficients`` is either a full model config (``{"model": "lugre", "sigma0": ...}``,
+        replaces the model) or some coefficients of the current model (``{"fc": 0.3}``).
+        Validated first: on error a ParameterError is raised and nothing changes.
+        """
+        if not isinstance(coefficients, Mapping):
+            raise ParameterError(f"coefficients = {coefficients!r} must be a mapping")
+        if "model" in coefficients:
+            self.friction.set_model(dict(coefficients))
+        else:
+            self.friction.set_coefficients(**coefficients)
+        self._cfg["friction"]["model"] = (
+            None if self.friction.model is None else self.friction.model.to_config()
+        )
+
+    def set_pid_gains(self, **gains: Any) -> None:
+        """Change PID parameters at run time (control_toolbox names), validated."""
+        self.pid.set_gains(**gains)
+
+    def reset(self) -> None:
+        """Clear integrators, filters, observer and dynamic-model states."""
+        self.pid.reset()
+        self.friction.reset()
+        self.velocity.reset()
+        if self.scheme is not None:
+            self.scheme.reset()
+        self._prev_cmd = None
+
+    # -- the control law ---------------------------------------------------------------------------
+    def compute(self, t: float, reference, measured, dt: float) -> ControllerTerms:
+        """One control period; returns all terms (also kept in ``self.terms``)."""
+        if not (isinstance(dt, (int, float)) and dt > 0.0 and math.isfinite(dt)):
+            raise ParameterError(f"controller: dt = {dt!r} is out of range: must be > 0 [s]")
+        r_pos, r_vel, r_acc = (float(x) for x in reference)
+        m_pos = float(measured[0])
+        m_vel = None if len(measured) < 2 or measured[1] is None else float(measured[1])
+        pos, vel = self.velocity.update(m_pos, m_vel, dt)
+        e = r_pos - pos
+        edot = r_vel - vel
+        ff_inertia = self.inertia * r_acc
+        ff_vel = self.feedforward_gain * r_vel
+        f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
+        lower, upper = -math.inf, math.inf
+        if self._prev_cmd is not None and math.isfinite(self.rate_limit):
+            lower = self._prev_cmd - self.rate_limit * dt
+            upper = self._prev_cmd + self.rate_limit * dt
+        lo = max(self.u_clamp_min, lower)
+        hi = min(self.u_clamp_max, upper)
+        if self.scheme is None:
+            offset = ff_inertia + ff_vel + f_ff + f_fb
+            out = self.pid.update(e, dt, error_dot=edot, offset=offset, lower=lo, upper=hi)
+            s = SchemeOutput(out.p_term, out.i_term, out.d_term, 0.0, 0.0)
+            unlimited, cmd, sat = out.unlimited, out.command, out.saturated
+        else:
+            s = self.scheme.compute(e, edot, (r_pos, r_vel, r_acc), (pos, vel), dt)
+            unlimited = (
+                s.p_term
+                + s.i_term
+                + s.d_term
+                + s.velocity_feedforward
+                + ff_vel
+                + ff_inertia
+                + f_ff
+                + f_fb
+                + s.friction_feedback
+            )
+            if lo > hi:
+                lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
+            cmd = min(max(unlimited, lo), hi)
+            sat = cmd != unlimited
+        self._prev_cmd = cmd
+        self.terms = ControllerTerms(
+            time=float(t),
+            mode=self.mode,
+            reference_position=r_pos,
+            reference_velocity=r_vel,
+            reference_acceleration=r_acc,
+            position=pos,
+            velocity=vel,
+            error=e,
+            error_dot=edot,
+            p_term=s.p_term,
+            i_term=s.i_term,
+            d_term=s.d_term,
+            velocity_feedforward=ff_vel + s.velocity_feedforward,
+            inertia_feedforward=ff_inertia,
+            friction_feedforward=f_ff,
+            friction_feedback=f_fb + s.friction_feedback,
+            command_unlimited=unlimited,
+            command=cmd,
+            saturated=bool(sat),
+        )
+        return self.terms
+
+    def update(self, t: float, reference, measured, dt: float) -> float:
+        """One control period: ``reference = (pos, vel, acc)``, ``measured = (pos, vel|None)``.
+
+        Returns the command (N*m, or A when the plant is current-driven and gains are in A);
+        all terms are in ``self.terms``.
+        """
+        return self.compute(t, reference, measured, dt).command

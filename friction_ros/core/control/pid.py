@@ -1,0 +1,179 @@
+"""PID with the parameter names of ros2_controllers ``pid_controller`` / control_toolbox ``Pid``.
+
+Law (control_toolbox ``Pid::compute_command`` semantics, anchors section 1.1-1.2), per period dt::
+
+    e      = reference - measurement            (zeroed inside +-error_deadband)
+    p_term = p * e
+    d_term = d * e_dot_f                         e_dot_f: first-order filtered error rate
+    i_term = I                                   integrator state, already multiplied by i
+    u      = p_term + i_term + d_term + offset   offset: feed-forward terms of the caller
+    u_sat  = clamp(u, max(u_clamp_min, lo), min(u_clamp_max, hi))   lo/hi: caller (rate) bounds
+
+and the integrator is advanced after the output is formed (forward Euler), with the anti-windup
+strategy of control_toolbox ``AntiWindupStrategy``:
+
+* ``none``:                    I += i e dt, then I clamped to [i_clamp_min, i_clamp_max]
+* ``back_calculation``:        I += dt (i e + (u_sat - u) / T_t), T_t = tracking_time_constant
+  (0 -> control_toolbox default: sqrt(d / i) if d != 0 else p / i), then clamped
+* ``conditional_integration``: I += i e dt only if the output is not saturated or e drives it
+  out of saturation, then clamped
+
+"Derivative on measurement" means the caller supplies ``e_dot = v_ref - v_measured`` (no
+derivative kick on reference steps); ``derivative_filter_time_constant`` T_f low-pass filters the
+rate: e_dot_f += dt / (T_f + dt) (e_dot - e_dot_f) (backward-Euler first-order filter).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
+
+ANTIWINDUP_STRATEGIES = ("none", "back_calculation", "conditional_integration")
+
+#: Default PID parameters (control_toolbox names); ranges are checked by :class:`Pid`.
+PID_DEFAULTS: dict[str, Any] = {
+    "p": 0.0,
+    "i": 0.0,
+    "d": 0.0,
+    "i_clamp_max": math.inf,
+    "i_clamp_min": -math.inf,
+    "antiwindup_strategy": "none",
+    "tracking_time_constant": 0.0,
+    "u_clamp_max": math.inf,
+    "u_clamp_min": -math.inf,
+    "error_deadband": 0.0,
+    "derivative_filter_time_constant": 0.0,
+}
+
+
+@dataclass
+class PidOutput:
+    """Terms of one PID evaluation (N*m)."""
+
+    p_term: float
+    i_term: float
+    d_term: float
+    error: float
+    error_dot: float
+    unlimited: float
+    command: float
+    saturated: bool
+
+
+class Pid:
+    """PID controller; see the module docstring for the law and the anti-windup strategies."""
+
+    def __init__(self, config: Mapping[str, Any] | None = None, *, prefix: str = "pid", **kwargs):
+        cfg = dict(PID_DEFAULTS)
+        given = dict(config or {})
+        given.update(kwargs)
+        check_keys(prefix, given, PID_DEFAULTS)
+        cfg.update(given)
+        self.prefix = prefix
+        self._set(cfg)
+        self.reset()
+
+    def _set(self, cfg: Mapping[str, Any]) -> None:
+        n = self.prefix
+        p = check_real(f"{n}.p", cfg["p"], 0.0)
+        i = check_real(f"{n}.i", cfg["i"], 0.0)
+        d = check_real(f"{n}.d", cfg["d"], 0.0)
+        imax = check_real(f"{n}.i_clamp_max", cfg["i_clamp_max"], allow_inf=True)
+        imin = check_real(f"{n}.i_clamp_min", cfg["i_clamp_min"], hi=imax, allow_inf=True)
+        umax = check_real(f"{n}.u_clamp_max", cfg["u_clamp_max"], allow_inf=True)
+        umin = check_real(f"{n}.u_clamp_min", cfg["u_clamp_min"], hi=umax, allow_inf=True)
+        if umin >= umax:
+            raise ParameterError(f"{n}.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
+        strategy = check_choice(f"{n}.antiwindup_strategy", cfg["antiwindup_strategy"], ANTIWINDUP_STRATEGIES)
+        tt = check_real(f"{n}.tracking_time_constant", cfg["tracking_time_constant"], 0.0, unit="s")
+        db = check_real(f"{n}.error_deadband", cfg["error_deadband"], 0.0)
+        tf = check_real(f"{n}.derivative_filter_time_constant", cfg["derivative_filter_time_constant"], 0.0)
+        self.p, self.i, self.d = p, i, d
+        self.i_clamp_max, self.i_clamp_min = imax, imin
+        self.u_clamp_max, self.u_clamp_min = umax, umin
+        self.antiwindup_strategy = strategy
+        self.tracking_time_constant = tt
+        self.error_deadband = db
+        self.derivative_filter_time_constant = tf
+
+    def config(self) -> dict[str, Any]:
+        """Current parameters as a dict with control_toolbox names."""
+        return {k: getattr(self, k) for k in PID_DEFAULTS}
+
+    def set_gains(self, **kwargs) -> None:
+        """Change parameters at run time (validated as a whole; nothing changes on error)."""
+        check_keys(self.prefix, kwargs, PID_DEFAULTS)
+        cfg = self.config()
+        cfg.update(kwargs)
+        self._set(cfg)
+        self.integral = min(max(self.integral, self.i_clamp_min), self.i_clamp_max)
+
+    def reset(self, integral: float = 0.0) -> None:
+        self.integral = float(integral)
+        self._edot_f = None
+        self._prev_error = None
+
+    def _effective_tt(self) -> float:
+        if self.tracking_time_constant > 0.0:
+            return self.tracking_time_constant
+        if self.i <= 0.0:
+            return math.inf
+        if self.d > 0.0:
+            return math.sqrt(self.d / self.i)
+        return self.p / self.i if self.p > 0.0 else 1.0
+
+    def update(
+        self,
+        error: float,
+        dt: float,
+        error_dot: float | None = None,
+        offset: float = 0.0,
+        lower: float = -math.inf,
+        upper: float = math.inf,
+    ) -> PidOutput:
+        """One period. ``error_dot`` None -> filtered backward difference of ``error``.
+
+        ``offset`` (feed-forward) is added before limiting so anti-windup sees the real command;
+        ``lower``/``upper`` are extra command bounds (e.g. from a rate limit).
+        """
+        if not dt > 0.0:
+            raise ParameterError(f"{self.prefix}: dt = {dt!r} is out of range: must be > 0 [s]")
+        e = float(error)
+        if abs(e) <= self.error_deadband:
+            e = 0.0
+        if error_dot is None:
+            raw = 0.0 if self._prev_error is None else (e - self._prev_error) / dt
+        else:
+            raw = float(error_dot)
+        self._prev_error = e
+        tf = self.derivative_filter_time_constant
+        if tf > 0.0 and self._edot_f is not None:
+            self._edot_f += dt / (tf + dt) * (raw - self._edot_f)
+        else:
+            self._edot_f = raw
+        edot = self._edot_f
+        p_term = self.p * e
+        d_term = self.d * edot
+        i_term = self.integral
+        u = p_term + i_term + d_term + offset
+        lo = max(self.u_clamp_min, lower)
+        hi = min(self.u_clamp_max, upper)
+        if lo > hi:  # rate window outside the clamp range: the clamp wins
+            lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
+        u_sat = min(max(u, lo), hi)
+        saturated = u_sat != u
+        # integrator update (forward Euler, after use)
+        if self.i > 0.0:
+            if self.antiwindup_strategy == "back_calculation":
+                self.integral += dt * (self.i * e + (u_sat - u) / self._effective_tt())
+            elif self.antiwindup_strategy == "conditional_integration":
+                if not saturated or (e * (u - u_sat) < 0.0):
+                    self.integral += dt * self.i * e
+            else:
+                self.integral += dt * self.i * e
+            self.integral = min(max(self.integral, self.i_clamp_min), self.i_clamp_max)
+        return PidOutput(p_term, i_term, d_term, e, edot, u, u_sat, saturated)

@@ -1,0 +1,354 @@
+"""The seeds' specific control schemes (feedback parts; the façade adds feed-forward and limits).
+
+* :class:`DNPF` seed 003 A.4.2 (Southward et al. 1991): discontinuous nonlinear proportional
+  feedback, constant ``tau_st + epsilon`` inside the presliding distance ``Q_h``.
+* :class:`GainScheduling` seed 003 A.4.3 (Fig. 10): mode 1 PD + Coulomb compensation, mode 2
+  presliding gains scheduled from the describing-function stiffness ``k_e(A)`` and damping
+  ``c_e(A)`` of the GMS virgin curve (eqs. (5)-(6), sign of (6) fixed as noted in the extract).
+* :class:`Cascade` seed 003 A.4.4: position P -> velocity PI with velocity feed-forward (the
+  integrating baseline).
+* :class:`SlidingMode` seed 000 A.5.1 (b)-(d): ``S = e_dot + lambda e``,
+  ``u = J_hat lambda e_dot + k_s S + M sat(S / phi)`` (phi = 0: relay ``M sign(S)``).
+* :func:`seed000_relay` seed 000 A.5.2 (``f_motor_smc.m``): ``u = u0 - du sign_dz(x; band)``.
+
+Every scheme has ``compute(e, e_dot, ref, meas, dt) -> SchemeOutput`` and ``reset()``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from friction_ros.core.control.pid import Pid
+from friction_ros.core.validation import ParameterError, check_keys, check_real
+
+# ---------------------------------------------------------------------------------------------------
+# describing function of a presliding virgin curve (seed 003 A.4.3 eqs. (5)-(6))
+
+
+def maxwell_virgin_curve(k: Sequence[float], alpha: Sequence[float], fs: float) -> Callable:
+    """Maxwell-slip virgin curve y(x) = sum_i min(k_i |x|, alpha_i Fs) sgn(x) (seed 003 A.2.4)."""
+    k = np.asarray(k, dtype=float)[:, None]
+    w = (np.asarray(alpha, dtype=float) * float(fs))[:, None]
+
+    def y(x):
+        x = np.asarray(x, dtype=float)
+        ax = np.abs(x).reshape(1, -1)
+        out = np.minimum(k * ax, w).sum(axis=0).reshape(x.shape)
+        return np.sign(x) * out
+
+    return y
+
+
+def describing_stiffness(y: Callable, A: float, n: int = 2001) -> float:
+    """k_e(A) = -(4 / (A pi)) int_0^pi y((A/2)(1 - cos th)) cos th dth  (seed 003 eq. (5))."""
+    th = np.linspace(0.0, math.pi, n)
+    f = y(0.5 * A * (1.0 - np.cos(th))) * np.cos(th)
+    return float(-4.0 / (A * math.pi) * np.trapezoid(f, th))
+
+
+def describing_damping(y: Callable, A: float, omega: float = 1.0, n: int = 2001) -> float:
+    """c_e(A) = +(8 / (pi A^2 omega)) int_0^A (y(u) - y(A)/2) du >= 0.
+
+    Seed 003 eq. (6) with the sign fixed as in the extract (A.4.3): the printed form gives
+    c_e omega <= 0 for a concave virgin curve; the magnitude is the equivalent viscous damping.
+    With ``omega = 1`` the value returned is ``c_e * omega``.
+    """
+    u = np.linspace(0.0, A, n)
+    f = y(u) - 0.5 * float(y(np.array([A]))[0])
+    return float(8.0 / (math.pi * A * A * omega) * np.trapezoid(f, u))
+
+
+@dataclass
+class SchemeOutput:
+    """Feedback terms of one scheme evaluation (N*m)."""
+
+    p_term: float = 0.0
+    i_term: float = 0.0
+    d_term: float = 0.0
+    velocity_feedforward: float = 0.0
+    friction_feedback: float = 0.0
+
+
+def _cfg(section: str, defaults: Mapping[str, Any], given: Mapping[str, Any] | None) -> dict[str, Any]:
+    given = dict(given or {})
+    check_keys(section, given, defaults)
+    out = dict(defaults)
+    out.update(given)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------
+
+
+class DNPF:
+    """Seed 003 A.4.2 DNPF (Southward et al. 1991), used without feed-forward.
+
+    u_P(e) = K_p e for |e| > Q_h; (tau_st + epsilon) sgn(e) for zero_band < |e| <= Q_h; 0 inside
+    zero_band (default: none); u = u_P(e) + K_d e_dot. ``kp = 0`` selects the continuous choice
+    K_p = (tau_st + epsilon) / Q_h.
+    """
+
+    DEFAULTS = {"q_h": 0.004, "tau_st": 0.95, "epsilon": 0.05, "kp": 0.0, "kd": 0.15, "zero_band": 0.0}
+
+    def __init__(self, config: Mapping[str, Any] | None = None):
+        c = _cfg("dnpf", self.DEFAULTS, config)
+        self.q_h = check_real("dnpf.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
+        self.tau_st = check_real("dnpf.tau_st", c["tau_st"], 0.0, unit="N*m")
+        self.epsilon = check_real("dnpf.epsilon", c["epsilon"], 0.0, unit="N*m")
+        kp = check_real("dnpf.kp", c["kp"], 0.0, unit="N*m/rad")
+        self.kp = kp if kp > 0.0 else (self.tau_st + self.epsilon) / self.q_h
+        self.kd = check_real("dnpf.kd", c["kd"], 0.0, unit="N*m*s/rad")
+        self.zero_band = check_real("dnpf.zero_band", c["zero_band"], 0.0, self.q_h, unit="rad")
+
+    def config(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.DEFAULTS}
+
+    def proportional(self, e: float) -> float:
+        ae = abs(e)
+        if ae <= self.zero_band or e == 0.0:
+            return 0.0
+        if ae <= self.q_h:
+            return math.copysign(self.tau_st + self.epsilon, e)
+        return self.kp * e
+
+    def reset(self) -> None:
+        pass
+
+    def compute(self, e, edot, ref, meas, dt) -> SchemeOutput:
+        return SchemeOutput(p_term=self.proportional(e), d_term=self.kd * edot)
+
+
+class GainScheduling:
+    """Seed 003 A.4.3 gain-scheduling controller (Fig. 10), no integrator.
+
+    Mode 1 (gross sliding): ``u = kp e + kd e_dot + F_c sgn(v_c)`` (Coulomb compensation with a
+    linear zone |v_c| < coulomb_velocity; v_c = measured velocity, or the reference velocity with
+    ``coulomb_source = reference``).
+    Switch to mode 2 when |v| <= standstill_velocity and |e| < q_h (presliding); back to mode 1 when
+    |e| > q_h. In mode 2, at entry and again at every standstill that lasts ``dwell`` seconds while
+    |e| > tolerance, with A = |e| [schedule NOT IN PAPER, extract A.4.3 suggestion, made cumulative]:
+
+        kp2 <- min(kp2 + k_e(A), kp_max)
+        kd2 <- max(0, 2 zeta sqrt((kp2 + k_e(A)) J) - c_e(A) omega_A),  omega_A = sqrt((kp2 + k_e) / J)
+
+    so the controller stiffness grows past the frictional presliding stiffness and the residual
+    error shrinks at each re-adjustment. Mode-2 law: ``u = kp2 e + kd2 e_dot``.
+    The virgin curve is the GMS one: ``k``, ``alpha``, ``fs`` (or a GMS ``model`` config).
+    """
+
+    DEFAULTS = {
+        "kp": 200.0,
+        "kd": 0.15,
+        "coulomb": 0.8,
+        "coulomb_velocity": 0.01,
+        "coulomb_source": "measured",
+        "q_h": 0.004,
+        "standstill_velocity": 1e-3,
+        "dwell": 0.01,
+        "tolerance": 5e-5,
+        "zeta": 0.7,
+        "kp_max": 2000.0,
+        "inertia": 0.0012,
+        "k": None,
+        "alpha": None,
+        "fs": None,
+        "model": None,
+    }
+
+    def __init__(self, config: Mapping[str, Any] | None = None):
+        c = _cfg("gain_scheduling", self.DEFAULTS, config)
+        n = "gain_scheduling"
+        self.kp = check_real(f"{n}.kp", c["kp"], 0.0, unit="N*m/rad")
+        self.kd = check_real(f"{n}.kd", c["kd"], 0.0, unit="N*m*s/rad")
+        self.coulomb = check_real(f"{n}.coulomb", c["coulomb"], 0.0, unit="N*m")
+        self.coulomb_velocity = check_real(f"{n}.coulomb_velocity", c["coulomb_velocity"], 0.0, unit="rad/s")
+        if c["coulomb_source"] not in ("measured", "reference"):
+            raise ParameterError(
+                f"{n}.coulomb_source = {c['coulomb_source']!r} is not allowed: must be one of measured, reference"
+            )
+        self.coulomb_source = c["coulomb_source"]
+        self.q_h = check_real(f"{n}.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
+        self.standstill_velocity = check_real(
+            f"{n}.standstill_velocity", c["standstill_velocity"], 0.0, unit="rad/s"
+        )
+        self.dwell = check_real(f"{n}.dwell", c["dwell"], 0.0, unit="s")
+        self.tolerance = check_real(f"{n}.tolerance", c["tolerance"], 0.0, unit="rad")
+        self.zeta = check_real(f"{n}.zeta", c["zeta"], 0.0, 5.0)
+        self.kp_max = check_real(f"{n}.kp_max", c["kp_max"], self.kp, unit="N*m/rad")
+        self.inertia = check_real(f"{n}.inertia", c["inertia"], 0.0, lo_open=True, unit="kg*m^2")
+        k, alpha, fs = c["k"], c["alpha"], c["fs"]
+        if c["model"] is not None:
+            m = c["model"] if hasattr(c["model"], "coefficients") else dict(c["model"])
+            coefs = m.coefficients if hasattr(m, "coefficients") else m
+            try:
+                k, alpha, fs = coefs["k"], coefs["alpha"], coefs["fs"]
+            except KeyError:
+                raise ParameterError(
+                    f"{n}.model must be a GMS model config with k, alpha and fs (got keys {sorted(coefs)})"
+                ) from None
+        if k is None or alpha is None or fs is None:
+            raise ParameterError(f"{n}: the virgin curve needs k, alpha and fs (or a GMS model config)")
+        k = [check_real(f"{n}.k[{i}]", x, 0.0, lo_open=True, unit="N*m/rad") for i, x in enumerate(k)]
+        alpha = [check_real(f"{n}.alpha[{i}]", x, 0.0, lo_open=True) for i, x in enumerate(alpha)]
+        if len(k) != len(alpha) or not k:
+            raise ParameterError(f"{n}: k has {len(k)} elements, alpha {len(alpha)}: must be equal and > 0")
+        self.k, self.alpha = k, alpha
+        self.fs = check_real(f"{n}.fs", fs, 0.0, lo_open=True, unit="N*m")
+        self.virgin = maxwell_virgin_curve(k, alpha, self.fs)
+        self.reset()
+
+    def config(self) -> dict[str, Any]:
+        out = {k: getattr(self, k) for k in self.DEFAULTS if k != "model"}
+        return out
+
+    def reset(self) -> None:
+        self.mode = 1
+        self.kp2 = self.kp
+        self.kd2 = self.kd
+        self._still = 0.0
+        self._adjusted = False
+        self.adjustments = 0
+
+    def schedule(self, A: float) -> tuple[float, float]:
+        """Return (kp2, kd2) after one re-adjustment at amplitude A (see the class docstring)."""
+        A = max(A, 1e-9)
+        ke = describing_stiffness(self.virgin, A)
+        kp2 = min(self.kp2 + ke, self.kp_max)
+        w = math.sqrt((kp2 + ke) / self.inertia)
+        ce = describing_damping(self.virgin, A) / w
+        kd2 = max(0.0, 2.0 * self.zeta * math.sqrt((kp2 + ke) * self.inertia) - ce)
+        return kp2, kd2
+
+    def compute(self, e, edot, ref, meas, dt) -> SchemeOutput:
+        v = meas[1]
+        still = abs(v) <= self.standstill_velocity
+        self._still = self._still + dt if still else 0.0
+        if self.mode == 1 and still and abs(e) < self.q_h and abs(ref[1]) <= self.standstill_velocity:
+            self.mode = 2
+            self.kp2, self.kd2 = self.kp, self.kd
+            self._adjusted = False
+        elif self.mode == 2 and abs(e) > self.q_h:
+            self.mode = 1
+        if self.mode == 2:
+            if not still:
+                self._adjusted = False
+            elif self._still >= self.dwell and not self._adjusted and abs(e) > self.tolerance:
+                self.kp2, self.kd2 = self.schedule(abs(e))
+                self._adjusted = True
+                self.adjustments += 1
+            return SchemeOutput(p_term=self.kp2 * e, d_term=self.kd2 * edot)
+        vc = ref[1] if self.coulomb_source == "reference" else v
+        if self.coulomb_velocity > 0.0:
+            fc = self.coulomb * max(-1.0, min(1.0, vc / self.coulomb_velocity))
+        else:
+            fc = math.copysign(self.coulomb, vc) if vc != 0.0 else 0.0
+        return SchemeOutput(p_term=self.kp * e, d_term=self.kd * edot, friction_feedback=fc)
+
+
+class Cascade:
+    """Seed 003 A.4.4 classical cascade: v_cmd = kp_position e + velocity_feedforward v_ref;
+    u = PI(v_cmd - v) (velocity PI with back-calculation anti-windup), integrating baseline.
+    """
+
+    DEFAULTS = {
+        "kp_position": 60.0,
+        "kp_velocity": 0.3,
+        "ki_velocity": 6.0,
+        "velocity_feedforward": 1.0,
+        "i_clamp": 2.0,
+    }
+
+    def __init__(self, config: Mapping[str, Any] | None = None, u_clamp: tuple[float, float] | None = None):
+        c = _cfg("cascade", self.DEFAULTS, config)
+        self.kp_position = check_real("cascade.kp_position", c["kp_position"], 0.0, unit="1/s")
+        self.kp_velocity = check_real("cascade.kp_velocity", c["kp_velocity"], 0.0, unit="N*m*s/rad")
+        self.ki_velocity = check_real("cascade.ki_velocity", c["ki_velocity"], 0.0, unit="N*m/rad")
+        self.velocity_feedforward = check_real(
+            "cascade.velocity_feedforward", c["velocity_feedforward"], 0.0, 2.0
+        )
+        self.i_clamp = check_real("cascade.i_clamp", c["i_clamp"], 0.0, unit="N*m", allow_inf=True)
+        self.pi = Pid(
+            {
+                "p": self.kp_velocity,
+                "i": self.ki_velocity,
+                "i_clamp_max": self.i_clamp,
+                "i_clamp_min": -self.i_clamp,
+                "antiwindup_strategy": "back_calculation",
+            },
+            prefix="cascade.velocity_pi",
+        )
+
+    def config(self) -> dict[str, Any]:
+        return {k: getattr(self, k) for k in self.DEFAULTS}
+
+    def reset(self) -> None:
+        self.pi.reset()
+
+    def compute(self, e, edot, ref, meas, dt) -> SchemeOutput:
+        vff = self.velocity_feedforward * ref[1]
+        v_cmd = self.kp_position * e + vff
+        out = self.pi.update(v_cmd - meas[1], dt, error_dot=0.0)
+        return SchemeOutput(
+            p_term=self.kp_velocity * self.kp_position * e,
+            i_term=out.i_term,
+            d_term=-self.kp_velocity * meas[1],
+            velocity_feedforward=self.kp_velocity * vff,
+        )
+
+
+class SlidingMode:
+    """Seed 000 A.5.1 sliding-mode compensator: S = e_dot + lambda e,
+    u = J_hat lambda e_dot + k_s S + M sat(S / phi)   (phi = 0: M sign(S), the relay of (5.2.6.3)).
+
+    Reachability S S_dot < 0 holds when M > |f| (bounded friction/disturbance, eq. (5.2.9.3)).
+    The inertia feed-forward J_hat theta_ddot_d is added by the façade.
+    """
+
+    DEFAULTS = {"lambda": 50.0, "gain": 1.0, "k_s": 0.0, "boundary_layer": 0.0, "inertia": 0.0}
+
+    def __init__(self, config: Mapping[str, Any] | None = None):
+        c = _cfg("sliding_mode", self.DEFAULTS, config)
+        self.lam = check_real("sliding_mode.lambda", c["lambda"], 0.0, unit="1/s")
+        self.gain = check_real("sliding_mode.gain", c["gain"], 0.0, unit="N*m")
+        self.k_s = check_real("sliding_mode.k_s", c["k_s"], 0.0, unit="N*m*s/rad")
+        self.boundary_layer = check_real(
+            "sliding_mode.boundary_layer", c["boundary_layer"], 0.0, unit="rad/s"
+        )
+        self.inertia = check_real("sliding_mode.inertia", c["inertia"], 0.0, unit="kg*m^2")
+
+    def config(self) -> dict[str, Any]:
+        return {
+            "lambda": self.lam,
+            "gain": self.gain,
+            "k_s": self.k_s,
+            "boundary_layer": self.boundary_layer,
+            "inertia": self.inertia,
+        }
+
+    def reset(self) -> None:
+        pass
+
+    def compute(self, e, edot, ref, meas, dt) -> SchemeOutput:
+        S = edot + self.lam * e
+        if self.boundary_layer > 0.0:
+            sw = self.gain * max(-1.0, min(1.0, S / self.boundary_layer))
+        else:
+            sw = math.copysign(self.gain, S) if S != 0.0 else 0.0
+        return SchemeOutput(
+            p_term=self.k_s * self.lam * e,
+            d_term=self.k_s * edot + self.inertia * self.lam * edot,
+            friction_feedback=sw,
+        )
+
+
+def seed000_relay(x, nominal: float = 1.0, amplitude: float = 0.1, deadband: float = 0.01):
+    """Seed 000 A.5.2 ``f_motor_smc.m``: u = nominal - amplitude if x >= deadband,
+    nominal + amplitude if x <= -deadband, else nominal (x: model-predicted friction signal)."""
+    x = np.asarray(x, dtype=float)
+    u = np.where(x >= deadband, nominal - amplitude, np.where(x <= -deadband, nominal + amplitude, nominal))
+    return float(u) if u.ndim == 0 else u
