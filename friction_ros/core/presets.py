@@ -1,0 +1,158 @@
+"""Plant presets: ROS parameter YAML files in ``params/`` -> plant parameters + friction models.
+
+File format (one file per preset)::
+
+    plant_simulator:
+      ros__parameters:
+        preset: <name>
+        description: "..."
+        control_period: 0.001
+        plant: {<PlantParams field>: value, ...}
+        friction_motor: {model: <name>, <coefficient>: value, ...}
+        friction_load: {model: none}
+
+``load_preset(name_or_path)`` accepts a preset name (see ``PRESET_NAMES``) or a path to such a file.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from friction_ros.core.friction import FrictionModel
+from friction_ros.core.plant import GearheadServoPlant, PlantParams
+from friction_ros.core.validation import ParameterError, check_keys, check_real
+
+NODE_NAME = "plant_simulator"
+PRESET_NAMES: tuple[str, ...] = (
+    "abb_m19s",
+    "seed002_x",
+    "seed002_y",
+    "seed002_z",
+    "seed004_dc_motor",
+    "seed001_harmonic_drive",
+    "seed000_gearhead",
+)
+_SECTION_KEYS = ("preset", "description", "control_period", "plant", "friction_motor", "friction_load")
+
+
+def params_dir() -> Path:
+    """Directory of the preset YAML files (``$FRICTION_ROS_PARAMS`` or the repository's ``params/``)."""
+    env = os.environ.get("FRICTION_ROS_PARAMS")
+    if env:
+        return Path(env)
+    here = Path(__file__).resolve()
+    for cand in (here.parents[2] / "params", here.parents[1] / "params"):
+        if cand.is_dir():
+            return cand
+    try:  # installed with colcon: share/friction_ros/params
+        from ament_index_python.packages import get_package_share_directory
+
+        return Path(get_package_share_directory("friction_ros")) / "params"
+    except Exception:  # pragma: no cover
+        return here.parents[2] / "params"
+
+
+def preset_path(name_or_path: str | os.PathLike) -> Path:
+    s = str(name_or_path)
+    if s in PRESET_NAMES or (not s.endswith((".yaml", ".yml")) and os.sep not in s):
+        p = params_dir() / f"{s}.yaml"
+        if not p.is_file():
+            raise ParameterError(
+                f"preset = {s!r} is not allowed: must be one of {', '.join(PRESET_NAMES)} or a YAML path"
+            )
+        return p
+    p = Path(s)
+    if not p.is_file():
+        raise ParameterError(f"preset file {s!r} does not exist")
+    return p
+
+
+@dataclass
+class Preset:
+    """A loaded preset: plant parameters (with their friction models) and metadata."""
+
+    name: str
+    description: str
+    control_period: float
+    params: PlantParams
+    source: str = ""
+
+    @property
+    def friction(self) -> FrictionModel:
+        """The main (truth) friction model: load side if set, else motor side."""
+        fl = self.params.friction_load
+        return fl if fl.name != "none" else self.params.friction_motor
+
+    @property
+    def friction_motor(self) -> FrictionModel:
+        return self.params.friction_motor
+
+    @property
+    def friction_load(self) -> FrictionModel:
+        return self.params.friction_load
+
+    def make_plant(self) -> GearheadServoPlant:
+        return GearheadServoPlant(self.params)
+
+    def to_config(self) -> dict:
+        """The ROS parameter YAML document (``{plant_simulator: {ros__parameters: {...}}}``)."""
+        cfg = self.params.to_config()
+        section = {
+            "preset": self.name,
+            "description": self.description,
+            "control_period": self.control_period,
+            **cfg,
+        }
+        return {NODE_NAME: {"ros__parameters": section}}
+
+    def __iter__(self):  # allows ``params, friction = load_preset(...)``
+        yield self.params
+        yield self.friction
+
+
+def preset_from_config(doc: Mapping[str, Any], source: str = "") -> Preset:
+    """Build a :class:`Preset` from a parsed YAML document or a bare ``ros__parameters`` section."""
+    sec: Any = doc
+    if isinstance(sec, Mapping) and len(sec) == 1 and "ros__parameters" not in sec:
+        sec = next(iter(sec.values()))  # node name (plant_simulator or any other)
+    if isinstance(sec, Mapping) and "ros__parameters" in sec:
+        sec = sec["ros__parameters"]
+    if not isinstance(sec, Mapping):
+        raise ParameterError(f"preset {source or ''}: expected a 'ros__parameters' mapping")
+    check_keys(f"preset {source}".strip(), sec, _SECTION_KEYS)
+    if "plant" not in sec:
+        raise ParameterError(f"preset {source}: missing the 'plant' section")
+    params = PlantParams.from_config(sec["plant"], sec.get("friction_motor"), sec.get("friction_load"))
+    return Preset(
+        name=str(sec.get("preset", Path(source).stem if source else "custom")),
+        description=str(sec.get("description", "")),
+        control_period=check_real(
+            "preset.control_period", sec.get("control_period", 0.001), 0.0, lo_open=True, unit="s"
+        ),
+        params=params,
+        source=source,
+    )
+
+
+def load_preset(name_or_path: str | os.PathLike) -> Preset:
+    """Load a preset by name (``PRESET_NAMES``) or YAML path; returns a :class:`Preset`.
+
+    ``params, friction = load_preset("abb_m19s")`` also works (plant params, main friction model).
+    """
+    path = preset_path(name_or_path)
+    with open(path, encoding="utf-8") as fh:
+        doc = yaml.safe_load(fh)
+    return preset_from_config(doc or {}, source=str(path))
+
+
+def save_preset(preset: Preset, path: str | os.PathLike) -> Path:
+    """Write ``preset`` as a ROS parameter YAML file (round-trips through :func:`load_preset`)."""
+    path = Path(path)
+    path.write_text(yaml.safe_dump(preset.to_config(), sort_keys=False), encoding="utf-8")
+    return path
