@@ -1,0 +1,496 @@
+"""drive_interface: one servo-drive axis on CAN (ODrive CANSimple or MIT) as ROS joint topics.
+
+Publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort = joint
+torque N*m) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
+``joint_commands`` (sensor_msgs/JointState effort = joint torque command) with keep-last 1, and
+publishes ``diagnostics``. Service ``~/enable`` (std_srvs/SetBool) enables (clearing latched faults)
+or disables the drive.
+
+Safe by default: the drive is only enabled on request (``enable_on_start`` or ``~/enable``); command
+watchdog, torque/current/velocity limits, NaN/inf rejection, stale-telemetry and drive-error faults
+live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTERM and shutdown send
+zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
+bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+import time
+
+import can
+from friction_msgs.msg import DriveState
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_srvs.srv import SetBool
+
+from friction_ros.core.can import mit as mitc
+from friction_ros.core.can import odrive as od
+from friction_ros.core.can.axis import (
+    FAULT_BUS,
+    LATCHING,
+    PROTOCOLS,
+    AxisConfig,
+    DriveAxis,
+    fault_text,
+)
+from friction_ros.core.can.frame import Frame
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.node_utils import (
+    COMMAND_QOS,
+    ERROR,
+    OK,
+    SENSOR_QOS,
+    STATE_QOS,
+    WARN,
+    DiagnosticsPublisher,
+    FixedRateLoop,
+    Param,
+    add_runtime_validation,
+    declare,
+    run_node,
+)
+
+
+def _level(x) -> int:
+    """node_utils' OK/WARN/ERROR are bytes (msg constants) but DiagnosticsPublisher wants an int."""
+    return x[0] if isinstance(x, bytes) else int(x)
+
+
+CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
+INTERFACES = tuple(sorted(can.VALID_INTERFACES))
+
+PARAMS = [
+    Param(
+        "interface",
+        "socketcan",
+        "python-can interface (socketcan on robots; virtual in tests)",
+        choices=INTERFACES,
+        read_only=True,
+    ),
+    Param("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
+    Param(
+        "bitrate",
+        1000000,
+        "bitrate for interfaces that set it (socketcan: set with ip link)",
+        lo=10000,
+        hi=1000000,
+        read_only=True,
+        unit="bit/s",
+    ),
+    Param("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
+    Param("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
+    Param("mit.master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
+    *[
+        Param(f"mit.{k}", float(getattr(mitc.MitRanges(), k)), f"MIT scaling range {k}", read_only=True)
+        for k in (
+            "p_min",
+            "p_max",
+            "v_min",
+            "v_max",
+            "kp_min",
+            "kp_max",
+            "kd_min",
+            "kd_max",
+            "t_min",
+            "t_max",
+        )
+    ],
+    Param("joint_name", "joint", "joint name in joint_states / joint_commands", read_only=True),
+    Param(
+        "control_rate_hz",
+        1000.0,
+        "publication and command rate",
+        lo=1.0,
+        hi=5000.0,
+        read_only=True,
+        unit="Hz",
+    ),
+    Param("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
+    Param("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
+    Param("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
+    Param("zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"),
+    Param(
+        "effort_source",
+        "current",
+        "joint effort from Iq*k_t*gear (current) or the drive's Torque_Estimate",
+        choices=("current", "torque_estimate"),
+        read_only=True,
+    ),
+    Param(
+        "request_telemetry",
+        False,
+        "ODrive: also send RTR requests for encoder + effort every period",
+        read_only=True,
+    ),
+    Param("torque_limit", 1.0, "|joint torque command| limit", lo=0.0, unit="N*m"),
+    Param("current_limit", 10.0, "|motor current| limit (also sent to the drive)", lo=0.0, unit="A"),
+    Param(
+        "velocity_limit",
+        10.0,
+        "|joint velocity| above which no accelerating torque is sent",
+        lo=0.0,
+        unit="rad/s",
+    ),
+    Param(
+        "command_timeout",
+        0.1,
+        "watchdog: zero torque when no command arrived for this long",
+        lo=1e-4,
+        hi=10.0,
+        unit="s",
+    ),
+    Param(
+        "telemetry_timeout",
+        0.01,
+        "stale telemetry fault when no encoder/effort frame for this long",
+        lo=1e-4,
+        hi=10.0,
+        unit="s",
+    ),
+    Param(
+        "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
+    ),
+    Param("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
+    Param("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
+    Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
+]
+RUNTIME = ("torque_limit", "current_limit", "velocity_limit", "command_timeout", "telemetry_timeout")
+
+
+def axis_config(v: dict) -> AxisConfig:
+    """Build the core AxisConfig from validated parameter values (ParameterError on bad combos)."""
+    if v["direction"] not in (1, -1):
+        raise ParameterError(f"direction = {v['direction']} is not allowed: must be one of 1, -1")
+    for k in ("torque_limit", "current_limit", "velocity_limit"):
+        if not v[k] > 0:
+            raise ParameterError(f"{k} = {v[k]:g} is out of range: must be > 0")
+    ranges = mitc.MitRanges(**{f.name: v[f"mit.{f.name}"] for f in dataclasses.fields(mitc.MitRanges)})
+    return AxisConfig(
+        protocol=v["protocol"],
+        node_id=v["node_id"],
+        mit_master_id=v["mit.master_id"],
+        mit_ranges=ranges,
+        conversion=JointConversion(v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"]),
+        torque_limit=v["torque_limit"],
+        current_limit=v["current_limit"],
+        velocity_limit=v["velocity_limit"],
+        command_timeout=v["command_timeout"],
+        telemetry_timeout=v["telemetry_timeout"],
+        effort_source=v["effort_source"],
+        request_telemetry=v["request_telemetry"],
+    )
+
+
+def can_filters(cfg: AxisConfig) -> list[dict]:
+    if cfg.protocol == "odrive_cansimple":
+        return [od.kernel_filter(cfg.node_id)]
+    return [{"can_id": cfg.mit_master_id, "can_mask": 0x7FF, "extended": False}]
+
+
+def open_bus(interface: str, channel: str, bitrate: int, filters: list[dict]) -> can.BusABC:
+    """Open a python-can bus; a failure becomes one clear ValueError line."""
+    try:
+        return can.Bus(interface=interface, channel=channel, bitrate=bitrate, can_filters=filters)
+    except Exception as exc:
+        hint = ""
+        if interface == "socketcan":
+            hint = f"; bring the interface up first: sudo ip link set {channel} up type can bitrate {bitrate}"
+        raise ParameterError(
+            f"cannot open CAN bus interface={interface} channel={channel}: {type(exc).__name__}: {exc}{hint}"
+        ) from None
+
+
+class _Reader(can.Listener):
+    """Notifier callback: frames into the axis (reader thread), errors into the node's counters."""
+
+    def __init__(self, node: DriveInterface):
+        self.node = node
+
+    def on_message_received(self, msg: can.Message) -> None:
+        node = self.node
+        if msg.is_error_frame:
+            node.error_frames += 1
+            if msg.arbitration_id & CAN_ERR_BUSOFF:
+                node.bus_dead("bus-off error frame received")
+            return
+        node.axis.on_frame(
+            msg.arbitration_id, msg.data, msg.is_remote_frame, msg.is_extended_id, False, time.monotonic()
+        )
+
+    def on_error(self, exc: Exception) -> None:
+        self.node.bus_dead(f"CAN reader failed: {type(exc).__name__}: {exc}")
+
+
+class DriveInterface(Node):
+    def __init__(self, **kwargs):
+        super().__init__("drive_interface", **kwargs)
+        self.v = v = declare(self, PARAMS)
+        self.axis = DriveAxis(axis_config(v))
+        self.joint = v["joint_name"]
+        self.period = 1.0 / v["control_rate_hz"]
+        self.error_frames = 0
+        self.send_errors = 0
+        self.bus_reopens = 0
+        self._consecutive_send_errors = 0
+        self._bus_dead_since: float | None = None
+        self._bus_lock = threading.Lock()
+        self._shutdown_done = False
+        self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
+        self.notifier = can.Notifier(self.bus, [_Reader(self)], timeout=0.1)
+
+        self.pub_joint = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.pub_drive = self.create_publisher(DriveState, "drive_state", SENSOR_QOS)
+        self.sub_cmd = self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS)
+        self.srv_enable = self.create_service(SetBool, "~/enable", self._on_enable)
+        hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{v['node_id']}"
+        self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
+        add_runtime_validation(self, PARAMS, self._apply)
+        self.commands_foreign = 0
+        self._diag_next = time.monotonic()
+        self._diag_prev: tuple[float, int, int, int, int] | None = None
+        self._js = JointState(name=[self.joint], position=[0.0], velocity=[0.0], effort=[0.0])
+        self._ds = DriveState(joint_name=self.joint, protocol=v["protocol"])
+        self._loop_error = ""
+        if v["enable_on_start"]:
+            self.axis.request_enable()
+        self.loop = FixedRateLoop(self.period, self._cycle, name="drive_interface_loop")
+        self.loop.start()
+        self.get_logger().info(
+            f"{v['protocol']} node {v['node_id']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "
+            f"joint '{self.joint}', drive {'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
+        )
+
+    # ---- parameters / service / commands ------------------------------------------------------------
+    def _apply(self, changes: dict) -> None:
+        merged = {**self.v, **changes}
+        new = axis_config(merged)  # raises ParameterError -> change rejected
+        with self.axis._lock:
+            self.axis.cfg = new
+        self.v = merged
+
+    def _on_enable(self, req, resp):
+        if req.data:
+            self.axis.request_enable()
+            resp.success, resp.message = (
+                True,
+                "enable requested: the drive enables as soon as telemetry is fresh",
+            )
+        else:
+            self.send_frames(self.axis.request_disable())
+            resp.success, resp.message = True, "drive disabled (zero torque, idle)"
+        self.get_logger().info(resp.message)
+        return resp
+
+    def _on_command(self, msg: JointState) -> None:
+        now = time.monotonic()
+        if msg.name:
+            try:
+                i = list(msg.name).index(self.joint)
+            except ValueError:
+                self.commands_foreign += 1
+                return
+        elif len(msg.effort) == 1:
+            i = 0
+        else:
+            self.commands_foreign += 1
+            return
+        value = msg.effort[i] if i < len(msg.effort) else math.nan  # a command without effort is rejected
+        if not self.axis.set_command(value, now):
+            self.get_logger().warning(
+                f"rejected joint command effort = {value} for '{self.joint}': must be a finite number [N*m]; "
+                "torque set to zero",
+                throttle_duration_sec=1.0,
+            )
+
+    # ---- bus ------------------------------------------------------------------------------------------
+    def send_frames(self, frames: list[Frame]) -> bool:
+        ok = True
+        for f in frames:
+            msg = can.Message(
+                arbitration_id=f.arbitration_id,
+                data=f.data,
+                is_extended_id=f.is_extended,
+                is_remote_frame=f.is_remote,
+                dlc=f.length,
+            )
+            try:
+                with self._bus_lock:
+                    self.bus.send(msg, timeout=0.001)
+                self._consecutive_send_errors = 0
+            except Exception as exc:  # can.CanError, OSError (ENOBUFS), closed bus ...
+                ok = False
+                self.send_errors += 1
+                self._consecutive_send_errors += 1
+                if self._consecutive_send_errors >= self.v["bus_error_limit"]:
+                    self.bus_dead(f"{self._consecutive_send_errors} consecutive send failures: {exc}")
+        return ok
+
+    def bus_dead(self, reason: str) -> None:
+        if self._bus_dead_since is None:
+            self._bus_dead_since = time.monotonic()
+            self.get_logger().error(f"CAN bus fault: {reason}; drive disabled, reopening the bus")
+        self.axis.report_bus_fault(reason)
+
+    def _recover_bus(self, now: float) -> None:
+        if now - self._bus_dead_since < self.v["bus_recovery_period"]:
+            return
+        v = self.v
+        try:
+            self.notifier.stop(timeout=0.2)
+            with self._bus_lock:
+                self.bus.shutdown()
+                self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
+            self.notifier = can.Notifier(self.bus, [_Reader(self)], timeout=0.1)
+            self.bus_reopens += 1
+            self._consecutive_send_errors = 0
+            self._bus_dead_since = None
+            self.get_logger().warning("CAN bus reopened; drive stays disabled until ~/enable")
+        except Exception as exc:
+            self._bus_dead_since = now
+            self.get_logger().error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)
+
+    # ---- control period -------------------------------------------------------------------------------
+    def _cycle(self) -> None:
+        try:
+            self._cycle_inner()
+        except Exception as exc:  # never let the loop thread die with the drive armed
+            if not self._loop_error:
+                self._loop_error = f"{type(exc).__name__}: {exc}"
+                self.get_logger().error(
+                    f"drive_interface cycle failed: {self._loop_error}; disabling the drive"
+                )
+            self.axis.report_bus_fault(f"internal error: {self._loop_error}")
+            try:
+                self.send_frames(self.axis.shutdown_frames())
+            except Exception:
+                pass
+
+    def _cycle_inner(self) -> None:
+        now = time.monotonic()
+        if self._bus_dead_since is not None:
+            self._recover_bus(now)
+        res = self.axis.cycle(now)
+        flags = res.flags
+        if res.frames and not self.send_frames(res.frames):
+            flags |= FAULT_BUS
+        stamp = self.get_clock().now().to_msg()
+        tel = self.axis.telemetry
+        if res.sample is not None:
+            js = self._js
+            js.header.stamp = stamp
+            js.position[0], js.velocity[0], js.effort[0] = (
+                res.sample.position,
+                res.sample.velocity,
+                res.sample.effort,
+            )
+            self.pub_joint.publish(js)
+        ds = self._ds
+        ds.header.stamp = stamp
+        fresh = res.sample is not None
+        ds.motor_position = tel.motor_position if fresh else math.nan
+        ds.motor_velocity = tel.motor_velocity if fresh else math.nan
+        ds.current_setpoint = tel.current_setpoint
+        ds.current_measured = tel.current_measured
+        ds.torque_estimate = tel.torque_estimate
+        ds.bus_voltage = tel.bus_voltage
+        ds.axis_state = tel.axis_state & 0xFFFFFFFF
+        ds.axis_error = tel.axis_error & 0xFFFFFFFF
+        ds.fault_flags = flags
+        ds.enabled = self.axis.enabled
+        self.pub_drive.publish(ds)
+        if now >= self._diag_next:
+            self._diag_next = now + self.v["diagnostics_period"]
+            self._publish_diagnostics(now, flags)
+
+    def _publish_diagnostics(self, now: float, flags: int) -> None:
+        c, st = self.axis.counters, self.axis.decode_stats
+        cur = (now, c.frames_rx, c.frames_tx, c.encoder_frames, c.commands)
+        rates = [math.nan] * 4
+        if self._diag_prev is not None and now > self._diag_prev[0]:
+            dt = now - self._diag_prev[0]
+            rates = [(a - b) / dt for a, b in zip(cur[1:], self._diag_prev[1:])]
+        self._diag_prev = cur
+        try:
+            bus_state = self.bus.state.name.lower()
+        except Exception:
+            bus_state = "unknown"
+        if self._bus_dead_since is not None:
+            bus_state = "dead (reopening)"
+        latched = self.axis.latched
+        if latched & LATCHING:
+            level, message = ERROR, f"fault: {self.axis.fault_reason}"
+        elif flags:
+            level, message = (
+                WARN,
+                f"{'enabled' if self.axis.enabled else 'disabled'}, flags {fault_text(flags)}",
+            )
+        else:
+            level, message = OK, "enabled" if self.axis.enabled else "disabled (telemetry ok)"
+        stats = self.loop.stats
+        self.diag.publish(
+            _level(level),
+            message,
+            {
+                "enabled": self.axis.enabled,
+                "fault_flags": fault_text(flags),
+                "latched_faults": fault_text(latched),
+                "fault_reason": self.axis.fault_reason,
+                "rx_frame_rate_hz": rates[0],
+                "tx_frame_rate_hz": rates[1],
+                "encoder_rate_hz": rates[2],
+                "command_rate_hz": rates[3],
+                "frames_decoded": st.decoded,
+                "frames_ignored": st.ignored,
+                "frames_rejected": st.rejected,
+                "last_reject_reason": st.last_reject_reason,
+                "commands_rejected": c.commands_rejected,
+                "commands_foreign": self.commands_foreign,
+                "watchdog_trips": c.watchdog_trips,
+                "fault_trips": c.fault_trips,
+                "limit_hits": c.limit_hits,
+                "send_errors": self.send_errors,
+                "error_frames": self.error_frames,
+                "bus_faults": c.bus_errors,
+                "bus_reopens": self.bus_reopens,
+                "bus_state": bus_state,
+                "axis_state": self.axis.telemetry.axis_state,
+                "axis_error": f"0x{self.axis.telemetry.axis_error:X}",
+                "loop_overruns": stats.overruns,
+                "loop_max_lateness_ms": stats.max_lateness * 1e3,
+                "loop_exec_ms": stats.last_exec * 1e3,
+            },
+        )
+
+    # ---- shutdown -------------------------------------------------------------------------------------
+    def on_shutdown(self) -> None:
+        """Stop the loop, then zero torque and idle / exit motor mode (retried), then close the bus."""
+        if self._shutdown_done:
+            return
+        self._shutdown_done = True
+        self.loop.stop()
+        frames = self.axis.shutdown_frames()
+        for _attempt in range(3):
+            if self.send_frames(frames):
+                break
+            time.sleep(0.01)
+        else:
+            self.get_logger().error("could not send the idle request: check the drive (its own watchdog)")
+        time.sleep(0.005)  # let the frames leave the socket before closing it
+        self.get_logger().info("drive left safe: zero torque, idle")
+        try:
+            self.notifier.stop(timeout=0.2)
+            self.bus.shutdown()
+        except Exception as exc:
+            self.get_logger().warning(f"closing the CAN bus: {exc}")
+
+
+def main(args: list[str] | None = None) -> int:
+    return run_node(DriveInterface, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

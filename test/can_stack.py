@@ -1,0 +1,83 @@
+"""Test helper process: drive emulator thread + drive_interface node on one python-can virtual bus.
+
+Usage: python test/can_stack.py --channel CH --log FILE [--emulator JSON] [--silent-after S]
+       [--error-after S] -- <ROS args for drive_interface>
+
+python-can's virtual bus only connects buses of one process, so the emulator and the node share
+this process; the test talks to the node over DDS (joint_commands / joint_states) and reads the bus
+log written by a third bus (sniffer) on the same channel.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import threading
+
+import can
+from can_support import make_plant
+
+from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.nodes import drive_interface
+
+
+class Sniffer(can.Listener):
+    def __init__(self, path):
+        self.fh = open(path, "w")  # noqa: SIM115
+
+    def on_message_received(self, msg):
+        self.fh.write(
+            f"{msg.timestamp:.6f},{msg.arbitration_id:x},{int(msg.is_remote_frame)},{bytes(msg.data).hex()}\n"
+        )
+
+    def stop(self):
+        self.fh.close()
+
+
+def main():
+    argv = sys.argv[1:]
+    ros = argv[argv.index("--") + 1 :] if "--" in argv else []
+    own = argv[: argv.index("--")] if "--" in argv else argv
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--channel", required=True)
+    ap.add_argument("--log", required=True)
+    ap.add_argument("--emulator", default="{}")
+    ap.add_argument("--silent-after", type=float, default=None)
+    ap.add_argument("--error-after", type=float, default=None)
+    a = ap.parse_args(own)
+    emu_kw = json.loads(a.emulator)
+    if "conversion" in emu_kw:
+        emu_kw["conversion"] = JointConversion(**emu_kw["conversion"])
+    cfg = EmulatorConfig(**emu_kw)
+    emu_bus = can.Bus(interface="virtual", channel=a.channel)
+    sniff_bus = can.Bus(interface="virtual", channel=a.channel)
+    sniffer = Sniffer(a.log)
+    notifier = can.Notifier(sniff_bus, [sniffer], timeout=0.05)
+    emu = DriveEmulator(emu_bus, make_plant(), cfg)
+    emu.start()
+    timers = []
+    if a.silent_after is not None:
+        timers.append(threading.Timer(a.silent_after, emu.set_silent))
+    if a.error_after is not None:
+        timers.append(threading.Timer(a.error_after, emu.inject_axis_error))
+    for t in timers:
+        t.daemon = True
+        t.start()
+    try:
+        rc = drive_interface.main(["drive_interface", "--ros-args", *ros])
+    finally:
+        import time
+
+        time.sleep(0.05)
+        emu.stop()
+        notifier.stop()
+        sniffer.stop()
+        emu_bus.shutdown()
+        sniff_bus.shutdown()
+    sys.exit(rc)
+
+
+if __name__ == "__main__":
+    main()
