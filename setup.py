@@ -9,6 +9,9 @@ PACKAGE = "friction_ros"
 # Console scripts: ROS nodes (ros2 run friction_ros <name>) and user CLIs.
 ENTRY_POINTS = [
     "friction-doctor = friction_ros.cli.doctor:main",
+    "bag_recorder = friction_ros.nodes.bag_recorder:main",
+    "bag_player = friction_ros.nodes.bag_player:main",
+    "friction-bag = friction_ros.cli.bag:main",
 ]
 
 setup(

@@ -1,0 +1,240 @@
+"""bag_recorder: record chosen topics to a rosbag2-compatible MCAP bag directory.
+
+    bag_recorder -o bags/run_1 /joint_states /controller_state --preset abb_m19s --program plateaus
+    bag_recorder --ros-args -p topics:="[/joint_states]" -p output:=bags/run_1 -p flush_interval:=0.5
+
+Topics are subscribed as soon as a publisher appears (generic raw subscriptions: messages are stored
+as received, never deserialised). The subscription is reliable unless a publisher offers best effort,
+and transient-local if every publisher is. Each message is stored with log_time = receive time and
+publish_time = source timestamp (ns since epoch). The publishers' offered QoS go into the channel
+metadata (``offered_qos_profiles``).
+
+SIGINT/SIGTERM: the recorder stops subscribing, takes every message still queued, then finishes the
+MCAP file (summary, statistics) and writes metadata.yaml. SIGKILL: every completed chunk is
+recoverable by ``friction_ros.core.bag.read_bag``; at most the last ``flush_interval`` seconds (or
+``chunk_size`` bytes, whichever comes first) are lost.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+from friction_ros.core.bag import BagWriter, run_metadata
+from friction_ros.core.bag.writer import COMPRESSIONS
+from friction_ros.nodes.bag_common import (
+    Spec,
+    declare_params,
+    fail,
+    install_stop_handlers,
+    message_class,
+    qos_to_dict,
+)
+
+SPECS = [
+    Spec("topics", [], "topics to record (absolute names); empty with all_topics=false records nothing"),
+    Spec("all_topics", False, "record every topic that appears (except /rosout and /parameter_events)"),
+    Spec("output", "", "bag directory to create; default run_<YYYYmmdd_HHMMSS> in the working directory"),
+    Spec("overwrite", False, "allow an existing non-empty output directory (its bag files are replaced)"),
+    Spec("compression", "zstd", "MCAP chunk compression", choices=tuple(COMPRESSIONS)),
+    Spec(
+        "chunk_size",
+        1048576,
+        "uncompressed bytes per chunk before it is written",
+        lo=1024,
+        hi=1 << 30,
+        unit="B",
+    ),
+    Spec(
+        "flush_interval",
+        1.0,
+        "longest time a message waits in the open chunk (SIGKILL loss bound)",
+        0.0,
+        3600.0,
+        "s",
+    ),
+    Spec("qos_depth", 1000, "keep-last depth of the recording subscriptions", lo=1, hi=100000),
+    Spec(
+        "discovery_period", 0.2, "period of the search for publishers of the wanted topics", 0.01, 60.0, "s"
+    ),
+    Spec("max_duration", 0.0, "stop after this time, 0 = until SIGINT/SIGTERM", 0.0, 1e9, "s"),
+    Spec("preset", "", "run metadata: plant/joint preset name"),
+    Spec("program", "", "run metadata: excitation program"),
+    Spec("parameter_files", [], "run metadata: parameter files embedded by content"),
+]
+_IGNORED = ("/rosout", "/parameter_events")
+
+
+class BagRecorder(Node):
+    """Records topics into a :class:`~friction_ros.core.bag.BagWriter` bag."""
+
+    def __init__(self, overrides: dict | None = None, **kwargs):
+        super().__init__("bag_recorder", **kwargs)
+        p = self.p = declare_params(self, SPECS, overrides)
+        out = p["output"] or time.strftime("run_%Y%m%d_%H%M%S")
+        meta = run_metadata(p["preset"], p["program"], p["parameter_files"], topics=p["topics"])
+        self.writer = BagWriter(
+            out,
+            chunk_size=p["chunk_size"],
+            flush_interval=p["flush_interval"],
+            compression=p["compression"],
+            metadata=meta,
+            overwrite=p["overwrite"],
+        )
+        self.wanted = [t if t.startswith("/") else "/" + t for t in p["topics"]]
+        self.subs: dict[str, object] = {}
+        self.counts: dict[str, int] = {}
+        self.closed = False
+        self.create_timer(p["discovery_period"], self.discover)
+        poll = min(max(p["flush_interval"] / 4.0, 0.005), 0.1)
+        self.create_timer(poll, self.writer.poll)
+        self.started = time.monotonic()
+        self.discover()
+        self.get_logger().info(
+            f"recording to {self.writer.path} (chunk {p['chunk_size']} B, flush {p['flush_interval']:g} s, "
+            f"{p['compression']}); topics: {', '.join(self.wanted) or 'all'}"
+        )
+
+    def discover(self) -> None:
+        """Subscribe to wanted topics that have a publisher now."""
+        if self.closed:
+            return
+        for name, types in self.get_topic_names_and_types():
+            if name in self.subs:
+                continue
+            if self.p["all_topics"]:
+                if name in _IGNORED:
+                    continue
+            elif name not in self.wanted:
+                continue
+            if len(types) != 1:
+                self.get_logger().warning(f"topic {name} has several types {types}: not recorded")
+                self.subs[name] = None
+                continue
+            msgtype = types[0]
+            try:
+                cls = message_class(msgtype)
+                pubs = self.get_publishers_info_by_topic(name)
+                offered = [qos_to_dict(i.qos_profile) for i in pubs]
+                self.writer.add_topic(name, msgtype, qos_profiles=offered)
+            except ValueError as exc:
+                self.get_logger().error(f"topic {name} not recorded: {exc}")
+                self.subs[name] = None
+                continue
+            reliable = all(i.qos_profile.reliability != ReliabilityPolicy.BEST_EFFORT for i in pubs)
+            latched = bool(pubs) and all(
+                i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in pubs
+            )
+            qos = QoSProfile(
+                history=HistoryPolicy.KEEP_LAST,
+                depth=self.p["qos_depth"],
+                reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+            )
+            self.counts[name] = 0
+            self.subs[name] = self.create_subscription(
+                cls, name, lambda data, info, topic=name: self._on_message(topic, data, info), qos, raw=True
+            )
+            self.get_logger().info(f"recording {name} [{msgtype}]")
+
+    def _on_message(self, topic: str, data: bytes, info) -> None:
+        if self.closed:
+            return
+        recv = int(info.get("received_timestamp") or 0) or time.time_ns()
+        sent = int(info.get("source_timestamp") or 0) or recv
+        self.writer.write(topic, data, recv, sent)
+        self.counts[topic] += 1
+
+    @property
+    def message_count(self) -> int:
+        return sum(self.counts.values())
+
+    def expired(self) -> bool:
+        d = self.p["max_duration"]
+        return d > 0 and time.monotonic() - self.started >= d
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self.writer.close()
+            self.get_logger().info(
+                f"wrote {self.message_count} messages on {len(self.counts)} topic(s) to {self.writer.path}"
+            )
+
+
+def _parse_cli(argv: list[str]) -> dict:
+    ap = argparse.ArgumentParser(
+        prog="bag_recorder",
+        description="Record topics to a rosbag2 MCAP bag (ROS parameters via --ros-args).",
+    )
+    ap.add_argument("topics", nargs="*", help="topics to record")
+    ap.add_argument(
+        "-a", "--all", dest="all_topics", action="store_true", default=None, help="record all topics"
+    )
+    ap.add_argument("-o", "--output", help="bag directory")
+    ap.add_argument("--overwrite", action="store_true", default=None)
+    ap.add_argument("--compression", choices=list(COMPRESSIONS))
+    ap.add_argument("--chunk-size", dest="chunk_size", type=int, help="bytes")
+    ap.add_argument("--flush-interval", dest="flush_interval", type=float, help="s (SIGKILL loss bound)")
+    ap.add_argument("--qos-depth", dest="qos_depth", type=int)
+    ap.add_argument("--max-duration", dest="max_duration", type=float, help="s")
+    ap.add_argument("--preset")
+    ap.add_argument("--program")
+    ap.add_argument(
+        "--param-file", dest="parameter_files", action="append", help="embed this file (repeatable)"
+    )
+    ns = ap.parse_args(argv)
+    out = {k: v for k, v in vars(ns).items() if v is not None}
+    if not out.get("topics"):
+        out.pop("topics", None)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv if argv is None else argv)
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = install_stop_handlers()
+    node = None
+    try:
+        cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
+        node = BagRecorder(overrides=cli)
+        if not node.wanted and not node.p["all_topics"]:
+            raise ValueError("no topics to record: give topics (positional or -p topics:=[...]) or --all")
+    except (ValueError, OSError) as exc:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+        return fail(exc)
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        while not stop.is_set() and rclpy.ok() and not node.expired():
+            executor.spin_once(timeout_sec=0.05)
+        # Drain: take everything already delivered to our subscriptions before closing the file.
+        idle_since = time.monotonic()
+        last = node.message_count
+        deadline = time.monotonic() + 3.0
+        while time.monotonic() < deadline and time.monotonic() - idle_since < 0.15:
+            executor.spin_once(timeout_sec=0.01)
+            if node.message_count != last:
+                last, idle_since = node.message_count, time.monotonic()
+    except ExternalShutdownException:
+        pass
+    finally:
+        node.close()
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
