@@ -293,7 +293,7 @@ class DynamicModel(FrictionModel):
         v = np.ascontiguousarray(v_traj, dtype=float).ravel()
         if use_numba and K.HAVE_NUMBA:
             kp = self.batch_kernel_params(pm)
-            st0 = np.zeros((pm.shape[0], self.initial_state().size))
+            st0 = np.ascontiguousarray(np.tile(self.initial_state(), (pm.shape[0], 1)))
             out = np.empty((pm.shape[0], v.size))
             K.simulate_batch_kernel(self.KIND, kp, st0, v, float(dt), out)
             return out
