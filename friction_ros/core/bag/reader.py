@@ -288,10 +288,12 @@ class _FileScan:
     def _scan(self, data: bytes) -> None:
         n = len(data)
         if n < 17:
-            raise TruncatedBagError(f"{self.path}: MCAP header record is truncated ({n} bytes in the file)")
+            raise TruncatedBagError(f"{self.path}: MCAP header record is truncated (file has only {n} bytes)")
         op, ln = _OPHDR.unpack_from(data, 8)
         if op != 0x01 or 17 + ln > n:
-            raise TruncatedBagError(f"{self.path}: MCAP header record is truncated or missing")
+            raise TruncatedBagError(
+                f"{self.path}: MCAP header record is truncated or missing (not a complete MCAP file)"
+            )
         self.profile, _ = _read_str(data, 17)
         if self.profile not in ("ros2", ""):
             raise UnsupportedBagError(f"{self.path}: MCAP profile {self.profile!r} is not 'ros2'")
@@ -350,6 +352,12 @@ class _FileScan:
             self.warnings.append(
                 f"{self.path}: file is truncated at byte {pos} of {n} (recording was killed?): recovered "
                 "all complete chunks; messages of the last, incomplete chunk are lost"
+            )
+        elif not footer_ok:
+            self.truncated = True
+            self.warnings.append(
+                f"{self.path}: file is truncated after the data section (summary/footer missing): all "
+                "messages recovered"
             )
 
     def _scan_summary(self, data: bytes, start: int, end: int) -> None:
