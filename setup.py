@@ -8,6 +8,8 @@ PACKAGE = "friction_ros"
 
 # Console scripts: ROS nodes (ros2 run friction_ros <name>) and user CLIs.
 ENTRY_POINTS = [
+    "drive_interface = friction_ros.nodes.drive_interface:main",
+    "drive_emulator = friction_ros.nodes.drive_emulator:main",
     "friction-doctor = friction_ros.cli.doctor:main",
     "bag_recorder = friction_ros.nodes.bag_recorder:main",
     "bag_player = friction_ros.nodes.bag_player:main",

@@ -48,14 +48,14 @@ def main():
     ap.add_argument("--error-after", type=float, default=None)
     a = ap.parse_args(own)
     emu_kw = json.loads(a.emulator)
-    if "conversion" in emu_kw:
-        emu_kw["conversion"] = JointConversion(**emu_kw["conversion"])
+    plant, conv = make_plant(emu_kw.pop("preset", "abb_m19s"))
+    emu_kw["conversion"] = JointConversion(**{**conv.__dict__, **emu_kw.get("conversion", {})})
     cfg = EmulatorConfig(**emu_kw)
     emu_bus = can.Bus(interface="virtual", channel=a.channel)
     sniff_bus = can.Bus(interface="virtual", channel=a.channel)
     sniffer = Sniffer(a.log)
     notifier = can.Notifier(sniff_bus, [sniffer], timeout=0.05)
-    emu = DriveEmulator(emu_bus, make_plant(), cfg)
+    emu = DriveEmulator(emu_bus, plant, cfg)
     emu.start()
     timers = []
     if a.silent_after is not None:

@@ -33,9 +33,11 @@ class StandInPlant:
         return Meas(self.q, self.v, command, 0.0, self.t)
 
 
-def make_plant():
-    """The project's plant when it exists, else the stand-in (documented in the report)."""
-    return StandInPlant()
+def make_plant(preset: str = "abb_m19s"):
+    """The project's plant (GearheadServoPlant preset in torque actuation) + its JointConversion."""
+    from friction_ros.core.can.emulator import plant_from_preset
+
+    return plant_from_preset(preset)
 
 
 def read_bus_log(path):

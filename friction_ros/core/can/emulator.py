@@ -347,3 +347,19 @@ class DriveEmulator:
             if self._out:
                 nxt = min(nxt, self._out[0][0])
             self.poll(max(0.0, min(nxt - now, 0.01)))
+
+
+def plant_from_preset(preset: str = "abb_m19s"):
+    """A project plant (:class:`friction_ros.core.plant.GearheadServoPlant`) for the emulator.
+
+    The preset's plant is switched to torque actuation (the emulated drive closes the current loop,
+    so the plant's command is the joint torque). Returns ``(plant, conversion)`` where the
+    :class:`JointConversion` matches the preset's gear ratio and torque constant, i.e. what the
+    drive_interface node must be configured with to get the plant's joint values back.
+    """
+    from friction_ros.core.plant import GearheadServoPlant
+    from friction_ros.core.presets import load_preset
+
+    p = load_preset(preset).params
+    plant = GearheadServoPlant(p.replace(actuation="torque"))
+    return plant, JointConversion(gear_ratio=p.ratio, torque_constant=p.torque_constant)

@@ -1,0 +1,119 @@
+"""drive_emulator: run the frame-level servo-drive emulator as its own process.
+
+The emulated drive (ODrive CANSimple or MIT) answers on a python-can bus with a project plant
+preset behind it, so ``drive_interface`` can be exercised without hardware, e.g. on a Linux PC with
+a virtual SocketCAN interface::
+
+    sudo ip link add dev vcan0 type vcan && sudo ip link set vcan0 up
+    drive_emulator --interface socketcan --channel vcan0 --preset abb_m19s
+    drive_interface --ros-args -p channel:=vcan0 -p enable_on_start:=true ...
+
+It is not a ROS node (a drive does not speak DDS); it prints a status line every few seconds and
+stops cleanly on Ctrl-C. Fault injection: ``--silent-after``, ``--error-after``, ``--loss``, ``--latency``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+import time
+
+from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.validation import ParameterError
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="drive_emulator", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
+    ap.add_argument("--channel", default="vcan0", help="CAN channel (default vcan0)")
+    ap.add_argument("--bitrate", type=int, default=1_000_000)
+    ap.add_argument("--protocol", default="odrive_cansimple", choices=("odrive_cansimple", "mit"))
+    ap.add_argument("--node-id", type=int, default=0, help="ODrive node id / MIT motor id")
+    ap.add_argument("--mit-master-id", type=int, default=0)
+    ap.add_argument("--preset", default="abb_m19s", help="plant preset name or YAML path")
+    ap.add_argument("--direction", type=int, default=1, choices=(1, -1))
+    ap.add_argument("--zero-offset", type=float, default=0.0, help="joint rad at motor zero")
+    ap.add_argument("--physics-rate", type=float, default=1000.0, help="plant steps per second")
+    ap.add_argument(
+        "--encoder-rate", type=float, default=1000.0, help="cyclic encoder frames/s (0: RTR only)"
+    )
+    ap.add_argument("--iq-rate", type=float, default=1000.0)
+    ap.add_argument("--torques-rate", type=float, default=0.0)
+    ap.add_argument("--heartbeat-rate", type=float, default=10.0)
+    ap.add_argument("--bus-voltage-rate", type=float, default=0.0)
+    ap.add_argument("--latency", type=float, default=0.0, help="added to every transmitted frame [s]")
+    ap.add_argument("--loss", type=float, default=0.0, help="probability a transmitted frame is lost")
+    ap.add_argument("--silent-after", type=float, default=None, help="stop transmitting after S seconds")
+    ap.add_argument("--error-after", type=float, default=None, help="raise an axis error after S seconds")
+    ap.add_argument("--duration", type=float, default=None, help="exit after S seconds")
+    ap.add_argument("--status-period", type=float, default=5.0)
+    return ap
+
+
+def main(argv: list[str] | None = None) -> int:
+    a = build_parser().parse_args(argv)
+    try:
+        import can
+
+        plant, conv = plant_from_preset(a.preset)
+        conv = JointConversion(conv.gear_ratio, conv.torque_constant, a.direction, a.zero_offset)
+        cfg = EmulatorConfig(
+            protocol=a.protocol,
+            node_id=a.node_id,
+            mit_master_id=a.mit_master_id,
+            conversion=conv,
+            physics_rate_hz=a.physics_rate,
+            encoder_rate_hz=a.encoder_rate,
+            iq_rate_hz=a.iq_rate,
+            torques_rate_hz=a.torques_rate,
+            heartbeat_rate_hz=a.heartbeat_rate,
+            bus_voltage_rate_hz=a.bus_voltage_rate,
+            latency=a.latency,
+            loss_probability=a.loss,
+        )
+        try:
+            bus = can.Bus(interface=a.interface, channel=a.channel, bitrate=a.bitrate)
+        except Exception as exc:
+            raise ParameterError(
+                f"cannot open CAN bus interface={a.interface} channel={a.channel}: {exc}"
+            ) from None
+    except (ParameterError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    emu = DriveEmulator(bus, plant, cfg)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    for after, action in ((a.silent_after, emu.set_silent), (a.error_after, emu.inject_axis_error)):
+        if after is not None:
+            t = threading.Timer(after, action)
+            t.daemon = True
+            t.start()
+    print(
+        f"drive_emulator: {a.protocol} node {a.node_id} on {a.interface}:{a.channel}, plant preset {a.preset} "
+        f"(gear_ratio {conv.gear_ratio:g}, torque_constant {conv.torque_constant:g})",
+        flush=True,
+    )
+    emu.start()
+    t0 = time.monotonic()
+    try:
+        while not stop.wait(a.status_period):
+            s = emu.stats
+            print(
+                f"t={time.monotonic() - t0:.0f}s armed={emu.armed} q={emu.meas.position:+.4f} rad "
+                f"rx={s.frames_rx} tx={s.frames_tx} lost={s.frames_lost} cmds={s.commands}",
+                flush=True,
+            )
+            if a.duration is not None and time.monotonic() - t0 >= a.duration:
+                break
+    finally:
+        emu.stop()
+        bus.shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
