@@ -1,6 +1,6 @@
 """bag_player: replay a bag onto its topics with the recorded timing (or a rate factor).
 
-    bag_player bags/run_1 --rate 2.0 --topics /joint_states --remap /joint_states:=/replay/joint_states
+    bag_player bags/run_1 --rate 2.0 --topics /joint_states --remap /joint_states=/replay/joint_states
     bag_player --ros-args -p bag:=bags/run_1 -p publish_clock:=true -p loop:=true
 
 Messages are published as recorded (serialized bytes, no re-encoding) in log-time order; message k is
@@ -48,13 +48,14 @@ SPECS = [
 
 
 def parse_remaps(items: list[str]) -> dict[str, str]:
+    """``["/from:=/to", "/a=/b"]`` -> ``{"/from": "/to", "/a": "/b"}`` (``=`` for the command line, where
+    rcl would take ``:=`` for a node remapping)."""
     out = {}
     for item in items:
-        if ":=" not in item:
-            raise ValueError(f"remap = {item!r} must be of the form /from:=/to")
-        a, b = (s.strip() for s in item.split(":=", 1))
-        if not a or not b:
-            raise ValueError(f"remap = {item!r} must be of the form /from:=/to")
+        sep = ":=" if ":=" in item else "="
+        a, _, b = (s.strip() for s in item.partition(sep))
+        if sep not in item or not a or not b:
+            raise ValueError(f"remap = {item!r} must be of the form /from:=/to (or /from=/to)")
         out[a if a.startswith("/") else "/" + a] = b if b.startswith("/") else "/" + b
     return out
 
@@ -91,7 +92,7 @@ class BagPlayer(Node):
             f"replaying {len(self.messages)} messages of {len(wanted)} topic(s) from {info.path} at rate {p['rate']:g}"
         )
 
-    def _clock(self, bag_ns: int) -> None:
+    def _send_clock(self, bag_ns: int) -> None:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(int(bag_ns), 1_000_000_000)
         self.clock_pub.publish(msg)
@@ -120,7 +121,7 @@ class BagPlayer(Node):
                 while True:
                     now = time.monotonic()
                     if self.clock_pub is not None and clock_period and now >= next_clock:
-                        self._clock(first + (now - t0) * rate * 1e9)
+                        self._send_clock(first + (now - t0) * rate * 1e9)
                         next_clock += clock_period
                     if now >= target or stop.is_set():
                         break
@@ -131,7 +132,7 @@ class BagPlayer(Node):
                 if stop.is_set():
                     break
                 if self.clock_pub is not None and not clock_period:
-                    self._clock(m.log_time)
+                    self._send_clock(m.log_time)
                 self.pubs[m.topic].publish(m.data)
                 self.published += 1
             if not self.p["loop"]:
@@ -147,7 +148,7 @@ def _parse_cli(argv: list[str]) -> dict:
     ap.add_argument("-r", "--rate", type=float)
     ap.add_argument("-l", "--loop", action="store_true", default=None)
     ap.add_argument("--topics", nargs="+")
-    ap.add_argument("--remap", nargs="+", help="from:=to")
+    ap.add_argument("--remap", nargs="+", help="/from=/to")
     ap.add_argument("--clock", dest="publish_clock", action="store_true", default=None, help="publish /clock")
     ap.add_argument("--clock-frequency", dest="clock_frequency", type=float, help="Hz, 0 = per message")
     ap.add_argument("--qos-depth", dest="qos_depth", type=int)
