@@ -368,3 +368,49 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def flatten(config: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested config dict -> dotted ROS parameter names (``{'pid': {'p': 1}} -> {'pid.p': 1}``)."""
+    flat: dict[str, Any] = {}
+    for key, value in config.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            flat.update(flatten(value, name + "."))
+        else:
+            flat[name] = value
+    return flat
+
+
+def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
+    """Dotted ROS parameter names -> nested config dict (inverse of :func:`flatten`)."""
+    nested: dict[str, Any] = {}
+    for name, value in flat.items():
+        parts = name.split(".")
+        d = nested
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+        d[parts[-1]] = value
+    return nested
+
+
+def params_from_config(
+    config: dict[str, Any], docs: dict[str, str] | None = None, read_only: Iterable[str] = ()
+) -> list[Param]:
+    """Param specs for every leaf of a nested core config (type from the value; docs by dotted name).
+
+    Ranges of core parameters are enforced by the core object that the node builds from them (one
+    ParameterError naming the key and the allowed range), so a bad value still refuses to start.
+    """
+    docs = docs or {}
+    ro = set(read_only)
+    specs = []
+    for name, value in flatten(config).items():
+        if value is None:
+            continue
+        if isinstance(value, tuple):
+            value = list(value)
+        specs.append(
+            Param(name, value, docs.get(name, name.replace(".", " ").replace("_", " ")), read_only=name in ro)
+        )
+    return specs
