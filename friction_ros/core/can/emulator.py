@@ -258,14 +258,17 @@ class DriveEmulator:
             tau = 0.0  # ODrive torque-mode velocity limit
         return tau
 
-    def advance(self, t: float) -> None:
-        """Step the plant in fixed ``dt`` steps up to time ``t`` and queue due cyclic telemetry."""
+    def advance(self, t: float, max_backlog: float | None = None) -> None:
+        """Step the plant in fixed ``dt`` steps up to time ``t`` and queue due cyclic telemetry.
+
+        ``max_backlog`` (real-time use): when further behind than this, skip instead of replaying.
+        """
         with self._lock:
             if self._t_phys is None:
                 self._t_phys = t
                 for c in self._cyclic:
                     c[1] = t
-            if t - self._t_phys > 0.05:  # far behind (paused process): do not replay the backlog
+            if max_backlog is not None and t - self._t_phys > max_backlog:  # paused process: skip
                 self._t_phys = t - self.dt
             while self._t_phys + self.dt <= t + 1e-9:
                 self._t_phys += self.dt
@@ -324,7 +327,7 @@ class DriveEmulator:
                 )
             msg = self.bus.recv(0.0)
         now = self.clock()
-        self.advance(now)
+        self.advance(now, max_backlog=0.05)
         self.flush(now)
 
     def start(self) -> None:
