@@ -309,7 +309,7 @@ def _body_step(w, ta, J, h, km, pm, sm, kl, pl, sl, r, scale_l, load_m, load_l, 
         if abs(ta) <= brk:
             return 0.0, ta
         f = d * brk
-        return h * (ta - f) / J, f
+        return w + h * (ta - f) / J, f
     f = _static_pair(km, pm, sm, kl, pl, sl, w, r, scale_l, load_m, load_l)
     wn = w + h * (ta - f) / J
     if wn * w < 0.0:
