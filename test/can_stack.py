@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import signal
 import sys
 import threading
 
@@ -20,6 +21,7 @@ from can_support import make_plant
 
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig
 from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.can.mit import MitRanges
 from friction_ros.nodes import drive_interface
 
 
@@ -50,6 +52,8 @@ def main():
     emu_kw = json.loads(a.emulator)
     plant, conv = make_plant(emu_kw.pop("preset", "abb_m19s"))
     emu_kw["conversion"] = JointConversion(**{**conv.__dict__, **emu_kw.get("conversion", {})})
+    if "mit_ranges" in emu_kw:
+        emu_kw["mit_ranges"] = MitRanges(**emu_kw["mit_ranges"])
     cfg = EmulatorConfig(**emu_kw)
     emu_bus = can.Bus(interface="virtual", channel=a.channel)
     sniff_bus = can.Bus(interface="virtual", channel=a.channel)
@@ -62,6 +66,7 @@ def main():
         timers.append(threading.Timer(a.silent_after, emu.set_silent))
     if a.error_after is not None:
         timers.append(threading.Timer(a.error_after, emu.inject_axis_error))
+    signal.signal(signal.SIGUSR1, lambda *_: emu.set_silent())  # the test makes the drive go quiet
     for t in timers:
         t.daemon = True
         t.start()
