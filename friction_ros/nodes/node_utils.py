@@ -130,14 +130,14 @@ class Param:
             value = list(value)
             if self.ptype == ParameterType.PARAMETER_DOUBLE_ARRAY:
                 value = [float(v) for v in value]
-                if any(not math.isfinite(v) for v in value):
-                    raise ParameterError(f"{self.name} = {value!r} must contain finite numbers only")
+                if any(math.isnan(v) for v in value):
+                    raise ParameterError(f"{self.name} = {value!r} must not contain NaN")
             return value
         if type(value) is not type(self.default):
             want = type(self.default).__name__
             raise ParameterError(f"{self.name} = {value!r} has type {type(value).__name__}: must be {want}")
-        if isinstance(value, float) and not math.isfinite(value):
-            raise ParameterError(f"{self.name} = {value} is not finite")
+        if isinstance(value, float) and math.isnan(value):
+            raise ParameterError(f"{self.name} = nan is not a number")
         if self.choices and value not in self.choices:
             raise ParameterError(
                 f"{self.name} = {value!r} is not allowed: must be one of {', '.join(self.choices)}"
@@ -152,7 +152,7 @@ class Param:
         return value
 
 
-def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
+def declare(node: Node, params: Iterable[Param], check_unknown: bool = True) -> dict[str, Any]:
     """Declare ``params`` with descriptors and return their validated values.
 
     Raises ParameterError (the node refuses to start) when a value from a parameter file is invalid.
@@ -188,7 +188,9 @@ def declare(node: Node, params: Iterable[Param]) -> dict[str, Any]:
     for p in specs:
         value = node.get_parameter(p.name).value
         values[p.name] = p.check(value)
-    declared = {p.name for p in specs} | {"use_sim_time"}
+    if not check_unknown:
+        return values
+    declared = set(node._parameters) | {"use_sim_time"}
     unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides"))
     if unknown:
         raise ParameterError(
@@ -302,7 +304,7 @@ class DiagnosticsPublisher:
 
     def publish(self, level: int, message: str, values: dict[str, Any]) -> DiagnosticStatus:
         status = DiagnosticStatus(
-            level=bytes([level]) if isinstance(DiagnosticStatus().level, bytes) else level,
+            level=level if isinstance(level, bytes) else bytes([level]),
             name=f"{self.node.get_namespace().rstrip('/')}/{self.name}",
             message=message,
             hardware_id=self.hardware_id,
@@ -324,6 +326,22 @@ OK = DiagnosticStatus.OK
 WARN = DiagnosticStatus.WARN
 ERROR = DiagnosticStatus.ERROR
 STALE = DiagnosticStatus.STALE
+
+
+def make_executor():
+    """The executor of every node: rclpy's EventsExecutor when available (several times less
+    overhead per callback than SingleThreadedExecutor, which is what lets the lockstep graph run
+    faster than real time), else SingleThreadedExecutor. FRICTION_ROS_EXECUTOR=single forces the latter."""
+    import os
+
+    if os.environ.get("FRICTION_ROS_EXECUTOR", "events") == "events":
+        try:
+            from rclpy.experimental import EventsExecutor
+
+            return EventsExecutor()
+        except ImportError:
+            pass
+    return rclpy.executors.SingleThreadedExecutor()
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
@@ -350,7 +368,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
 
     signal.signal(signal.SIGTERM, _on_signal)
     signal.signal(signal.SIGINT, _on_signal)
-    executor = rclpy.executors.SingleThreadedExecutor()
+    executor = make_executor()
     executor.add_node(node)
     try:
         while not stop.is_set() and rclpy.ok():
@@ -414,3 +432,71 @@ def params_from_config(
             Param(name, value, docs.get(name, name.replace(".", " ").replace("_", " ")), read_only=name in ro)
         )
     return specs
+
+
+def override_values(node: Node, prefix: str) -> dict[str, Any]:
+    """Values given for ``<prefix>.*`` in the node's parameter files / command line (dotted names)."""
+    overrides = getattr(node, "_parameter_overrides", {})
+    return {k: v.value for k, v in overrides.items() if k.startswith(prefix + ".")}
+
+
+def section_specs(
+    node: Node, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
+) -> list[Param]:
+    """Param specs for every ``<prefix>.<key>`` of a nested core section (defaults + keys given in files).
+
+    Keys only present in the parameter file (e.g. the coefficients of the chosen friction model) are
+    declared too, with their type taken from the given value; the core object built from the section
+    then validates names and ranges and raises one ParameterError naming the key if anything is off.
+    """
+    flat = {f"{prefix}.{k}": v for k, v in flatten(defaults).items() if v is not None}
+    for key, value in override_values(node, prefix).items():
+        flat.setdefault(key, value)
+    return [
+        Param(
+            key, list(v) if isinstance(v, tuple) else v, f"{doc}: {key.split('.', 1)[1]}", read_only=read_only
+        )
+        for key, v in flat.items()
+    ]
+
+
+def declare_section(
+    node: Node, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
+) -> dict[str, Any]:
+    """Declare a section (see :func:`section_specs`) and return it as a nested dict."""
+    values = declare(node, section_specs(node, prefix, defaults, doc, read_only), check_unknown=False)
+    return unflatten(values).get(prefix, {})
+
+
+def stamp_to_ns(stamp) -> int:
+    """builtin_interfaces/Time -> integer nanoseconds."""
+    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
+
+
+def select_effort(msg, joint: str) -> float | None:
+    """Effort of ``joint`` in a JointState command (an unnamed single effort also counts); None if absent."""
+    if msg.name:
+        try:
+            i = list(msg.name).index(joint)
+        except ValueError:
+            return None
+        return float(msg.effort[i]) if i < len(msg.effort) else None
+    return float(msg.effort[0]) if len(msg.effort) == 1 else None
+
+
+def select_joint(msg, joint: str) -> tuple[float, float | None, float | None] | None:
+    """(position, velocity|None, effort|None) of ``joint`` in a JointState; None if it is absent."""
+    names = list(msg.name)
+    if names:
+        if joint not in names:
+            return None
+        i = names.index(joint)
+    elif len(msg.position) == 1:
+        i = 0
+    else:
+        return None
+    if i >= len(msg.position):
+        return None
+    vel = float(msg.velocity[i]) if i < len(msg.velocity) else None
+    eff = float(msg.effort[i]) if i < len(msg.effort) else None
+    return float(msg.position[i]), vel, eff

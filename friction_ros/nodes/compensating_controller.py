@@ -1,0 +1,318 @@
+"""compensating_controller: friction_ros.core.control.CompensatingController as a ROS 2 node.
+
+Event-driven: every ``joint_states`` message is one control period. The command answers the state
+it was computed from (its header stamp is the state's stamp), which is what makes the lockstep
+graph deterministic and lets the plant/drive measure state-to-command latency.
+
+Topics (all relative, so one namespace per joint works):
+
+* in  ``joint_states`` (sensor_msgs/JointState), ``reference`` (trajectory_msgs/JointTrajectory,
+  optional: replaces the built-in reference generator), ``friction_estimate``
+  (friction_msgs/FrictionEstimate, adopted when ``adopt_estimator_coefficients`` is true)
+* out ``joint_commands`` (sensor_msgs/JointState effort = joint torque N*m, keep-last 1),
+  ``controller_state`` (friction_msgs/ControllerState), ``diagnostics``
+
+Parameters: the node's own (below) plus the sections of the core controller, one ROS parameter per
+leaf (``pid.p``, ``compensation.source``, ``friction.model`` + that model's coefficients,
+``reference.type`` ...). See README "Nodes" for the full table.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import time
+
+from friction_msgs.msg import ControllerState, FrictionEstimate
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory
+
+from friction_ros.core.coefficient_exchange import from_fields
+from friction_ros.core.control.controller import CONTROLLER_DEFAULTS, CompensatingController
+from friction_ros.core.references import reference_from_config
+from friction_ros.core.trajectory import TrajectoryReference
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.node_utils import (
+    COMMAND_QOS,
+    OK,
+    STATE_QOS,
+    WARN,
+    DiagnosticsPublisher,
+    Param,
+    add_runtime_validation,
+    declare,
+    override_values,
+    run_node,
+    section_specs,
+    select_joint,
+    stamp_to_ns,
+    unflatten,
+)
+
+NODE_PARAMS = [
+    Param("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
+    Param(
+        "control_period",
+        0.001,
+        "nominal control period (dt of the control law)",
+        lo=1e-5,
+        hi=0.1,
+        unit="s",
+        read_only=True,
+    ),
+    Param("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
+    Param(
+        "state_timeout",
+        0.05,
+        "zero torque once no joint state came for this long (wall)",
+        lo=0.001,
+        hi=60.0,
+        unit="s",
+    ),
+    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+]
+# Core controller keys that are plain values (not sections).
+TOP_KEYS = [k for k, v in CONTROLLER_DEFAULTS.items() if not isinstance(v, dict)]
+DOCS = {
+    "mode": "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
+    "feedforward_gain": "velocity feedforward gain (command += gain * reference velocity)",
+    "inertia": "J_hat for the inertia feedforward J_hat * reference acceleration",
+    "u_clamp_max": "upper torque limit",
+    "u_clamp_min": "lower torque limit",
+    "rate_limit": "torque rate limit",
+    "velocity_source": "measured (joint_states velocity) or differentiated (filtered position difference)",
+    "velocity_filter_time_constant": "velocity filter time constant",
+    "position_jump_limit": "reject position samples that jump more than this (lost encoder bits)",
+}
+UNITS = {
+    "inertia": "kg*m^2",
+    "u_clamp_max": "N*m",
+    "u_clamp_min": "N*m",
+    "rate_limit": "N*m/s",
+    "velocity_filter_time_constant": "s",
+    "position_jump_limit": "rad",
+    "feedforward_gain": "N*m*s/rad",
+}
+SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+DEFAULT_REFERENCE = {"type": "constant"}
+
+
+def node_to_core(values: dict) -> tuple[dict, dict]:
+    """ROS parameters (nested) -> (core controller config, reference config).
+
+    ROS layout: ``compensation.*`` holds the compensator options and ``friction.*`` the friction
+    model (``friction.model`` = model name + its coefficients, as written by ``friction-fit`` and the
+    presets); the core keeps the model inside its ``friction`` section.
+    """
+    cfg = {k: values[k] for k in TOP_KEYS if k in values}
+    for s in SCHEME_SECTIONS:
+        if s in values:
+            cfg[s] = copy.deepcopy(values[s])
+    comp = dict(values.get("compensation", {}))
+    model = dict(values.get("friction", {}))
+    comp["model"] = model if model.get("model", "none") not in ("none", "") else None
+    cfg["friction"] = comp
+    return cfg, dict(values.get("reference", DEFAULT_REFERENCE))
+
+
+class CompensatingControllerNode(Node):
+    """Thin adapter over CompensatingController; see the module docstring."""
+
+    def __init__(self):
+        super().__init__("compensating_controller")
+        specs = list(NODE_PARAMS)
+        for k in TOP_KEYS:
+            v = CONTROLLER_DEFAULTS[k]
+            specs.append(
+                Param(
+                    k,
+                    float(v) if isinstance(v, int) and not isinstance(v, bool) else v,
+                    DOCS.get(k, k),
+                    unit=UNITS.get(k, ""),
+                )
+            )
+        for s in SCHEME_SECTIONS:
+            specs += section_specs(self, s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
+        comp_defaults = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
+        specs += section_specs(self, "compensation", comp_defaults, "friction compensation option")
+        model_given = override_values(self, "friction")
+        specs += section_specs(self, "friction", {} if model_given else {"model": "none"}, "friction model")
+        ref_given = override_values(self, "reference")
+        specs += section_specs(
+            self, "reference", {} if ref_given else DEFAULT_REFERENCE, "reference generator"
+        )
+        self.specs = specs
+        values = declare(self, specs)
+        self.values = unflatten(values)
+        cfg, ref_cfg = node_to_core(self.values)
+        self.controller = CompensatingController(cfg)  # ParameterError -> refuses to start
+        self.reference = reference_from_config(ref_cfg)
+        self.trajectory: TrajectoryReference | None = None
+        add_runtime_validation(self, specs, self._apply)
+
+        self.joint = self.values["joint_name"]
+        self.dt = self.values["control_period"]
+        self.cmd_pub = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+        self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
+        self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS)
+        self.diag = DiagnosticsPublisher(self, "compensating_controller", self.joint)
+        self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
+        self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
+
+        self._t0_ns: int | None = None
+        self._last_ns: int | None = None
+        self._last_cmd: JointState | None = None
+        self._last_state_wall = time.monotonic()
+        self._timed_out = False
+        self.counts = {
+            "cycles": 0,
+            "duplicates": 0,
+            "rejected_states": 0,
+            "rejected_references": 0,
+            "saturated": 0,
+            "adopted": 0,
+            "rejected_estimates": 0,
+        }
+        self._compute_times: list[float] = []
+        self.get_logger().info(
+            f"mode {self.controller.mode}, friction model "
+            f"{self.controller.friction.model.name if self.controller.friction.model else 'none'}, "
+            f"reference {self.reference.config().get('type', '?')}"
+        )
+
+    # -- parameters -------------------------------------------------------------------------------
+    def _apply(self, changes: dict) -> None:
+        """Validate a run-time change by building the new controller first; commit only if valid."""
+        flat = {**{p.name: self.get_parameter(p.name).value for p in self.specs}, **changes}
+        values = unflatten(
+            {k: (list(v) if hasattr(v, "tolist") or isinstance(v, tuple) else v) for k, v in flat.items()}
+        )
+        cfg, ref_cfg = node_to_core(values)
+        new_ctrl = CompensatingController(cfg)  # raises ParameterError -> change rejected
+        new_ref = reference_from_config(ref_cfg)
+        self.controller, self.reference, self.values = new_ctrl, new_ref, values
+        self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))}")
+
+    # -- inputs -----------------------------------------------------------------------------------
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        try:
+            if self.joint not in msg.joint_names:
+                raise ParameterError(f"joint {self.joint} is not in joint_names {list(msg.joint_names)}")
+            j = list(msg.joint_names).index(self.joint)
+            times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
+            pos = [p.positions[j] if j < len(p.positions) else math.nan for p in msg.points]
+            vel = (
+                [p.velocities[j] for p in msg.points]
+                if all(len(p.velocities) > j for p in msg.points)
+                else None
+            )
+            stamp = stamp_to_ns(msg.header.stamp)
+            if stamp == 0 or self._t0_ns is None:
+                start = (self._last_ns - self._t0_ns) * 1e-9 if self._last_ns is not None else 0.0
+            else:
+                start = (stamp - self._t0_ns) * 1e-9
+            self.trajectory = TrajectoryReference(times, pos, vel, start_time=start)
+        except ParameterError as exc:
+            self.counts["rejected_references"] += 1
+            self.get_logger().error(f"rejected reference trajectory: {exc}; keeping the previous reference")
+
+    def _on_estimate(self, msg: FrictionEstimate) -> None:
+        if not (self.values.get("adopt_estimator_coefficients") and msg.converged):
+            return
+        try:
+            self.controller.set_coefficients(from_fields(msg.model, msg.coefficient_names, msg.coefficients))
+            self.counts["adopted"] += 1
+        except (ParameterError, ValueError) as exc:
+            self.counts["rejected_estimates"] += 1
+            self.get_logger().warning(f"estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0)
+
+    def _on_state(self, msg: JointState) -> None:
+        sel = select_joint(msg, self.joint)
+        if sel is None:
+            self.counts["rejected_states"] += 1
+            return
+        pos, vel, _effort = sel
+        t_ns = stamp_to_ns(msg.header.stamp)
+        if self._last_ns is not None and t_ns <= self._last_ns:
+            if t_ns == self._last_ns and self._last_cmd is not None:
+                self.counts["duplicates"] += 1
+                self.cmd_pub.publish(self._last_cmd)  # lockstep re-send: same answer, no recompute
+            return
+        if not (math.isfinite(pos) and (vel is None or math.isfinite(vel))):
+            self.counts["rejected_states"] += 1
+            self.get_logger().error(
+                f"joint state of {self.joint} is not finite: commanding zero torque",
+                throttle_duration_sec=1.0,
+            )
+            self._publish_command(msg.header.stamp, 0.0)
+            return
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+        t = (t_ns - self._t0_ns) * 1e-9
+        self._last_state_wall = time.monotonic()
+        self._timed_out = False
+        ref = self.trajectory.sample(t) if self.trajectory is not None else self.reference.sample(t)
+        c0 = time.perf_counter()
+        terms = self.controller.compute(t, ref, (pos, vel), self.dt)
+        self._compute_times.append(time.perf_counter() - c0)
+        self._last_ns = t_ns
+        self._publish_command(msg.header.stamp, terms.command)
+        self.counts["cycles"] += 1
+        self.counts["saturated"] += int(terms.saturated)
+        st = ControllerState()
+        st.header.stamp = msg.header.stamp
+        st.joint_name = self.joint
+        for k, v in terms.as_dict().items():
+            if k != "time":
+                setattr(st, k, v if isinstance(v, (str, bool)) else float(v))
+        self.state_pub.publish(st)
+
+    def _publish_command(self, stamp, torque: float) -> None:
+        cmd = JointState()
+        cmd.header.stamp = stamp
+        cmd.name = [self.joint]
+        cmd.effort = [float(torque)]
+        self._last_cmd = cmd
+        self.cmd_pub.publish(cmd)
+
+    # -- safety and health --------------------------------------------------------------------------
+    def _check_state_timeout(self) -> None:
+        if self._last_ns is None or self._timed_out:
+            return
+        if self.get_parameter("use_sim_time").value:
+            return  # lockstep: time only moves with the plant; nothing to time out
+        if time.monotonic() - self._last_state_wall > self.values["state_timeout"]:
+            self._timed_out = True
+            self.get_logger().warning(
+                f"no joint state for {self.values['state_timeout']:g} s: commanding zero torque"
+            )
+            self._publish_command(self.get_clock().now().to_msg(), 0.0)
+
+    def _publish_diagnostics(self) -> None:
+        ct = sorted(self._compute_times[-5000:])
+        self._compute_times = self._compute_times[-5000:]
+        values = dict(self.counts)
+        if ct:
+            values["compute_p50_s"] = ct[len(ct) // 2]
+            values["compute_p99_s"] = ct[min(len(ct) - 1, int(len(ct) * 0.99))]
+        level, text = OK, f"{self.controller.mode} running"
+        if self._timed_out:
+            level, text = WARN, "no joint state: commanding zero torque"
+        self.diag.publish(level, text, values)
+
+    def on_shutdown(self) -> None:
+        """Leave the joint safe: the last command is zero torque."""
+        for _ in range(3):
+            self._publish_command(self.get_clock().now().to_msg(), 0.0)
+            time.sleep(0.01)
+
+
+def main(args=None) -> int:
+    return run_node(CompensatingControllerNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

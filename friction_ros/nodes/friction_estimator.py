@@ -1,0 +1,179 @@
+"""friction_estimator: friction_ros.core.estimation.OnlineFrictionEstimator as a ROS 2 node.
+
+* in  ``joint_states`` (sensor_msgs/JointState; effort = joint torque N*m). Works the same on live
+  data, in lockstep and on a bag replayed by ``bag_player``.
+* out ``friction_estimate`` (friction_msgs/FrictionEstimate: friction torque from the torque balance
+  or disturbance observer, model prediction, states, adapted coefficients with their one-sigma
+  std, excitation and convergence flags), ``diagnostics``.
+
+The coefficients are published as the friction library model config (flattened, see
+``friction_ros.core.coefficient_exchange``), so the compensating controller can adopt them without
+a restart when its ``adopt_estimator_coefficients`` parameter is true.
+"""
+
+from __future__ import annotations
+
+import math
+
+from friction_msgs.msg import FrictionEstimate
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from friction_ros.core.coefficient_exchange import to_fields
+from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
+from friction_ros.nodes.node_utils import (
+    OK,
+    STATE_QOS,
+    WARN,
+    DiagnosticsPublisher,
+    Param,
+    add_runtime_validation,
+    declare,
+    override_values,
+    run_node,
+    section_specs,
+    select_joint,
+    stamp_to_ns,
+    unflatten,
+)
+
+NODE_PARAMS = [
+    Param("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
+    Param(
+        "control_period",
+        0.001,
+        "nominal sample period (used when stamps do not advance)",
+        lo=1e-5,
+        hi=1.0,
+        unit="s",
+        read_only=True,
+    ),
+    Param("publish_every", 1, "publish one estimate every N samples", lo=1, hi=100000),
+    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+]
+DOCS = {
+    "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
+    "model": "adapted model: viscous, coulomb_viscous, asymmetric_coulomb_viscous, stribeck, "
+    "asymmetric_stribeck, lugre (observer)",
+    "inertia": "J_hat of the joint (joint side)",
+    "filter_time_constant": "acceleration/velocity filter time constant",
+    "observer_bandwidth": "disturbance observer bandwidth",
+    "vs": "Stribeck velocity (fixed shape)",
+    "delta": "Stribeck exponent (fixed shape)",
+    "forgetting_factor": "RLS forgetting factor",
+    "initial_covariance": "RLS initial covariance",
+    "min_velocity": "excitation: adapt only while |v| >= this",
+    "min_samples": "excited samples before convergence can be declared",
+    "convergence_tolerance": "relative one-sigma std below which a coefficient counts as converged",
+    "std_floor": "absolute std floor for convergence",
+    "observer_gain": "LuGre observer correction gain",
+}
+UNITS = {
+    "inertia": "kg*m^2",
+    "filter_time_constant": "s",
+    "observer_bandwidth": "rad/s",
+    "vs": "rad/s",
+    "min_velocity": "rad/s",
+    "observer_gain": "1/s",
+}
+SECTIONS = ("initial", "lugre")
+
+
+class FrictionEstimatorNode(Node):
+    """Thin adapter over OnlineFrictionEstimator; see the module docstring."""
+
+    def __init__(self):
+        super().__init__("friction_estimator")
+        specs = list(NODE_PARAMS)
+        for k, v in ESTIMATOR_DEFAULTS.items():
+            if k in SECTIONS:
+                continue
+            specs.append(
+                Param(k, float(v) if isinstance(v, float) else v, DOCS.get(k, k), unit=UNITS.get(k, ""))
+            )
+        for s in SECTIONS:
+            if override_values(self, s):
+                specs += section_specs(self, s, {}, f"estimator {s}")
+        self.specs = specs
+        self.values = unflatten(declare(self, specs))
+        self.estimator = OnlineFrictionEstimator(
+            self._core_config(self.values)
+        )  # refuses to start if invalid
+        add_runtime_validation(self, specs, self._apply)
+        self.joint = self.values["joint_name"]
+        self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", STATE_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self.diag = DiagnosticsPublisher(self, "friction_estimator", self.joint)
+        self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
+        self._last_ns: int | None = None
+        self._n = 0
+        self.counts = {"samples": 0, "excited_samples": 0, "rejected_states": 0, "published": 0}
+
+    @staticmethod
+    def _core_config(values: dict) -> dict:
+        return {k: values[k] for k in ESTIMATOR_DEFAULTS if k in values}
+
+    def _apply(self, changes: dict) -> None:
+        flat = {**{p.name: self.get_parameter(p.name).value for p in self.specs}, **changes}
+        values = unflatten({k: (list(v) if hasattr(v, "tolist") else v) for k, v in flat.items()})
+        est = OnlineFrictionEstimator(self._core_config(values))  # raises -> change rejected
+        self.estimator, self.values = est, values
+        self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))} (estimator restarted)")
+
+    def _on_state(self, msg: JointState) -> None:
+        sel = select_joint(msg, self.joint)
+        if sel is None or sel[1] is None or sel[2] is None:
+            self.counts["rejected_states"] += 1
+            return
+        pos, vel, eff = sel
+        if not (math.isfinite(pos) and math.isfinite(vel) and math.isfinite(eff)):
+            self.counts["rejected_states"] += 1
+            return
+        t_ns = stamp_to_ns(msg.header.stamp)
+        if self._last_ns is not None and t_ns < self._last_ns:
+            self.estimator.reset()  # time went backwards (bag loop): start over
+            self._last_ns = None
+        dt = (t_ns - self._last_ns) * 1e-9 if self._last_ns is not None else 0.0
+        if dt <= 0.0:
+            if self._last_ns is not None:
+                return  # duplicate (lockstep re-send)
+            dt = self.values["control_period"]
+        self._last_ns = t_ns
+        e = self.estimator.update(t_ns * 1e-9, pos, vel, eff, dt)
+        self.counts["samples"] += 1
+        self.counts["excited_samples"] += int(e.excitation_ok)
+        self._n += 1
+        if self._n % self.values["publish_every"]:
+            return
+        out = FrictionEstimate()
+        out.header.stamp = msg.header.stamp
+        out.joint_name = self.joint
+        model, names, coefs = to_fields(self.estimator.model_config())
+        out.model = model
+        out.friction_torque = e.friction_torque
+        out.model_torque = e.model_torque
+        out.velocity = e.velocity
+        out.state = [float(x) for x in e.state]
+        out.coefficient_names = names
+        out.coefficients = coefs
+        std = self.estimator.coefficient_std
+        out.coefficient_std = [float(std.get(n.split(".")[-1], math.nan)) for n in names] if std else []
+        out.excitation_ok = e.excitation_ok
+        out.converged = e.converged
+        self.pub.publish(out)
+        self.counts["published"] += 1
+
+    def _publish_diagnostics(self) -> None:
+        values = dict(self.counts)
+        values.update({f"coef.{k}": v for k, v in self.estimator.coefficients.items()})
+        level = OK if self.estimator.converged else WARN
+        text = "converged" if self.estimator.converged else "adapting (not converged yet)"
+        self.diag.publish(level, text, values)
+
+
+def main(args=None) -> int:
+    return run_node(FrictionEstimatorNode, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,283 @@
+"""plant_simulator: the gearhead DC servo plant (friction_ros.core.plant) as a ROS 2 node.
+
+Stands in for the CAN drive interface with the same topics, so controller, estimator, recorder and
+a ros2_control stack (topic_based_ros2_control) cannot tell the difference:
+
+* subscribes ``joint_commands`` (sensor_msgs/JointState, effort = joint torque N*m; COMMAND_QOS)
+* publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort N*m),
+  ``diagnostics`` and, in lockstep mode, ``/clock``.
+
+Modes:
+
+``realtime``  a fixed-rate loop thread steps the plant every ``control_period`` of wall time with
+              the newest command (zero torque once no command came for ``command_timeout``).
+``lockstep``  the plant advances exactly one control period per command whose header stamp equals
+              the stamp of the state it answers, publishes ``/clock`` then the new state. Nodes with
+              ``use_sim_time`` follow; the whole graph runs as fast as it can and deterministically.
+              If no answer arrives within ``resend_period`` (wall) the pending state is published
+              again (a subscriber that joined late gets it); duplicate commands are ignored.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.time import Time
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from friction_ros.core.harness import command_scale
+from friction_ros.core.presets import load_preset, preset_from_config
+from friction_ros.nodes.node_utils import (
+    COMMAND_QOS,
+    ERROR,
+    OK,
+    STATE_QOS,
+    WARN,
+    DiagnosticsPublisher,
+    FixedRateLoop,
+    Param,
+    add_runtime_validation,
+    declare,
+    declare_section,
+    run_node,
+    select_effort,
+    stamp_to_ns,
+)
+
+PARAMS = [
+    Param(
+        "preset",
+        "abb_m19s",
+        "plant preset: a name in params/ (abb_m19s, seed002_x ...) or a YAML path",
+        read_only=True,
+    ),
+    Param("description", "", "free text describing the preset", read_only=True),
+    Param(
+        "joint_name",
+        "joint1",
+        "joint name used in joint_states and expected in joint_commands",
+        read_only=True,
+    ),
+    Param(
+        "mode",
+        "realtime",
+        "realtime: wall-clock loop; lockstep: one period per command + /clock",
+        choices=("realtime", "lockstep"),
+        read_only=True,
+    ),
+    Param(
+        "control_period",
+        0.001,
+        "control period (plant step per state)",
+        lo=1e-5,
+        hi=0.1,
+        unit="s",
+        read_only=True,
+    ),
+    Param("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
+    Param(
+        "command_timeout",
+        0.1,
+        "realtime: zero torque when no command arrived for this long",
+        lo=0.0,
+        hi=60.0,
+        unit="s",
+    ),
+    Param(
+        "resend_period",
+        0.2,
+        "lockstep: re-publish the pending state after this wall time",
+        lo=0.005,
+        hi=60.0,
+        unit="s",
+    ),
+    Param(
+        "clock_period",
+        0.001,
+        "lockstep: publish /clock every this much simulated time (>= control period)",
+        lo=0.0,
+        hi=1.0,
+        unit="s",
+        read_only=True,
+    ),
+    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+]
+
+
+class PlantSimulator(Node):
+    """Thin adapter: commands in, GearheadServoPlant.step, joint states out."""
+
+    def __init__(self):
+        super().__init__("plant_simulator")
+        sections = {
+            s: declare_section(self, s, {}, f"preset {s} parameter", read_only=True)
+            for s in ("plant", "friction_motor", "friction_load")
+        }
+        self.p = declare(self, PARAMS)
+        preset = load_preset(self.p["preset"])
+        doc = preset.to_config()["plant_simulator"]["ros__parameters"]
+        for s, given in sections.items():
+            if given:
+                if s.startswith("friction") and "model" in given:
+                    doc[s] = dict(given)  # a model in the file replaces the preset's model
+                else:
+                    doc[s] = {**(doc.get(s) or {}), **given}
+        self.preset = preset_from_config(doc, source=self.p["preset"])
+        self.plant = self.preset.make_plant()
+        self.scale = command_scale(self.plant)
+        self.dt = self.p["control_period"]
+        self.dt_ns = int(round(self.dt * 1e9))
+        self.joint = self.p["joint_name"]
+        self.lockstep = self.p["mode"] == "lockstep"
+        add_runtime_validation(self, PARAMS, self._apply)
+
+        self.state_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
+        self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS)
+        self.diag = DiagnosticsPublisher(self, "plant_simulator", self.preset.name)
+
+        self._lock = threading.Lock()
+        self._command = 0.0
+        self._command_wall = -math.inf
+        self._commands_rejected = 0
+        self._commands_ignored = 0
+        self._steps = 0
+        self._latency: list[float] = []
+        self._last_state_wall = 0.0
+        self.plant.reset(position=self.p["initial_position"])
+        self._t_ns = 0
+        self._next_clock_ns = 0
+        self._clock_ns = int(round(self.p["clock_period"] * 1e9))
+        self._pending = self._state_msg(self.p["initial_position"], 0.0, 0.0)
+        self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
+        if self.lockstep:
+            self._last_publish = 0.0
+            self.create_timer(self.p["resend_period"] / 4, self._resend)
+            self._publish_pending()
+            self.loop = None
+        else:
+            self._t0_ns = self.get_clock().now().nanoseconds
+            self.loop = FixedRateLoop(self.dt, self._tick, name="plant_loop")
+            self.loop.start()
+        self.get_logger().info(
+            f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
+            f"command scale {self.scale:.6g} (plant unit per N*m)"
+        )
+
+    # -- parameters ---------------------------------------------------------------------------------
+    def _apply(self, changes):
+        for k, v in changes.items():
+            self.p[k] = v
+
+    # -- messages -------------------------------------------------------------------------------------
+    def _state_msg(self, position: float, velocity: float, effort: float) -> JointState:
+        msg = JointState()
+        msg.name = [self.joint]
+        msg.position = [position]
+        msg.velocity = [velocity]
+        msg.effort = [effort]
+        return msg
+
+    def _stamp(self, msg: JointState, t_ns: int) -> None:
+        msg.header.stamp = Time(nanoseconds=t_ns).to_msg()
+
+    def _on_command(self, msg: JointState) -> None:
+        effort = select_effort(msg, self.joint)
+        if effort is None:
+            self._commands_ignored += 1
+            return
+        if not math.isfinite(effort):
+            self._commands_rejected += 1
+            self.get_logger().warning(
+                f"rejected joint_commands effort = {effort} for {self.joint}: must be a finite torque [N*m]",
+                throttle_duration_sec=1.0,
+            )
+            effort = 0.0
+        if self.lockstep:
+            if stamp_to_ns(msg.header.stamp) != self._t_ns:
+                self._commands_ignored += 1  # duplicate or stale answer
+                return
+            self._advance(effort)
+            self._publish_pending()
+            return
+        now = time.monotonic()
+        with self._lock:
+            self._command = effort
+            self._command_wall = now
+        sent = stamp_to_ns(msg.header.stamp)
+        if sent:
+            self._latency.append(self.get_clock().now().nanoseconds * 1e-9 - sent * 1e-9)
+            if len(self._latency) > 20000:
+                del self._latency[:10000]
+
+    # -- stepping -------------------------------------------------------------------------------------
+    def _advance(self, torque: float) -> None:
+        m = self.plant.step(torque * self.scale, self.dt)
+        self._steps += 1
+        self._t_ns += self.dt_ns
+        self._pending = self._state_msg(m.position, m.velocity, m.effort)
+
+    def _publish_pending(self) -> None:
+        self._stamp(self._pending, self._t_ns)
+        if self.clock_pub is not None and self._t_ns >= self._next_clock_ns:
+            self._next_clock_ns = self._t_ns + self._clock_ns
+            clock = Clock()
+            clock.clock = self._pending.header.stamp
+            self.clock_pub.publish(clock)
+        self.state_pub.publish(self._pending)
+        self._last_publish = time.monotonic()
+
+    def _resend(self) -> None:
+        if time.monotonic() - self._last_publish >= self.p["resend_period"]:
+            self._publish_pending()
+
+    def _tick(self) -> None:
+        with self._lock:
+            fresh = time.monotonic() - self._command_wall <= self.p["command_timeout"]
+            torque = self._command if fresh else 0.0
+        self._advance(torque)
+        self._t_ns = self.get_clock().now().nanoseconds
+        self._publish_pending()
+
+    # -- health ---------------------------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        values = {
+            "mode": self.p["mode"],
+            "steps": self._steps,
+            "sim_time": self.plant.time,
+            "commands_rejected": self._commands_rejected,
+            "commands_ignored": self._commands_ignored,
+        }
+        level, text = OK, "running"
+        if self.loop is not None:
+            s = self.loop.stats
+            values.update(cycles=s.cycles, overruns=s.overruns, max_lateness_s=s.max_lateness)
+            with self._lock:
+                stale = time.monotonic() - self._command_wall > self.p["command_timeout"]
+            if stale:
+                level, text = WARN, "no fresh command: applying zero torque"
+            if self._latency:
+                lat = np.asarray(self._latency[-5000:])
+                values.update(
+                    latency_p50_s=float(np.percentile(lat, 50)), latency_p99_s=float(np.percentile(lat, 99))
+                )
+        if self._commands_rejected:
+            level, text = max(level, WARN), f"{self._commands_rejected} non-finite commands rejected"
+        self.diag.publish(level if level != ERROR else ERROR, text, values)
+
+    def on_shutdown(self) -> None:
+        if self.loop is not None:
+            self.loop.stop()
+
+
+def main(args=None) -> int:
+    return run_node(PlantSimulator, args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
