@@ -233,3 +233,46 @@ def test_bad_parameter_refuses_to_start_with_one_line(tmp_path):
     out, _ = proc.communicate(timeout=30)
     assert proc.returncode == 2
     assert "protocol" in out and "odrive_cansimple" in out and "Traceback" not in out
+
+
+COMPENSATING_CONTROLLER = HERE.parent / "friction_ros" / "nodes" / "compensating_controller.py"
+
+
+@pytest.mark.skipif(not COMPENSATING_CONTROLLER.exists(), reason="compensating_controller node not present")
+def test_compensating_controller_tracks_sinusoid_through_can(tmp_path):
+    """The project's controller node (PID, no friction compensation) drives the CAN stack."""
+    from friction_msgs.msg import ControllerState
+
+    proc, _log = start_stack(tmp_path, params=["telemetry_timeout:=0.03"])
+    ctrl_cmd = [sys.executable, "-m", "friction_ros.nodes.compensating_controller", "--ros-args",
+                "-p", "joint_name:=j1", "-p", f"pid.p:={KP}", "-p", f"pid.d:={KD}",
+                "-p", "pid.u_clamp_max:=4.0", "-p", "pid.u_clamp_min:=-4.0",
+                "-p", "reference.type:=sinusoid", "-p", "reference.amplitude:=0.3",
+                "-p", "reference.frequency:=0.5"]  # fmt: skip
+    ctrl = subprocess.Popen(ctrl_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("cc_observer", context=ctx)
+    states: list = []
+    node.create_subscription(ControllerState, "controller_state", states.append, STATE_QOS)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    try:
+        end, t_first = time.time() + 20, math.inf
+        while time.time() < end and time.time() < t_first + 4.0:
+            ex.spin_once(timeout_sec=0.05)
+            if states and math.isinf(t_first):
+                t_first = time.time()
+        stop(ctrl)
+        _, out = stop(proc)
+    finally:
+        for p in (ctrl, proc):
+            if p.poll() is None:
+                p.kill()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)
+    assert states, "no controller_state from compensating_controller"
+    errs = [s.error for s in states[len(states) // 2 :]]
+    rms = math.sqrt(sum(e * e for e in errs) / len(errs))
+    assert rms < DIRECT_RMS + 0.035, f"compensating_controller over CAN: RMS error {rms:.4f} rad"
+    assert proc.returncode == 0, out
