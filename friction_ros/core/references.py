@@ -104,14 +104,17 @@ class Reference(ABC):
         p, v, a = self._eval(np.atleast_1d(tau))
         before = np.atleast_1d(t) < self.start_time
         if np.any(before):
-            p0, _, _ = self._eval(np.zeros(1))
-            p = np.where(before, p0[0], p)
+            p = np.where(before, self._initial(), p)
             v = np.where(before, 0.0, v)
             a = np.where(before, 0.0, a)
         p = p + self.offset
         if t.ndim == 0:
             return float(p[0]), float(v[0]), float(a[0])
         return p.reshape(t.shape), v.reshape(t.shape), a.reshape(t.shape)
+
+    def _initial(self) -> float:
+        """Value (relative to offset) held before ``start_time``."""
+        return float(self._eval(np.zeros(1))[0][0])
 
     def sample(self, t: float) -> tuple[float, float, float]:
         """Reference at one time ``t`` (s): ``(pos, vel, acc)`` floats."""
@@ -165,6 +168,9 @@ class Step(Reference):
         super().__init__(**kw)
         self.amplitude = check_real("reference.step.amplitude", amplitude, unit="rad")
         self.rise_time = check_real("reference.step.rise_time", rise_time, 0.0, unit="s")
+
+    def _initial(self) -> float:
+        return 0.0
 
     def _eval(self, tau):
         if self.rise_time == 0.0:

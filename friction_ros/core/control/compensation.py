@@ -229,7 +229,9 @@ class FrictionCompensator:
         """Internal states (observer z_hat, or the feedback/feedforward model state)."""
         if self._observer is not None:
             return self._observer.state
-        for m in (self._fb_model, self._ff_model):
+        wff, wfb = self.weights
+        order = (self._fb_model, self._ff_model) if wfb > 0.0 else (self._ff_model, self._fb_model)
+        for m in order:
             if m is not None and m.is_dynamic:
                 return np.asarray(m.state, dtype=float).copy()
         return np.zeros(0)

@@ -267,7 +267,10 @@ class OnlineFrictionEstimator:
             s0 = obs.model.coefficients["sigma0"]
             # correction through the friction-measurement residual (L / sigma0 scales it to z)
             corr = self.observer_gain * (y - self.estimate.model_torque) / s0
-            model_torque = obs.step(vf, dt, error=0.0) if corr == 0.0 else self._lugre_step(vf, dt, corr)
+            v_raw = float(velocity)  # the observer runs on the measured velocity (no filter lag)
+            model_torque = (
+                obs.step(v_raw, dt, error=0.0) if corr == 0.0 else self._lugre_step(v_raw, dt, corr)
+            )
             state = [obs.z]
             std = []
         self.estimate = FrictionEstimateData(

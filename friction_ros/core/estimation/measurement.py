@@ -106,8 +106,11 @@ class DisturbanceObserver:
         if self.z is None:
             self.z = L * J * v
             self._vf = v
-        # z_dot = L (tau - z + L J v) with tau, v held: exact ZOH
-        target = float(torque) + L * J * v
+            self._vprev = v
+        # z_dot = L (tau - z + L J v): tau held, v taken at the mid-point of the period (the
+        # velocity ramps over the period; holding the end value would bias d_hat by L J a dt / 2)
+        target = float(torque) + L * J * 0.5 * (v + self._vprev)
+        self._vprev = v
         e = math.exp(-L * dt)
         self.z = target + (self.z - target) * e
         self.d_hat = self.z - L * J * v

@@ -1,0 +1,324 @@
+"""Deterministic lockstep closed loop: plant + controller + (optional) estimator at the control period.
+
+Per period k (t_k = k dt)::
+
+    r_k        = reference(t_k)                        (pos, vel, acc)
+    tau_k      = controller.update(t_k, r_k, (pos_k, vel_k), dt)        joint torque [N*m]
+    command_k  = tau_k * command_scale                  plant command unit (A, N*m or V)
+    meas_{k+1} = plant.step(command_k, dt)              sensors at the end of the period
+    estimator.update(t_{k+1}, pos, vel, effort, dt)     (optional; coefficients can be adopted
+                                                          by the controller every ``adopt_period``)
+
+``command_scale`` converts the controller's joint torque to the plant's command: current mode
+1 / (amplifier_gain Kt r eta), torque mode 1, voltage mode R / (Kt r eta) (quasi-static, the
+back-EMF is part of the plant's linear dynamics, seed 004 eq. (12)).
+
+Everything is seeded and stepped in one thread, so the same inputs give bit-identical outputs
+(tests, benchmarks and the ROS lockstep comparison rely on it).
+
+Metrics (:func:`tracking_metrics`) use the *true* joint position (the encoder is a sensor):
+``rms_error``, ``max_error``, ``final_error`` (|e| at the end), ``rms_error_measured``;
+stick-slip: ``stick_fraction`` (share of the time the joint is stuck, |v| < v_stick, while the
+reference moves, |v_ref| > 2 v_stick) and ``stick_events`` (entries into such sticking);
+hunting (over the last ``window`` seconds): ``hunting_amplitude`` (peak-to-peak position),
+``hunting_reversals`` (velocity sign changes with |v| > v_stick) and ``hunting`` (reversals >= 4
+and amplitude above ``resolution``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from friction_ros.core.control.controller import CompensatingController
+from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
+from friction_ros.core.references import Reference, reference_from_config
+from friction_ros.core.validation import ParameterError, check_keys, check_real
+
+PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"
+
+
+def load_plant_config(name: str) -> dict[str, Any]:
+    """Plant config ``{"plant": ..., "friction_motor": ..., "friction_load": ...}`` of a preset.
+
+    Uses :func:`friction_ros.core.presets.load_preset` when available; otherwise reads
+    ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) directly (thin adapter).
+    """
+    try:
+        from friction_ros.core import presets  # noqa: F401
+
+        loader = getattr(presets, "load_preset_config", None)
+        if loader is not None:
+            return loader(name)
+    except ImportError:
+        pass
+    import yaml
+
+    path = PARAMS_DIR / f"{name}.yaml"
+    if not path.is_file():
+        avail = ", ".join(sorted(p.stem for p in PARAMS_DIR.glob("*.yaml")))
+        raise ParameterError(f"plant preset = {name!r} is not allowed: must be one of {avail}")
+    doc = yaml.safe_load(path.read_text())
+    params = next(iter(doc.values()))["ros__parameters"]
+    return {
+        "plant": dict(params["plant"]),
+        "friction_motor": params.get("friction_motor", {"model": "none"}),
+        "friction_load": params.get("friction_load", {"model": "none"}),
+    }
+
+
+def make_plant(spec: Any, **plant_overrides: Any):
+    """Build a GearheadServoPlant from a preset name, a plant config dict or a plant instance.
+
+    ``plant_overrides``: plant keys (``encoder_cpr=0`` ...) and/or ``friction_motor`` /
+    ``friction_load`` model configs replacing the preset's.
+    """
+    from friction_ros.core.plant import GearheadServoPlant
+
+    if isinstance(spec, GearheadServoPlant):
+        if plant_overrides:
+            return GearheadServoPlant(spec.params.replace(**plant_overrides))
+        return spec
+    cfg = load_plant_config(spec) if isinstance(spec, str) else dict(spec)
+    cfg = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in cfg.items()}
+    plant = dict(cfg.get("plant", {}))
+    fm = plant_overrides.pop("friction_motor", cfg.get("friction_motor"))
+    fl = plant_overrides.pop("friction_load", cfg.get("friction_load"))
+    plant.update(plant_overrides)
+    return GearheadServoPlant({"plant": plant, "friction_motor": fm, "friction_load": fl})
+
+
+def command_scale(plant) -> float:
+    """Joint torque -> plant command factor (see the module docstring)."""
+    p = plant.params
+    gain = p.torque_constant * p.ratio * p.gear_efficiency
+    if p.actuation == "current":
+        return 1.0 / (p.amplifier_gain * gain)
+    if p.actuation == "voltage":
+        return p.resistance / gain
+    return 1.0
+
+
+@dataclass
+class LoopResult:
+    """Time series of one closed-loop run plus its metrics."""
+
+    t: np.ndarray
+    reference: np.ndarray  # (n, 3) pos, vel, acc
+    position: np.ndarray  # measured
+    velocity: np.ndarray  # measured
+    true_position: np.ndarray
+    true_velocity: np.ndarray
+    torque: np.ndarray  # controller output [N*m]
+    command: np.ndarray  # plant command unit
+    effort: np.ndarray  # measured joint torque
+    friction: np.ndarray  # true friction (motor + load side, plant's report)
+    terms: dict[str, np.ndarray] = field(default_factory=dict)
+    estimate: dict[str, np.ndarray] = field(default_factory=dict)
+    metrics: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.reference[:, 0] - self.true_position
+
+
+_TERM_KEYS = (
+    "p_term",
+    "i_term",
+    "d_term",
+    "velocity_feedforward",
+    "inertia_feedforward",
+    "friction_feedforward",
+    "friction_feedback",
+)
+
+
+def tracking_metrics(
+    t: np.ndarray,
+    ref: np.ndarray,
+    pos: np.ndarray,
+    vel: np.ndarray,
+    ref_vel: np.ndarray | None = None,
+    pos_measured: np.ndarray | None = None,
+    *,
+    window: float = 1.0,
+    v_stick: float = 1e-4,
+    resolution: float = 0.0,
+    skip: float = 0.0,
+) -> dict[str, float]:
+    """Tracking, stick-slip and hunting metrics (see the module docstring)."""
+    t = np.asarray(t)
+    sel = t >= skip
+    e = (np.asarray(ref) - np.asarray(pos))[sel]
+    out = {
+        "rms_error": float(np.sqrt(np.mean(e * e))),
+        "max_error": float(np.max(np.abs(e))),
+        "final_error": float(abs(e[-1])),
+    }
+    if pos_measured is not None:
+        em = (np.asarray(ref) - np.asarray(pos_measured))[sel]
+        out["rms_error_measured"] = float(np.sqrt(np.mean(em * em)))
+    vel = np.asarray(vel)
+    if ref_vel is not None:
+        rv = np.asarray(ref_vel)
+        moving = np.abs(rv) > 2.0 * v_stick
+        stuck = moving & (np.abs(vel) < v_stick)
+        out["stick_fraction"] = float(np.sum(stuck & sel) / max(np.sum(moving & sel), 1))
+        out["stick_events"] = int(np.sum(stuck[1:] & ~stuck[:-1] & sel[1:]))
+    win = t >= t[-1] - window
+    pw, vw = np.asarray(pos)[win], vel[win]
+    amp = float(np.max(pw) - np.min(pw)) if pw.size else 0.0
+    s = np.sign(np.where(np.abs(vw) > v_stick, vw, 0.0))
+    s = s[s != 0]
+    rev = int(np.sum(s[1:] != s[:-1])) if s.size > 1 else 0
+    out["hunting_amplitude"] = amp
+    out["hunting_reversals"] = rev
+    out["hunting"] = float(rev >= 4 and amp > resolution)
+    return out
+
+
+def run_closed_loop(
+    plant: Any,
+    controller: CompensatingController | Mapping[str, Any],
+    reference: Reference | Mapping[str, Any],
+    duration: float,
+    dt: float = 1e-3,
+    *,
+    estimator: OnlineFrictionEstimator | Mapping[str, Any] | None = None,
+    adopt_period: float = 0.0,
+    scale: float | None = None,
+    initial_position: float | None = None,
+    initial_velocity: float = 0.0,
+    record_terms: bool = False,
+    metrics: Mapping[str, Any] | None = None,
+) -> LoopResult:
+    """Run the lockstep loop for ``duration`` seconds at period ``dt``; see the module docstring.
+
+    ``plant``: preset name, plant config or GearheadServoPlant (reset here to the reference's
+    initial position unless ``initial_position`` is given). ``adopt_period > 0`` with an estimator:
+    every ``adopt_period`` seconds the controller adopts ``estimator.model_config()`` once the
+    estimator has converged. ``metrics``: keyword arguments of :func:`tracking_metrics`.
+    """
+    duration = check_real("harness.duration", duration, 0.0, lo_open=True, unit="s")
+    dt = check_real("harness.dt", dt, 0.0, 1.0, lo_open=True, unit="s")
+    adopt_period = check_real("harness.adopt_period", adopt_period, 0.0, unit="s")
+    plant = make_plant(plant)
+    ctrl = (
+        controller if isinstance(controller, CompensatingController) else CompensatingController(controller)
+    )
+    ref = reference_from_config(reference)
+    est = None
+    if estimator is not None:
+        est = (
+            estimator
+            if isinstance(estimator, OnlineFrictionEstimator)
+            else OnlineFrictionEstimator(estimator)
+        )
+    k_scale = command_scale(plant) if scale is None else float(scale)
+    n = int(round(duration / dt))
+    t = np.arange(n) * dt
+    R = np.column_stack(ref.arrays(t))
+    x0 = R[0, 0] if initial_position is None else float(initial_position)
+    plant.reset(position=x0, velocity=float(initial_velocity))
+    ctrl.reset()
+    if est is not None:
+        est.reset()
+    pos_m, vel_m = x0, float(initial_velocity)
+    cols = {k: np.empty(n) for k in ("pos", "vel", "tpos", "tvel", "tau", "cmd", "eff", "fric")}
+    terms = {k: np.empty(n) for k in _TERM_KEYS} if record_terms else {}
+    est_cols = {k: np.empty(n) for k in ("friction_torque", "model_torque", "excitation_ok")} if est else {}
+    adopt_every = int(round(adopt_period / dt)) if adopt_period > 0 else 0
+    update = ctrl.compute
+    step = plant.step
+    for k in range(n):
+        r = (R[k, 0], R[k, 1], R[k, 2])
+        tm = update(t[k], r, (pos_m, vel_m), dt)
+        tau = tm.command
+        m = step(tau * k_scale, dt)
+        pos_m, vel_m = m.position, m.velocity
+        cols["pos"][k] = m.position
+        cols["vel"][k] = m.velocity
+        cols["tpos"][k] = m.true_position
+        cols["tvel"][k] = m.true_velocity
+        cols["tau"][k] = tau
+        cols["cmd"][k] = tau * k_scale
+        cols["eff"][k] = m.effort
+        cols["fric"][k] = m.friction_motor + m.friction_load
+        if record_terms:
+            for key in _TERM_KEYS:
+                terms[key][k] = getattr(tm, key)
+        if est is not None:
+            e = est.update(t[k] + dt, m.position, m.velocity, m.effort, dt)
+            est_cols["friction_torque"][k] = e.friction_torque
+            est_cols["model_torque"][k] = e.model_torque
+            est_cols["excitation_ok"][k] = e.excitation_ok
+            if adopt_every and (k + 1) % adopt_every == 0 and e.converged:
+                ctrl.set_coefficients(est.model_config())
+    # position recorded at the end of each period belongs to t + dt: compare with r(t + dt)
+    t_end = t + dt
+    R_end = np.column_stack(ref.arrays(t_end))
+    res = LoopResult(
+        t=t_end,
+        reference=R_end,
+        position=cols["pos"],
+        velocity=cols["vel"],
+        true_position=cols["tpos"],
+        true_velocity=cols["tvel"],
+        torque=cols["tau"],
+        command=cols["cmd"],
+        effort=cols["eff"],
+        friction=cols["fric"],
+        terms=terms,
+        estimate=est_cols,
+    )
+    res.metrics = tracking_metrics(
+        t_end, R_end[:, 0], cols["tpos"], cols["tvel"], R_end[:, 1], cols["pos"], **dict(metrics or {})
+    )
+    return res
+
+
+HARNESS_KEYS = (
+    "plant",
+    "plant_overrides",
+    "controller",
+    "reference",
+    "estimator",
+    "duration",
+    "dt",
+    "adopt_period",
+    "scale",
+    "initial_position",
+    "record_terms",
+    "metrics",
+)
+
+
+def run_from_config(config: Mapping[str, Any]) -> LoopResult:
+    """Run a closed loop described by one dict (keys: :data:`HARNESS_KEYS`)."""
+    cfg = dict(config)
+    check_keys("harness", cfg, HARNESS_KEYS)
+    for req in ("plant", "controller", "reference", "duration"):
+        if req not in cfg:
+            raise ParameterError(f"harness.{req} is missing: required")
+    plant = make_plant(cfg["plant"], **dict(cfg.get("plant_overrides") or {}))
+    return run_closed_loop(
+        plant,
+        cfg["controller"],
+        cfg["reference"],
+        cfg["duration"],
+        cfg.get("dt", 1e-3),
+        estimator=cfg.get("estimator"),
+        adopt_period=cfg.get("adopt_period", 0.0),
+        scale=cfg.get("scale"),
+        initial_position=cfg.get("initial_position"),
+        record_terms=bool(cfg.get("record_terms", False)),
+        metrics=cfg.get("metrics"),
+    )
+
+
+_ = math
