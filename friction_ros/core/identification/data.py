@@ -1,0 +1,487 @@
+"""Data preparation for friction identification: arrays in, a uniform, differentiated record out.
+
+Pipeline (all SI, REP-103 signs):
+
+1. **Torque**: ``sensor_msgs/JointState.effort`` is the joint torque [N*m]; or a current [A]
+   converted as ``tau = K_t * N * i`` (torque constant x gear ratio; seed 003 A.1: "the measured
+   current is assumed to correspond to the torque").
+2. **Time alignment**: messages are sorted by stamp, duplicates dropped, and everything (also a
+   current from another topic) is linearly interpolated onto one uniform grid with the median
+   sample period (``dt``) of the joint states.
+3. **Velocity / acceleration** from position by Savitzky-Golay differentiation (polynomial order 3,
+   zero phase, so no lag offline): velocity window ``velocity_window`` (default 21 ms),
+   acceleration window ``acceleration_window`` (default 41 ms). With the seed 003 encoder
+   (1.05e-4 rad) at 1 kHz the velocity noise is ~1e-3 rad/s and the -3 dB bandwidth ~30 Hz, well
+   above the 4 Hz excitation. If only a velocity field exists, it is used and differentiated.
+4. **Plateaus** (constant-velocity segments, seed 004 B.3 experiment 2): from ExperimentEvent
+   START/END markers (program containing ``plateau``) when present, otherwise detected
+   automatically as runs where the velocity stays within a tolerance of its running mean; the first
+   ``settle`` seconds (seed 004: 0.2 s) of each are discarded; each gives (mean v, mean tau,
+   spread).
+5. **Breakaway** (seed 004 B.3 experiment 1): the torque at the first sample where the position
+   has moved ``breakaway_counts`` (seed 004: 2) encoder counts from rest, inside ``breakaway``
+   segments or automatically after a dwell at rest.
+6. **Train/validation split**: seed 003 A.3 trains on the first 10 s and validates on the rest.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from friction_ros.core.validation import ParameterError, check_real
+
+START, END, ABORT = 0, 1, 2
+
+
+class ExcitationError(ParameterError):
+    """The data lack something a fit needs; the message says what and which experiment provides it."""
+
+
+@dataclass
+class Event:
+    """One friction_msgs/ExperimentEvent marker."""
+
+    time: float
+    program: str
+    segment: str
+    index: int
+    event: int
+    target: float = math.nan
+    note: str = ""
+
+
+@dataclass
+class Plateau:
+    """A constant-velocity segment: mean velocity and torque with their spread (seed 004)."""
+
+    t_start: float
+    t_end: float
+    velocity: float
+    torque: float
+    torque_std: float
+    velocity_std: float
+    n: int
+    source: str = "auto"
+
+
+@dataclass
+class Breakaway:
+    """Torque at which the joint left rest (seed 004: 2 encoder counts of motion)."""
+
+    time: float
+    torque: float
+    direction: int
+    source: str = "auto"
+
+
+@dataclass
+class JointData:
+    """A uniform record of one joint: time, position, velocity, acceleration, torque."""
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    acceleration: np.ndarray
+    torque: np.ndarray
+    dt: float
+    events: list[Event] = field(default_factory=list)
+    resolution: float = 0.0
+    t0: float = 0.0
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return int(self.t.shape[0])
+
+    @property
+    def duration(self) -> float:
+        return float(self.n * self.dt)
+
+    def slice(self, i0: int, i1: int) -> JointData:
+        """Samples i0..i1-1 (events kept when inside)."""
+        t0, t1 = (self.t[i0] if i0 < self.n else np.inf), (self.t[i1 - 1] if i1 > i0 else -np.inf)
+        return JointData(
+            self.t[i0:i1],
+            self.position[i0:i1],
+            self.velocity[i0:i1],
+            self.acceleration[i0:i1],
+            self.torque[i0:i1],
+            self.dt,
+            [e for e in self.events if t0 <= e.time <= t1],
+            self.resolution,
+            self.t0,
+            dict(self.meta),
+        )
+
+
+def _window(seconds: float, dt: float, order: int) -> int:
+    w = int(round(seconds / dt)) | 1
+    return max(w, order + 2 + ((order + 2) % 2 == 0))
+
+
+def estimate_resolution(position: np.ndarray) -> float:
+    """Encoder resolution estimated as the smallest common non-zero position step (0 if continuous)."""
+    d = np.abs(np.diff(position))
+    d = d[d > 1e-12]
+    if d.size < 10:
+        return 0.0
+    q = float(np.percentile(d, 1))
+    # quantised data: most steps are integer multiples of q
+    ratio = d / q
+    if np.mean(np.abs(ratio - np.round(ratio)) < 0.05) > 0.9:
+        return q
+    return 0.0
+
+
+def prepare(
+    t,
+    position=None,
+    velocity=None,
+    effort=None,
+    *,
+    current=None,
+    current_t=None,
+    torque_constant: float | None = None,
+    gear_ratio: float = 1.0,
+    events: list[Event] | None = None,
+    velocity_window: float = 0.021,
+    acceleration_window: float = 0.041,
+    source: str = "arrays",
+) -> JointData:
+    """Build a uniform :class:`JointData` from raw arrays (see module docstring for the steps).
+
+    ``t`` are message stamps [s]; ``position`` [rad], ``velocity`` [rad/s] and ``effort`` [N*m]
+    are per-message arrays (None when absent). When ``effort`` is None, ``current`` [A] (with its
+    own stamps ``current_t`` if from another topic) times ``torque_constant`` [N*m/A] times
+    ``gear_ratio`` gives the joint torque.
+    """
+    t = np.asarray(t, dtype=float)
+    if t.ndim != 1 or t.size < 3:
+        raise ExcitationError(
+            f"samples = {t.size}: need at least 3 joint-state messages; record a run with the "
+            "identification experiment (friction-experiment) first"
+        )
+    order = np.argsort(t, kind="stable")
+    t = t[order]
+    keep = np.concatenate([[True], np.diff(t) > 0])
+
+    def pick(x):
+        if x is None:
+            return None
+        x = np.asarray(x, dtype=float)[order][keep]
+        return x
+
+    ts = t[keep]
+    pos, vel, eff = pick(position), pick(velocity), pick(effort)
+    if eff is None or not np.any(np.isfinite(eff)):
+        if current is None:
+            raise ExcitationError(
+                "torque: the joint states carry no effort and no current was given; pass the current "
+                "topic/field with --current-field, --torque-constant and --gear-ratio"
+            )
+        kt = check_real("torque_constant", torque_constant, 0.0, lo_open=True, unit="N*m/A")
+        n_ratio = check_real("gear_ratio", gear_ratio, 0.0, lo_open=True)
+        ct = ts if current_t is None else np.asarray(current_t, dtype=float)
+        cur = np.asarray(current, dtype=float)
+        co = np.argsort(ct, kind="stable")
+        eff = np.interp(ts, ct[co], cur[co]) * kt * n_ratio
+    if pos is None and vel is None:
+        raise ExcitationError("motion: the joint states carry neither position nor velocity")
+    dts = np.diff(ts)
+    dt = float(np.median(dts))
+    if not dt > 0:
+        raise ExcitationError("time: joint-state stamps do not increase")
+    n = int(math.floor((ts[-1] - ts[0]) / dt + 1e-6)) + 1
+    grid = ts[0] + dt * np.arange(n)
+
+    def interp(x):
+        ok = np.isfinite(x)
+        return np.interp(grid, ts[ok], x[ok])
+
+    tau = interp(eff)
+    resolution = 0.0
+    if pos is not None and np.any(np.isfinite(pos)):
+        p = interp(pos)
+        resolution = estimate_resolution(pos[np.isfinite(pos)])
+        wv = _window(velocity_window, dt, 3)
+        wa = _window(acceleration_window, dt, 3)
+        if n > wa:
+            v = savgol_filter(p, wv, 3, deriv=1, delta=dt, mode="interp")
+            a = savgol_filter(p, wa, 3, deriv=2, delta=dt, mode="interp")
+        else:
+            v = np.gradient(p, dt)
+            a = np.gradient(v, dt)
+    else:
+        v = interp(vel)
+        p = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+        wa = _window(acceleration_window, dt, 3)
+        a = savgol_filter(v, wa, 3, deriv=1, delta=dt, mode="interp") if n > wa else np.gradient(v, dt)
+    evs = sorted(events or [], key=lambda e: e.time)
+    evs = [Event(e.time - ts[0], e.program, e.segment, e.index, e.event, e.target, e.note) for e in evs]
+    return JointData(
+        grid - ts[0],
+        p,
+        v,
+        a,
+        tau,
+        dt,
+        evs,
+        resolution,
+        float(ts[0]),
+        {
+            "source": source,
+            "velocity_window_s": velocity_window,
+            "acceleration_window_s": acceleration_window,
+        },
+    )
+
+
+def concatenate(records: list[JointData]) -> list[JointData]:
+    """Several bags are kept as separate records (dynamic states restart per record)."""
+    return list(records)
+
+
+# ------------------------------------------------------------------------------ split
+def split(data: JointData, train_seconds: float = 10.0) -> tuple[JointData, JointData]:
+    """Seed 003 A.3: the first ``train_seconds`` for training, the remainder for validation."""
+    check_real("train_seconds", train_seconds, 0.0, lo_open=True, unit="s")
+    i = int(round(train_seconds / data.dt))
+    if i >= data.n - 10:
+        raise ExcitationError(
+            f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
+            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+        )
+    return data.slice(0, i), data.slice(i, data.n)
+
+
+# ------------------------------------------------------------------------------ velocity regimes
+def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarray:
+    """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of seed 003's envelope."""
+    w = max(int(round(window / dt)), 1)
+    k = np.ones(w) / w
+    return np.sqrt(np.convolve(np.asarray(v) ** 2, k, mode="same"))
+
+
+def high_velocity_mask(v: np.ndarray, dt: float, threshold: float | None = None) -> tuple[np.ndarray, float]:
+    """Classify samples as high (envelope above threshold) or low velocity (seed 003 Table 1 split).
+
+    Default threshold: geometric mean of the 5th and 95th percentiles of the 1 s velocity RMS, which
+    separates the two envelope levels of seed 003's excitation.
+    """
+    env = velocity_envelope(v, dt)
+    if threshold is None:
+        lo, hi = np.percentile(env, [5, 95])
+        threshold = float(math.sqrt(max(lo, 1e-9) * max(hi, 1e-9)))
+    return env > threshold, float(threshold)
+
+
+# ------------------------------------------------------------------------------ plateaus
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
+
+
+def _segment_pairs(events: list[Event], key: str) -> list[tuple[Event, Event]]:
+    out = []
+    open_: dict[tuple[str, int], Event] = {}
+    for e in events:
+        if key not in e.program.lower() and key not in e.segment.lower():
+            continue
+        k = (e.program, e.index)
+        if e.event == START:
+            open_[k] = e
+        elif e.event == END and k in open_:
+            out.append((open_.pop(k), e))
+        elif e.event == ABORT:
+            open_.pop(k, None)
+    return out
+
+
+def find_plateaus(
+    data: JointData,
+    *,
+    settle: float = 0.2,
+    min_duration: float = 0.3,
+    rel_tol: float = 0.05,
+    min_speed: float | None = None,
+) -> list[Plateau]:
+    """Constant-velocity plateaus: from ``plateau`` event markers if any, else automatic detection.
+
+    Automatic: a sample belongs to a plateau when the velocity stays within
+    ``max(rel_tol |v|, 3 noise)`` of its 0.1 s running mean and |v| > ``min_speed``; runs shorter
+    than ``settle + min_duration`` are dropped and the first ``settle`` seconds discarded.
+    """
+    v, tau, dt = data.velocity, data.torque, data.dt
+    out: list[Plateau] = []
+    pairs = _segment_pairs(data.events, "plateau")
+    if pairs:
+        for s, e in pairs:
+            i0 = int(np.searchsorted(data.t, s.time + settle))
+            i1 = int(np.searchsorted(data.t, e.time))
+            if i1 - i0 < max(int(min_duration / dt / 3), 5):
+                continue
+            vv, tt = v[i0:i1], tau[i0:i1]
+            out.append(
+                Plateau(
+                    data.t[i0],
+                    data.t[i1 - 1],
+                    float(vv.mean()),
+                    float(tt.mean()),
+                    float(tt.std()),
+                    float(vv.std()),
+                    i1 - i0,
+                    "events",
+                )
+            )
+        return out
+    w = max(int(round(0.1 / dt)), 3)
+    k = np.ones(w) / w
+    vm = np.convolve(v, k, mode="same")
+    dev = np.sqrt(np.convolve((v - vm) ** 2, k, mode="same"))
+    noise = float(np.median(np.abs(np.diff(v)))) / math.sqrt(2) + 1e-12
+    if min_speed is None:
+        min_speed = max(10 * noise, 1e-3)
+    steady = (np.abs(vm - np.convolve(vm, k, mode="same")) < np.maximum(rel_tol * np.abs(vm), 3 * noise)) & (
+        dev < np.maximum(rel_tol * np.abs(vm), 3 * noise)
+    )
+    steady &= np.abs(vm) > min_speed
+    sign = np.sign(vm)
+    for i0, i1 in _runs(steady):
+        # split a run wherever the mean velocity drifts by more than rel_tol
+        i0s = i0 + int(round(settle / dt))
+        if i1 - i0s < int(round(min_duration / dt)):
+            continue
+        seg_v = v[i0s:i1]
+        if np.any(sign[i0s:i1] != sign[i0s]):
+            continue
+        ref = np.median(seg_v)
+        if np.max(np.abs(vm[i0s:i1] - ref)) > max(2 * rel_tol * abs(ref), 6 * noise):
+            continue
+        tt = tau[i0s:i1]
+        out.append(
+            Plateau(
+                data.t[i0s],
+                data.t[i1 - 1],
+                float(seg_v.mean()),
+                float(tt.mean()),
+                float(tt.std()),
+                float(seg_v.std()),
+                i1 - i0s,
+            )
+        )
+    return out
+
+
+def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> list[Breakaway]:
+    """Breakaway torques: first sample ``counts`` encoder counts away from rest (seed 004 B.3)."""
+    q = data.resolution if data.resolution > 0 else 1e-4
+    thr = counts * q * 0.999
+    pos, tau, dt = data.position, data.torque, data.dt
+    out: list[Breakaway] = []
+    pairs = _segment_pairs(data.events, "breakaway")
+    if pairs:
+        for s, e in pairs:
+            i0 = int(np.searchsorted(data.t, s.time))
+            i1 = int(np.searchsorted(data.t, e.time))
+            if i1 - i0 < 2:
+                continue
+            moved = np.nonzero(np.abs(pos[i0:i1] - pos[i0]) >= thr)[0]
+            if moved.size:
+                j = i0 + int(moved[0])
+                out.append(
+                    Breakaway(float(data.t[j]), float(tau[j]), int(np.sign(pos[j] - pos[i0])), "events")
+                )
+        return out
+    nd = max(int(round(dwell / dt)), 2)
+    i = 0
+    n = data.n
+    while i < n - nd:
+        # at rest for `dwell`: position within one count
+        seg = pos[i : i + nd]
+        if np.ptp(seg) < q * 0.999:
+            j0 = i + nd
+            ref = pos[i]
+            moved = np.nonzero(np.abs(pos[j0:] - ref) >= thr)[0]
+            if not moved.size:
+                break
+            j = j0 + int(moved[0])
+            # only a ramp-driven breakaway: torque rising in magnitude towards j
+            pre = tau[max(i, j - nd) : j + 1]
+            if pre.size > 3 and abs(pre[-1]) > abs(pre[0]):
+                out.append(Breakaway(float(data.t[j]), float(tau[j]), int(np.sign(pos[j] - ref))))
+            i = j + nd
+        else:
+            i += max(nd // 4, 1)
+    return out
+
+
+# ------------------------------------------------------------------------------ excitation checks
+@dataclass
+class Excitation:
+    """Summary of what a record excites."""
+
+    max_speed_pos: float
+    max_speed_neg: float
+    reversals: int
+    motion_range: float
+    low_speed_fraction: float
+    n_plateaus_pos: int
+    n_plateaus_neg: int
+    plateau_decades: float
+
+
+def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
+    v = data.velocity
+    noise = float(np.median(np.abs(np.diff(v)))) + 1e-9
+    moving = np.abs(v) > max(5 * noise, 1e-4)
+    sv = np.sign(v[moving])
+    rev = int(np.sum(sv[1:] != sv[:-1])) if sv.size > 1 else 0
+    pv = [abs(p.velocity) for p in plateaus]
+    dec = math.log10(max(pv) / min(pv)) if len(pv) >= 2 else 0.0
+    return Excitation(
+        float(max(v.max(), 0.0)),
+        float(max(-v.min(), 0.0)),
+        rev,
+        float(np.ptp(data.position)),
+        float(np.mean(np.abs(v[moving]) < 0.05)) if moving.any() else 0.0,
+        sum(p.velocity > 0 for p in plateaus),
+        sum(p.velocity < 0 for p in plateaus),
+        dec,
+    )
+
+
+def check_motion(data: JointData, label: str) -> None:
+    """Raise ExcitationError if the joint never moved."""
+    q = data.resolution if data.resolution > 0 else 1e-6
+    if np.ptp(data.position) < 3 * q or np.max(np.abs(data.velocity)) < 1e-4:
+        raise ExcitationError(
+            f"{label}: no motion (position range {np.ptp(data.position):.3g} rad, max |v| "
+            f"{np.max(np.abs(data.velocity)):.3g} rad/s); the joint must move: record the 'plateaus' "
+            "experiment (constant-velocity plateaus in both directions) or seed 003's 'random' "
+            "excitation (band-limited random velocity under a 10 s envelope)"
+        )
+
+
+def check_excitation(ex: Excitation, *, dynamic: bool, static_from_plateaus: bool, label: str) -> None:
+    """Raise ExcitationError naming what is missing and the experiment that provides it."""
+    missing = []
+    if ex.max_speed_pos < 1e-3 or ex.max_speed_neg < 1e-3:
+        d = "positive" if ex.max_speed_pos < 1e-3 else "negative"
+        missing.append(f"motion in the {d} direction (run 'plateaus' in both directions)")
+    if static_from_plateaus and (ex.n_plateaus_pos + ex.n_plateaus_neg) < 3:
+        missing.append(
+            f"constant-velocity plateaus (found {ex.n_plateaus_pos}+/{ex.n_plateaus_neg}-, need >= 3; "
+            "run the 'plateaus' experiment over a log-spaced speed range)"
+        )
+    if dynamic and ex.reversals < 4:
+        missing.append(
+            f"velocity reversals for presliding dynamics (found {ex.reversals}, need >= 4; run seed 003's "
+            "'random' excitation or the 'presliding' cycles)"
+        )
+    if missing:
+        raise ExcitationError(f"{label}: too little excitation: missing " + "; ".join(missing))

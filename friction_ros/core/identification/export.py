@@ -1,0 +1,185 @@
+"""Fitted coefficients -> friction-library configs and the ROS parameter YAML the nodes load.
+
+Library configs (``model.to_config()`` form, validated with ``model_from_config``):
+
+* ``coulomb``/``coulomb_viscous``/``stribeck`` fitted in the time domain with a linear zone
+  ``eps`` -> ``stribeck_eps`` (seed 003 A.2.2; Coulomb as fs = fc); from plateaus -> the plain
+  library model (``asymmetric`` wrapper when the directions differ);
+* ``dahl`` -> ``dahl`` (alpha = 1), ``lugre`` -> ``lugre`` (sigma2 -> fv), ``gms<N>`` -> ``gms``
+  (C -> attraction);
+* ``anfis``/``nusvr`` have no library model: no config (JSON summary only).
+
+Parameter file (``node_name: ros__parameters:``):
+
+* ``compensating_controller``: ``inertia`` and ``friction.model`` (the config dict);
+* ``friction_estimator``: ``inertia``, the nearest estimator ``model`` (lugre, stribeck,
+  coulomb_viscous or their asymmetric forms) with ``initial`` coefficients (and ``lugre`` config);
+* ``plant_simulator``: a preset section with ``plant.motor_inertia`` and ``friction_motor``
+  (loadable by :func:`friction_ros.core.presets.preset_from_config`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import yaml
+
+
+def library_config(
+    name: str, coefs: dict, *, eps: float = 0.0, per_direction: dict | None = None
+) -> dict | None:
+    """The library ``to_config()`` dict for a fitted model (None for learned models)."""
+    c = coefs
+    if name in ("anfis", "nusvr"):
+        return None
+    if name in ("coulomb", "coulomb_viscous", "stribeck"):
+        if per_direction:
+            base = "stribeck" if name == "stribeck" else name
+            return {
+                "model": "asymmetric",
+                "base": base,
+                "positive": _static(name, per_direction["positive"], 0.0, bare=True),
+                "negative": _static(name, per_direction["negative"], 0.0, bare=True),
+            }
+        return _static(name, c, eps)
+    if name == "dahl":
+        return {"model": "dahl", "sigma": c["sigma"], "fc": c["fc"], "alpha": 1.0}
+    if name == "lugre":
+        return {
+            "model": "lugre",
+            "sigma0": c["sigma0"],
+            "sigma1": c["sigma1"],
+            "fv": c["sigma2"],
+            "fc": c["fc"],
+            "fs": max(c["fs"], c["fc"]),
+            "vs": c["vs"],
+            "delta": c["delta"],
+        }
+    if name.startswith("gms"):
+        alpha = [float(a) for a in c["alpha"]]
+        alpha[-1] = 1.0 - sum(alpha[:-1])  # exact sum 1 after rounding
+        return {
+            "model": "gms",
+            "fc": c["fc"],
+            "fs": max(c["fs"], c["fc"]),
+            "vs": c["vs"],
+            "delta": c["delta"],
+            "attraction": c["c"],
+            "fv": c["fv"],
+            "k": [float(k) for k in c["k"]],
+            "alpha": alpha,
+        }
+    return None
+
+
+def _static(name: str, c: dict, eps: float, bare: bool = False) -> dict:
+    fc = float(c["fc"])
+    fv = float(c.get("fv", 0.0))
+    if name == "stribeck":
+        body = {
+            "fc": fc,
+            "fs": max(float(c["fs"]), fc),
+            "vs": float(c["vs"]),
+            "delta": float(c["delta"]),
+            "fv": fv,
+        }
+        model = "stribeck"
+    elif name == "coulomb_viscous":
+        body = {"fc": fc, "fv": fv}
+        model = "coulomb_viscous"
+    else:
+        body = {"fc": fc}
+        model = "coulomb"
+    if eps > 0 and not bare:
+        full = {
+            "fc": fc,
+            "fs": body.get("fs", fc),
+            "vs": body.get("vs", 1.0),
+            "delta": body.get("delta", 2.0),
+        }
+        return {"model": "stribeck_eps", **full, "fv": fv, "eps": float(eps)}
+    return body if bare else {"model": model, **body}
+
+
+def estimator_section(config: dict, inertia: float) -> dict:
+    """friction_estimator parameters nearest to a library config."""
+    m = config.get("model")
+    out: dict[str, Any] = {"inertia": float(inertia)}
+    if m == "lugre":
+        out.update({"model": "lugre", "lugre": dict(config)})
+        return out
+    if m == "asymmetric":
+        p, n = config["positive"], config["negative"]
+        if config.get("base") == "coulomb_viscous":
+            out.update(
+                {
+                    "model": "asymmetric_coulomb_viscous",
+                    "initial": {"fc_pos": p["fc"], "fc_neg": n["fc"], "fv_pos": p["fv"], "fv_neg": n["fv"]},
+                }
+            )
+            return out
+        if config.get("base") == "stribeck":
+            out.update(
+                {
+                    "model": "asymmetric_stribeck",
+                    "vs": p["vs"],
+                    "delta": p["delta"],
+                    "initial": {
+                        "fc_pos": p["fc"],
+                        "fs_pos": p["fs"],
+                        "fv_pos": p["fv"],
+                        "fc_neg": n["fc"],
+                        "fs_neg": n["fs"],
+                        "fv_neg": n["fv"],
+                    },
+                }
+            )
+            return out
+        config = {"model": config.get("base"), **p}
+        m = config["model"]
+    if m in ("coulomb", "coulomb_viscous"):
+        out.update({"model": "coulomb_viscous", "initial": {"fc": config["fc"], "fv": config.get("fv", 0.0)}})
+        return out
+    # stribeck family, GMS, Dahl: the steady-state Stribeck curve
+    fc = config.get("fc", 0.0)
+    out.update(
+        {
+            "model": "stribeck",
+            "vs": config.get("vs", 0.05),
+            "delta": config.get("delta", 2.0),
+            "initial": {"fc": fc, "fs": config.get("fs", fc), "fv": config.get("fv", 0.0)},
+        }
+    )
+    return out
+
+
+def parameter_document(config: dict, inertia: float, *, description: str = "") -> dict:
+    """The ROS parameter YAML document for the three nodes."""
+    return {
+        "compensating_controller": {
+            "ros__parameters": {"inertia": float(inertia), "friction": {"model": config}}
+        },
+        "friction_estimator": {"ros__parameters": estimator_section(config, inertia)},
+        "plant_simulator": {
+            "ros__parameters": {
+                "preset": "identified",
+                "description": description or f"identified by friction-fit ({config.get('model')})",
+                "plant": {"motor_inertia": float(inertia)},
+                "friction_motor": config,
+            }
+        },
+    }
+
+
+def dump_yaml(doc: dict, header: str = "") -> str:
+    def clean(x):
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if hasattr(x, "item"):
+            return x.item()
+        return x
+
+    text = yaml.safe_dump(clean(doc), sort_keys=False, default_flow_style=None)
+    return (header + "\n" if header else "") + text

@@ -1,0 +1,307 @@
+"""Compiled (numba) simulation kernels for output-error fitting, vectorised over a population.
+
+Each dynamic friction model is simulated in a *normalised* form in which the coefficients that
+enter linearly are factored out (variable projection, Golub & Pereyra 1973). The kernels return,
+per candidate, the Gram matrix ``X^T X`` of the regressor columns ``[phi_1 .. phi_m, v, a, tau]``
+so the linear coefficients (static level, element weights, micro-damping, viscous coefficient,
+inertia J) are solved exactly by (non-negative) least squares outside the kernel. This keeps the
+global search low-dimensional and removes the scale ambiguities between them.
+
+Normalised model forms (derivations from the standard equations, see models.py):
+
+* Stribeck shape (seed 004 eq. 5, seed 003 A.2.2): ``s~(v) = r + (1 - r) exp(-|v/v_s|^delta)``,
+  ``r = F_C / F_S``, so ``s(v) = F_S s~(v)``.
+* Dahl (seed 004 eq. 9, alpha = 1): ``G = F/F_C``, ``dG/dx = sigma~ (1 - G sgn v)``,
+  ``sigma~ = sigma / F_C``; exact update for piecewise-constant v:
+  ``G+ = sgn v + (G - sgn v) exp(-sigma~ |v| dt)``.
+* LuGre (seed 004 eqs. 10-11): ``w = sigma0 z / F_S``, ``dw/dt = sigma~0 v - sigma~0 |v| w / s~(v)``
+  with ``sigma~0 = sigma0 / F_S``; exact exponential update with rate ``a = sigma~0 |v| / s~``;
+  ``dz/dt = (v - |v| w / s~)``; ``F = F_S w + sigma1 dz/dt + sigma2 v``.
+* GMS-N (seed 003 A.2.4, sign-corrected eq. 3): element ``i`` force ``F_i = F_S alpha_i G_i``;
+  stick ``dG_i/dt = v / x_i`` (``x_i = alpha_i F_S / k_i`` is the element's breakaway
+  displacement), slip ``dG_i/dt = C~ (sgn v - G_i / s~(v))`` with ``C~ = C / F_S`` (exact
+  exponential update), stick -> slip when ``|G_i| >= s~`` in the direction of motion, slip ->
+  stick on a velocity reversal or v = 0. ``F = sum_i beta_i G_i + sigma2 v`` with
+  ``beta_i = F_S alpha_i``.
+
+All kernels use ``prange`` over the population (both cores) and ``cache=True``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(cache=True, inline="always")
+def _sgn(x):
+    if x > 0.0:
+        return 1.0
+    if x < 0.0:
+        return -1.0
+    return 0.0
+
+
+@njit(cache=True, inline="always")
+def _shape(v, r, vs, delta):
+    """Normalised Stribeck curve s~(v) = r + (1-r) exp(-|v/vs|^delta), in (r, 1]."""
+    av = abs(v) / vs
+    if av == 0.0:
+        return 1.0
+    return r + (1.0 - r) * math.exp(-math.pow(av, delta))
+
+
+@njit(cache=True, inline="always")
+def _accumulate(gram, feats, m):
+    for i in range(m):
+        fi = feats[i]
+        for j in range(i, m):
+            gram[i, j] += fi * feats[j]
+
+
+@njit(cache=True, inline="always")
+def _symmetrise(gram, m):
+    for i in range(m):
+        for j in range(i):
+            gram[i, j] = gram[j, i]
+
+
+# ---------------------------------------------------------------------------------- Dahl
+@njit(cache=True)
+def dahl_features(theta, v, dt):
+    """Regressor columns [G] of the normalised Dahl model for one parameter row [sigma~]."""
+    n = v.shape[0]
+    out = np.empty((n, 1))
+    st = theta[0]
+    g = 0.0
+    for k in range(n):
+        vk = v[k]
+        if vk != 0.0:
+            s = _sgn(vk)
+            g = s + (g - s) * math.exp(-st * abs(vk) * dt)
+        out[k, 0] = g
+    return out
+
+
+@njit(cache=True, parallel=True)
+def dahl_gram(P, v, a, tau, dt):
+    npop = P.shape[0]
+    n = v.shape[0]
+    m = 4
+    grams = np.zeros((npop, m, m))
+    for p in prange(npop):
+        st = P[p, 0]
+        g = 0.0
+        feats = np.empty(m)
+        gram = np.zeros((m, m))
+        for k in range(n):
+            vk = v[k]
+            if vk != 0.0:
+                s = _sgn(vk)
+                g = s + (g - s) * math.exp(-st * abs(vk) * dt)
+            feats[0] = g
+            feats[1] = vk
+            feats[2] = a[k]
+            feats[3] = tau[k]
+            _accumulate(gram, feats, m)
+        _symmetrise(gram, m)
+        grams[p] = gram
+    return grams
+
+
+# ---------------------------------------------------------------------------------- LuGre
+@njit(cache=True, inline="always")
+def _lugre_step(w, vk, r, vs, delta, s0, dt):
+    if vk == 0.0:
+        return w, 0.0
+    g = _shape(vk, r, vs, delta)
+    rate = s0 * abs(vk) / g
+    wss = _sgn(vk) * g
+    w = wss + (w - wss) * math.exp(-rate * dt)
+    zdot = vk - abs(vk) * w / g
+    return w, zdot
+
+
+@njit(cache=True)
+def lugre_features(theta, v, dt):
+    """Regressor columns [w, dz/dt] of the normalised LuGre model; theta = [r, vs, delta, sigma~0]."""
+    n = v.shape[0]
+    out = np.empty((n, 2))
+    r, vs, delta, s0 = theta[0], theta[1], theta[2], theta[3]
+    w = 0.0
+    for k in range(n):
+        w, zd = _lugre_step(w, v[k], r, vs, delta, s0, dt)
+        out[k, 0] = w
+        out[k, 1] = zd
+    return out
+
+
+@njit(cache=True, parallel=True)
+def lugre_gram(P, v, a, tau, dt):
+    npop = P.shape[0]
+    n = v.shape[0]
+    m = 5
+    grams = np.zeros((npop, m, m))
+    for p in prange(npop):
+        r, vs, delta, s0 = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
+        w = 0.0
+        feats = np.empty(m)
+        gram = np.zeros((m, m))
+        for k in range(n):
+            vk = v[k]
+            w, zd = _lugre_step(w, vk, r, vs, delta, s0, dt)
+            feats[0] = w
+            feats[1] = zd
+            feats[2] = vk
+            feats[3] = a[k]
+            feats[4] = tau[k]
+            _accumulate(gram, feats, m)
+        _symmetrise(gram, m)
+        grams[p] = gram
+    return grams
+
+
+# ---------------------------------------------------------------------------------- GMS
+@njit(cache=True, inline="always")
+def _gms_step(G, stuck, vk, s, ct, xs, dt):
+    ne = G.shape[0]
+    sv = _sgn(vk)
+    decay = math.exp(-ct * dt / s)
+    for i in range(ne):
+        if stuck[i]:
+            G[i] += vk * dt / xs[i]
+            if sv != 0.0 and G[i] * sv >= s:
+                stuck[i] = False
+                G[i] = sv * s
+        else:
+            if sv == 0.0 or sv != _sgn(G[i]):
+                stuck[i] = True
+                G[i] += vk * dt / xs[i]
+            else:
+                gss = sv * s
+                G[i] = gss + (G[i] - gss) * decay
+
+
+@njit(cache=True)
+def gms_features(theta, v, dt):
+    """Regressor columns [G_1..G_N] of normalised GMS-N; theta = [r, vs, delta, C~, x_1..x_N]."""
+    n = v.shape[0]
+    ne = theta.shape[0] - 4
+    out = np.empty((n, ne))
+    r, vs, delta, ct = theta[0], theta[1], theta[2], theta[3]
+    xs = theta[4:].copy()
+    G = np.zeros(ne)
+    stuck = np.ones(ne, dtype=np.bool_)
+    for k in range(n):
+        vk = v[k]
+        s = _shape(vk, r, vs, delta)
+        _gms_step(G, stuck, vk, s, ct, xs, dt)
+        for i in range(ne):
+            out[k, i] = G[i]
+    return out
+
+
+@njit(cache=True, parallel=True)
+def gms_gram(P, v, a, tau, dt):
+    npop = P.shape[0]
+    n = v.shape[0]
+    ne = P.shape[1] - 4
+    m = ne + 3
+    grams = np.zeros((npop, m, m))
+    for p in prange(npop):
+        r, vs, delta, ct = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
+        xs = P[p, 4:].copy()
+        G = np.zeros(ne)
+        stuck = np.ones(ne, dtype=np.bool_)
+        feats = np.empty(m)
+        gram = np.zeros((m, m))
+        for k in range(n):
+            vk = v[k]
+            s = _shape(vk, r, vs, delta)
+            _gms_step(G, stuck, vk, s, ct, xs, dt)
+            for i in range(ne):
+                feats[i] = G[i]
+            feats[ne] = vk
+            feats[ne + 1] = a[k]
+            feats[ne + 2] = tau[k]
+            _accumulate(gram, feats, m)
+        _symmetrise(gram, m)
+        grams[p] = gram
+    return grams
+
+
+# ---------------------------------------------------------------- seed 001 unity-feedback loop
+@njit(cache=True, inline="always")
+def exp_friction(w, f_st, gamma, delta, f_kmin, sigma):
+    """Seed 001 eq. (21): (F_kmin + (F_ST - F_kmin) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v)."""
+    if w == 0.0:
+        return 0.0
+    aw = abs(w)
+    f = f_kmin + (f_st - f_kmin) * math.exp(-math.pow(gamma * aw, delta)) + sigma * aw
+    return f if w > 0.0 else -f
+
+
+@njit(cache=True)
+def seed001_simulate(P, u, substeps, h):
+    """Simulated output phi[k] of seed 001's loop J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi').
+
+    P = [F_ST, gamma, delta, F_kmin, sigma, J_m, B_m]; u is held over each sample (ZOH) and
+    integrated with ``substeps`` explicit-Euler steps of size ``h`` (seed 001 section 9 item 4).
+    """
+    n = u.shape[0]
+    out = np.empty(n)
+    phi = 0.0
+    w = 0.0
+    for k in range(n):
+        out[k] = phi
+        uk = u[k]
+        for _ in range(substeps):
+            f = exp_friction(w, P[0], P[1], P[2], P[3], P[4])
+            wd = (uk - phi - f - P[6] * w) / P[5]
+            phi += h * w
+            w += h * wd
+    return out
+
+
+@njit(cache=True, parallel=True)
+def seed001_fit_batch(P, u, theta, substeps, h):
+    """Seed 001 eq. (17) Fit = sum_k (theta[k] - phi[k])^2 for every row of P (inf if invalid)."""
+    npop = P.shape[0]
+    n = u.shape[0]
+    fits = np.empty(npop)
+    for p in prange(npop):
+        ok = True
+        for j in range(P.shape[1]):
+            if not (P[p, j] > 0.0) or not math.isfinite(P[p, j]):
+                ok = False
+        if not ok:
+            fits[p] = np.inf
+            continue
+        f_st, gamma, delta, f_kmin, sigma, jm, bm = (
+            P[p, 0],
+            P[p, 1],
+            P[p, 2],
+            P[p, 3],
+            P[p, 4],
+            P[p, 5],
+            P[p, 6],
+        )
+        phi = 0.0
+        w = 0.0
+        acc = 0.0
+        for k in range(n):
+            e = theta[k] - phi
+            acc += e * e
+            uk = u[k]
+            for _ in range(substeps):
+                f = exp_friction(w, f_st, gamma, delta, f_kmin, sigma)
+                wd = (uk - phi - f - bm * w) / jm
+                phi += h * w
+                w += h * wd
+            if not math.isfinite(phi) or abs(phi) > 1e6:
+                acc = np.inf
+                break
+        fits[p] = acc
+    return fits

@@ -1,0 +1,267 @@
+"""Fit specifications: each fittable model as (nonlinear search space) + (linear coefficients).
+
+Every model predicts the measured joint torque as (seed 003 A.3, eq. 1 with tau_0 = 0)
+
+    tau_hat = J a + F_hat(v trajectory),      F_hat = sum_j beta_j phi_j(v; theta) + F_v v
+
+where ``theta`` are the few coefficients that enter nonlinearly (searched globally, then refined)
+and ``beta`` (static level, element weights, micro-damping), the viscous coefficient ``F_v`` and
+the inertia ``J`` enter linearly and are solved exactly by non-negative least squares for every
+candidate ``theta`` (variable projection). The regressors ``phi_j`` of the dynamic models come from
+the compiled kernels in :mod:`kernels`; the normalised forms are documented there.
+
+Physical coefficient names follow the friction library's ``to_config()`` keys where known; the
+conversion to a library model is in :func:`friction_ros.core.identification.export.library_config`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from friction_ros.core.identification import kernels
+from friction_ros.core.validation import ParameterError
+
+DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (seed 003 A.2.1/A.2.2)
+
+
+def sat_sign(v: np.ndarray, eps: float) -> np.ndarray:
+    """sgn(v) with a linear zone of width eps (seed 003 A.2.1): clip(v / eps, -1, 1)."""
+    return np.clip(np.asarray(v, dtype=float) / eps, -1.0, 1.0)
+
+
+@dataclass
+class FitSpec:
+    """One fittable model: names, bounds and regressors of its nonlinear and linear parts."""
+
+    name: str
+    family: str
+    nonlinear: list[str]
+    lower: np.ndarray
+    upper: np.ndarray
+    log: np.ndarray  # search in log10 space for this coefficient
+    linear: list[str]  # model-specific linear coefficients (viscous and J are appended)
+    viscous: bool = True
+    dynamic: bool = False
+    n_elements: int = 0
+    eps: float = DEFAULT_EPS
+    extra: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ search-space transforms
+    def to_search(self, theta: np.ndarray) -> np.ndarray:
+        theta = np.asarray(theta, dtype=float)
+        return np.where(self.log, np.log10(np.maximum(theta, 1e-300)), theta)
+
+    def from_search(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return np.where(self.log, 10.0**x, x)
+
+    def search_bounds(self) -> list[tuple[float, float]]:
+        lo = self.to_search(self.lower)
+        hi = self.to_search(self.upper)
+        return list(zip(lo.tolist(), hi.tolist()))
+
+    @property
+    def linear_all(self) -> list[str]:
+        return [*self.linear, *(["fv"] if self.viscous else []), "J"]
+
+    @property
+    def n_params(self) -> int:
+        return len(self.nonlinear) + len(self.linear_all)
+
+    # ------------------------------------------------------------------ regressors
+    def features(self, theta: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """Model-specific regressor columns phi (n x len(linear)) for one theta."""
+        v = np.ascontiguousarray(v, dtype=float)
+        theta = np.ascontiguousarray(theta, dtype=float)
+        f = self.family
+        if f == "coulomb":
+            return sat_sign(v, self.eps)[:, None]
+        if f == "stribeck":
+            vs, delta = theta
+            sg = sat_sign(v, self.eps)
+            return np.column_stack([sg, sg * np.exp(-(np.abs(v / vs) ** delta))])
+        if f == "dahl":
+            return kernels.dahl_features(theta, v, dt)
+        if f == "lugre":
+            return kernels.lugre_features(theta, v, dt)
+        if f == "gms":
+            return kernels.gms_features(theta, v, dt)
+        raise ParameterError(f"model family {f!r} has no regressors")
+
+    def design(self, theta: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
+        """Full design matrix [phi, (v), a] for one theta."""
+        cols = [self.features(theta, v, dt)]
+        if self.viscous:
+            cols.append(np.asarray(v, dtype=float)[:, None])
+        cols.append(np.asarray(a, dtype=float)[:, None])
+        return np.hstack(cols)
+
+    def grams(self, P: np.ndarray, v: np.ndarray, a: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
+        """Gram matrices of [phi, v, a, tau] for every row of P (npop x m x m)."""
+        P = np.ascontiguousarray(P, dtype=float)
+        v = np.ascontiguousarray(v, dtype=float)
+        a = np.ascontiguousarray(a, dtype=float)
+        tau = np.ascontiguousarray(tau, dtype=float)
+        f = self.family
+        if f == "dahl":
+            g = kernels.dahl_gram(P, v, a, tau, dt)
+        elif f == "lugre":
+            g = kernels.lugre_gram(P, v, a, tau, dt)
+        elif f == "gms":
+            g = kernels.gms_gram(P, v, a, tau, dt)
+        else:
+            out = []
+            for theta in P:
+                X = np.hstack([self.features(theta, v, dt), v[:, None], a[:, None], tau[:, None]])
+                out.append(X.T @ X)
+            g = np.array(out)
+        if not self.viscous:  # drop the v row/column (index m_phi)
+            i = len(self.linear)
+            keep = [j for j in range(g.shape[1]) if j != i]
+            g = g[:, keep][:, :, keep]
+        return g
+
+    # ------------------------------------------------------------------ physical coefficients
+    def coefficients(self, theta: np.ndarray, beta: np.ndarray) -> dict:
+        """Physical coefficients (SI) from the nonlinear theta and linear beta (incl. fv, J)."""
+        theta = np.asarray(theta, dtype=float)
+        beta = np.asarray(beta, dtype=float)
+        lin = dict(zip(self.linear_all, beta.tolist()))
+        J = lin.pop("J")
+        fv = lin.pop("fv", 0.0)
+        f = self.family
+        if f == "coulomb":
+            c = {"fc": lin["fc"]}
+            if self.viscous:
+                c["fv"] = fv
+        elif f == "stribeck":
+            c = {"fc": lin["fc"], "fs": lin["fc"] + lin["dfs"], "vs": theta[0], "delta": theta[1], "fv": fv}
+        elif f == "dahl":
+            c = {"fc": lin["fc"], "sigma": theta[0] * lin["fc"], "fv": fv}
+        elif f == "lugre":
+            r, vs, delta, s0 = theta
+            fs = lin["fs"]
+            c = {
+                "fc": r * fs,
+                "fs": fs,
+                "vs": vs,
+                "delta": delta,
+                "sigma0": s0 * fs,
+                "sigma1": lin["sigma1"],
+                "sigma2": fv,
+            }
+        elif f == "gms":
+            r, vs, delta, ct = theta[:4]
+            xs = theta[4:]
+            betas = np.array([lin[f"beta{i + 1}"] for i in range(self.n_elements)])
+            fs = float(betas.sum())
+            alpha = betas / fs if fs > 0 else np.full(self.n_elements, 1.0 / self.n_elements)
+            k = betas / xs  # k_i = alpha_i F_S / x_i
+            order = np.argsort(xs)
+            c = {
+                "fc": r * fs,
+                "fs": fs,
+                "vs": vs,
+                "delta": delta,
+                "c": ct * fs,
+                "fv": fv,
+                "k": k[order].tolist(),
+                "alpha": alpha[order].tolist(),
+            }
+        else:  # pragma: no cover
+            raise ParameterError(f"unknown family {f!r}")
+        return {**c, "J": J}
+
+    def initial_theta(self, static: dict | None) -> np.ndarray:
+        """A starting point for the local search from a static fit (fc, fs, vs, delta) if any."""
+        mid = np.where(self.log, np.sqrt(self.lower * self.upper), 0.5 * (self.lower + self.upper))
+        theta = mid.copy()
+        if static:
+            names = self.nonlinear
+            fs = static.get("fs", static.get("fc", 1.0))
+            fc = static.get("fc", fs)
+            vals = {"r": fc / fs if fs > 0 else 0.8, "vs": static.get("vs"), "delta": static.get("delta")}
+            for i, nme in enumerate(names):
+                if nme in vals and vals[nme] is not None:
+                    theta[i] = vals[nme]
+        return np.clip(theta, self.lower, self.upper)
+
+
+_MODEL_HELP = "coulomb, coulomb_viscous, stribeck, dahl, lugre, gms<N> (e.g. gms4), anfis, nusvr"
+PARAMETRIC = ("coulomb", "coulomb_viscous", "stribeck", "dahl", "lugre")
+LEARNED = ("anfis", "nusvr")
+
+
+def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
+    """The FitSpec for a model name; ``gms<N>`` for a GMS with N elements (1..20)."""
+    arr = np.array
+    if name == "coulomb":
+        return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=False, eps=eps)
+    if name == "coulomb_viscous":
+        return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=True, eps=eps)
+    if name == "stribeck":
+        return FitSpec(
+            name,
+            "stribeck",
+            ["vs", "delta"],
+            arr([1e-4, 0.3]),
+            arr([2.0, 4.0]),
+            arr([True, False]),
+            ["fc", "dfs"],
+            eps=eps,
+        )
+    if name == "dahl":
+        return FitSpec(
+            name, "dahl", ["sigma_n"], arr([1.0]), arr([1e6]), arr([True]), ["fc"], dynamic=True, eps=eps
+        )
+    if name == "lugre":
+        return FitSpec(
+            name,
+            "lugre",
+            ["r", "vs", "delta", "sigma0_n"],
+            arr([0.05, 1e-4, 0.3, 10.0]),
+            arr([1.0, 2.0, 4.0, 1e6]),
+            arr([False, True, False, True]),
+            ["fs", "sigma1"],
+            dynamic=True,
+            eps=eps,
+        )
+    if name.startswith("gms"):
+        try:
+            ne = int(name[3:].lstrip("_-") or "4")
+        except ValueError:
+            raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}") from None
+        if not 1 <= ne <= 20:
+            raise ParameterError(f"model = {name!r}: GMS element count {ne} is out of range: must be 1..20")
+        lo = [0.05, 1e-4, 0.3, 1.0] + [1e-6] * ne
+        hi = [1.0, 2.0, 4.0, 1e5] + [0.1] * ne
+        lg = [False, True, False, True] + [True] * ne
+        return FitSpec(
+            f"gms{ne}",
+            "gms",
+            ["r", "vs", "delta", "c_n"] + [f"x{i + 1}" for i in range(ne)],
+            arr(lo),
+            arr(hi),
+            arr(lg),
+            [f"beta{i + 1}" for i in range(ne)],
+            dynamic=True,
+            n_elements=ne,
+            eps=eps,
+        )
+    raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}")
+
+
+def check_model_names(models) -> list[str]:
+    """Validate and normalise a list of model names (raises ParameterError naming the bad one)."""
+    out = []
+    for m in models:
+        m = str(m).strip().lower()
+        if m in LEARNED:
+            out.append(m)
+        else:
+            out.append(spec_for(m).name)
+    if not out:
+        raise ParameterError(f"models = [] is empty: must name at least one of {_MODEL_HELP}")
+    return list(dict.fromkeys(out))

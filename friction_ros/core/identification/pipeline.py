@@ -1,0 +1,518 @@
+"""The identification pipeline: records -> fitted models -> comparison -> outputs.
+
+Public entry points (stable signatures):
+
+* :func:`fit_bag` ``(bag_paths, topic, joint, models, out_dir, **options) -> FitResult``
+  reads one or more bags and writes the report, JSON summary, plots and parameter YAML;
+* :func:`fit_records` ``(records, models, **options) -> FitResult`` on prepared
+  :class:`~friction_ros.core.identification.data.JointData` (no files);
+* :func:`load_bag` ``(path, topic, joint, ...) -> JointData``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from friction_ros.core.identification import data as D
+from friction_ros.core.identification import export, identifiability, learned, metrics
+from friction_ros.core.identification.dynamic_fit import DynamicFit, fit_time_domain
+from friction_ros.core.identification.models import (
+    DEFAULT_EPS,
+    LEARNED,
+    check_model_names,
+    sat_sign,
+    spec_for,
+)
+from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus, stribeck_map
+from friction_ros.core.validation import ParameterError
+
+DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
+
+
+@dataclass
+class ModelResult:
+    """One fitted model with everything the report needs."""
+
+    name: str
+    method: str  # "plateaus", "time-domain (de)", "learned"
+    coefficients: dict
+    config: dict | None
+    metrics: dict
+    identifiability: dict
+    seconds: float
+    steady_state: Callable[[np.ndarray], np.ndarray]
+    predict: Callable[[D.JointData], np.ndarray]
+    notes: list[str] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class FitResult:
+    """Everything one fit produced; ``files`` lists what :func:`fit_bag` wrote."""
+
+    models: dict[str, ModelResult]
+    recommended: str | None
+    train: list[D.JointData]
+    validation: list[D.JointData]
+    plateaus: list[D.Plateau]
+    breakaways: list[D.Breakaway]
+    excitation: D.Excitation
+    high_threshold: float
+    options: dict
+    files: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def inertia(self) -> float:
+        m = self.models.get(self.recommended) if self.recommended else None
+        return float(m.coefficients.get("J", 0.0)) if m else 0.0
+
+    def parameter_document(self, model: str | None = None) -> dict:
+        name = model or self.recommended
+        m = self.models[name]
+        if m.config is None:
+            raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
+        return export.parameter_document(m.config, m.coefficients.get("J", 0.0))
+
+
+# ------------------------------------------------------------------------------------ loading
+def load_bag(
+    path,
+    topic: str = "/joint_states",
+    joint: str | None = None,
+    *,
+    events_topic: str | None = "/experiment_events",
+    current_topic: str | None = None,
+    current_field: str | None = None,
+    torque_constant: float | None = None,
+    gear_ratio: float = 1.0,
+    velocity_window: float = 0.021,
+    acceleration_window: float = 0.041,
+) -> D.JointData:
+    """Read a joint of a JointState topic (and event markers) from a bag into JointData."""
+    from friction_ros.core.bag import BagError, read_bag
+
+    path = Path(path)
+    if not path.exists():
+        raise D.ExcitationError(f"bag {path}: no such file or directory")
+    try:
+        bag = read_bag(path, topics=None)
+    except BagError as exc:
+        raise D.ExcitationError(f"bag {path}: {exc}") from None
+    if topic not in bag:
+        have = ", ".join(sorted(bag.topics)) if hasattr(bag, "topics") else "?"
+        raise D.ExcitationError(
+            f"bag {path} has no topic {topic} (topics: {have}): record the joint states "
+            "(sensor_msgs/JointState) with the identification experiment, or pass --topic"
+        )
+    js = bag[topic]
+    names = js.joint_names
+    if joint is None:
+        if len(names) != 1:
+            raise D.ExcitationError(
+                f"bag {path}: topic {topic} has joints {', '.join(names)}: choose one with --joint"
+            )
+        joint = names[0]
+    try:
+        series = js.joint(joint)
+    except BagError as exc:
+        raise D.ExcitationError(str(exc)) from None
+    try:
+        stamps = series.stamp
+    except BagError:
+        stamps = series.time
+    if not np.all(np.isfinite(stamps)) or np.all(stamps == 0):
+        stamps = series.time
+    events = []
+    if events_topic and events_topic in bag:
+        ev = bag[events_topic]
+        try:
+            et = ev.stamp
+        except BagError:
+            et = ev.time
+        for i in range(len(ev)):
+            events.append(
+                D.Event(
+                    float(et[i]),
+                    str(ev["program"][i]),
+                    str(ev["segment"][i]),
+                    int(ev["index"][i]),
+                    int(ev["event"][i]),
+                    float(ev["target"][i]),
+                    str(ev["note"][i]),
+                )
+            )
+    current = current_t = None
+    effort = series.effort
+    if current_field:
+        ct = bag[current_topic] if current_topic else js
+        current = ct[current_field]
+        if current.ndim > 1:
+            col = names.index(joint) if ct is js else 0
+            current = current[:, col]
+        current_t = ct.time
+        effort = None
+    elif not np.any(np.isfinite(effort)):
+        raise D.ExcitationError(
+            f"bag {path}: joint {joint!r} on {topic} has no effort: pass the motor current with "
+            "--current-topic/--current-field plus --torque-constant and --gear-ratio"
+        )
+    return D.prepare(
+        stamps,
+        series.position,
+        series.velocity,
+        effort,
+        current=current,
+        current_t=current_t,
+        torque_constant=torque_constant,
+        gear_ratio=gear_ratio,
+        events=events,
+        velocity_window=velocity_window,
+        acceleration_window=acceleration_window,
+        source=str(path),
+    )
+
+
+# ------------------------------------------------------------------------------------ fitting
+def _grid(records: list[D.JointData]) -> np.ndarray:
+    v = np.concatenate([np.abs(r.velocity) for r in records])
+    vmax = float(np.max(v))
+    moving = v[v > 1e-6]
+    vmin = max(float(np.percentile(moving, 1)) if moving.size else 1e-4, 1e-4, vmax * 1e-4)
+    g = np.geomspace(vmin, max(vmax, vmin * 10), 60)
+    return np.concatenate([-g[::-1], g])
+
+
+def fit_records(
+    records: D.JointData | list[D.JointData],
+    models=DEFAULT_MODELS,
+    *,
+    train_seconds: float = 10.0,
+    optimizer: str = "de",
+    maxiter: int | None = None,
+    popsize: int = 12,
+    seed: int = 3,
+    eps: float = DEFAULT_EPS,
+    high_threshold: float | None = None,
+    identifiability_check: bool = True,
+    progress: Callable[[str, float], None] | None = None,
+    label: str = "data",
+) -> FitResult:
+    """Fit ``models`` to prepared records (see module and package docstrings)."""
+    t_start = time.perf_counter()
+    records = [records] if isinstance(records, D.JointData) else list(records)
+    names = check_model_names(models)
+    if not records:
+        raise ParameterError("records = []: need at least one record")
+    for r in records:
+        D.check_motion(r, r.meta.get("source", label))
+    train, val, val_from = [], [], []
+    for r in records:
+        if r.duration > train_seconds + 1.0:
+            a, b = D.split(r, train_seconds)
+            train.append(a)
+            val.append(b)
+            val_from.append((r, a.n))
+    if not val:  # records too short to split: validate on the training data (reported)
+        train = list(records)
+        val = list(records)
+        val_from = [(r, 0) for r in records]
+        warnings_pre = [
+            f"records shorter than train_seconds + 1 s ({train_seconds:g} s): validated on training data"
+        ]
+    else:
+        warnings_pre = []
+
+    def predict_val(model) -> np.ndarray:
+        # dynamic states run on from the training part into the validation part (one simulation)
+        return np.concatenate([model.predict(full)[i0:] for full, i0 in val_from])
+
+    plateaus = [p for r in records for p in D.find_plateaus(r)]
+    breakaways = [b for r in records for b in D.find_breakaways(r)]
+    ex = D.excitation(records[0] if len(records) == 1 else _concat(records), plateaus)
+    dynamic_wanted = any(spec_for(n).dynamic for n in names if n not in LEARNED)
+    static_from_plateaus = len(plateaus) >= 3
+    D.check_excitation(ex, dynamic=dynamic_wanted, static_from_plateaus=False, label=label)
+    if dynamic_wanted:
+        ex_train = D.excitation(_concat(train), [])
+        if ex_train.reversals < 4:
+            raise D.ExcitationError(
+                f"{label}: too little excitation in the {train_seconds:g} s training window: "
+                f"{ex_train.reversals} velocity reversals, need >= 4 for presliding dynamics (run seed 003's "
+                "'random' excitation, or lower/raise --train-seconds)"
+            )
+    vall = _concat(val)
+    hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold)
+    results: dict[str, ModelResult] = {}
+    warnings: list[str] = list(warnings_pre)
+    grid = _grid(records)
+
+    def prog(name):
+        return (lambda f: progress(name, f)) if progress else None
+
+    for name in [n for n in names if n not in LEARNED]:
+        spec = spec_for(name, eps)
+        if not spec.dynamic and static_from_plateaus:
+            res = _fit_static_plateaus(name, plateaus, train, eps)
+            if progress:
+                progress(name, 1.0)
+        else:
+            static0 = None
+            if static_from_plateaus and "stribeck" in results:
+                static0 = results["stribeck"].coefficients
+            fit = fit_time_domain(
+                spec,
+                train,
+                optimizer=optimizer,
+                maxiter=maxiter,
+                popsize=popsize,
+                seed=seed,
+                x0=spec.initial_theta(static0) if static0 else None,
+                progress=prog(name),
+            )
+            res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, train)
+        yhat = predict_val(res)
+        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params)
+        res.extra["validation_prediction"] = yhat
+        results[name] = res
+    for name in [n for n in names if n in LEARNED]:
+        t0 = time.perf_counter()
+        ref = _best_parametric(results)
+        J = results[ref].coefficients.get("J", 0.0) if ref else 0.0
+        vx, fy, src = _learning_data(plateaus, train, J, eps)
+        dm = learned.fit_directional(name, vx, fy)
+        k = 8 if name == "anfis" else dm.positive.n_support + dm.negative.n_support + 2
+        pred = _static_predictor(dm.steady_state, J)
+        yhat = np.concatenate([pred(r) for r in val])
+        res = ModelResult(
+            name,
+            f"learned ({src})",
+            {"J": J, **dm.params()},
+            None,
+            metrics.compare(yhat, vall.torque, hm, k + 1),
+            {},
+            time.perf_counter() - t0,
+            dm.steady_state,
+            pred,
+            notes=[f"per-direction {name} map trained on {len(vx)} {src}; inertia J from {ref or 'none'}"],
+        )
+        res.extra["validation_prediction"] = yhat
+        results[name] = res
+        if progress:
+            progress(name, 1.0)
+    rec = metrics.recommend({n: r.metrics for n, r in results.items() if r.config is not None})
+    for r in results.values():
+        r.extra["steady_state_grid"] = {
+            "velocity": grid.tolist(),
+            "friction": np.asarray(r.steady_state(grid)).tolist(),
+        }
+    return FitResult(
+        results,
+        rec,
+        train,
+        val,
+        plateaus,
+        breakaways,
+        ex,
+        thr,
+        {"train_seconds": train_seconds, "optimizer": optimizer, "seed": seed, "eps": eps, "models": names},
+        warnings=warnings,
+        seconds=time.perf_counter() - t_start,
+    )
+
+
+def _concat(records: list[D.JointData]) -> D.JointData:
+    if len(records) == 1:
+        return records[0]
+    cat = lambda k: np.concatenate([getattr(r, k) for r in records])  # noqa: E731
+    return D.JointData(
+        cat("t"),
+        cat("position"),
+        cat("velocity"),
+        cat("acceleration"),
+        cat("torque"),
+        records[0].dt,
+        [],
+        records[0].resolution,
+    )
+
+
+def _static_predictor(ss, J):
+    return lambda r: J * r.acceleration + ss(r.velocity)
+
+
+def _best_parametric(results: dict[str, ModelResult]) -> str | None:
+    ok = [n for n, r in results.items() if r.config is not None]
+    if not ok:
+        return None
+    return min(ok, key=lambda n: results[n].extra.get("train_mse", math.inf))
+
+
+def _learning_data(plateaus, train, J, eps):
+    pos = [p for p in plateaus if p.velocity > 0]
+    neg = [p for p in plateaus if p.velocity < 0]
+    if len(pos) >= 6 and len(neg) >= 6:
+        return (
+            np.array([p.velocity for p in plateaus]),
+            np.array([p.torque for p in plateaus]),
+            "plateau means",
+        )
+    r = _concat(train)
+    m = np.abs(r.velocity) > max(20 * eps, 0.02)
+    return (
+        r.velocity[m],
+        (r.torque - J * r.acceleration)[m],
+        f"sliding samples (|v| > {max(20 * eps, 0.02):.3g} rad/s)",
+    )
+
+
+def _fit_static_plateaus(name, plateaus, train, eps) -> ModelResult:
+    sf: StaticFit = fit_plateaus(plateaus, name)
+    per = sf.per_direction if sf.asymmetric else None
+    coefs = dict(sf.coefficients)
+
+    def ss(v, c=coefs, per=per):
+        v = np.asarray(v, dtype=float)
+        if per:
+            return np.where(v >= 0, stribeck_map(v, per["positive"]), stribeck_map(v, per["negative"]))
+        return stribeck_map(v, c)
+
+    # inertia by NNLS on the training records with the map fixed (acceleration is ~0 on plateaus)
+    r = _concat(train)
+    resid = r.torque - ss(r.velocity)
+    a = r.acceleration
+    J = max(float(a @ resid / max(a @ a, 1e-300)), 0.0)
+    coefs["J"] = J
+    cfg = export.library_config(name, coefs, eps=0.0, per_direction=per)
+    _validate_config(cfg)
+    notes = [f"fitted to {sf.n_points} plateau means (robust soft-L1 least squares), rms {sf.rms:.3g} N*m"]
+    if sf.asymmetric:
+        notes.append("directions differ significantly: asymmetric model exported")
+    ident = {
+        "stderr": sf.stderr,
+        "ci95": {k: [coefs[k] - 1.96 * s, coefs[k] + 1.96 * s] for k, s in sf.stderr.items()},
+        "not_identifiable": [],
+        "per_direction": sf.per_direction,
+    }
+    m = ModelResult(name, "plateaus", coefs, cfg, {}, ident, sf.seconds, ss, _static_predictor(ss, J), notes)
+    m.extra["train_mse"] = float(np.mean((J * a + ss(r.velocity) - r.torque) ** 2))
+    return m
+
+
+def _validate_config(cfg):
+    if cfg is None:
+        return
+    from friction_ros.core.friction import model_from_config
+
+    model_from_config(cfg)
+
+
+def _wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> ModelResult:
+    coefs = fit.coefficients
+    cfg = export.library_config(name, coefs, eps=eps)
+    notes = []
+    try:
+        _validate_config(cfg)
+    except ParameterError as exc:
+        notes.append(f"library config rejected: {exc}")
+        cfg = None
+    spec = fit.spec
+
+    def ss(v, c=coefs):
+        v = np.asarray(v, dtype=float)
+        if spec.family == "dahl":
+            return c["fc"] * np.sign(v)
+        if spec.family in ("coulomb", "stribeck"):
+            return stribeck_map(v, {**c, "fs": c.get("fs", c["fc"])}) * np.abs(sat_sign(v, eps))
+        return stribeck_map(v, {**c, "fv": c.get("fv", c.get("sigma2", 0.0))})
+
+    ident = {}
+    if ident_check:
+        try:
+            jac, res, names, values = identifiability.time_domain_jacobian(fit, train)
+            ident = identifiability.analyse(jac, res, names, values)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            notes.append(f"identifiability analysis failed: {exc}")
+    if ident.get("not_identifiable"):
+        notes.append("not separately identifiable from these data: " + ", ".join(ident["not_identifiable"]))
+    m = ModelResult(
+        name,
+        f"time-domain output error ({fit.optimizer} + Nelder-Mead)"
+        if spec.nonlinear
+        else "time-domain linear least squares",
+        coefs,
+        cfg,
+        {},
+        ident,
+        fit.seconds,
+        ss,
+        fit.predict,
+        notes,
+    )
+    m.extra["train_mse"] = fit.train_mse
+    m.extra["theta"] = fit.theta.tolist()
+    m.extra["evaluations"] = fit.evaluations
+    return m
+
+
+# ------------------------------------------------------------------------------------ bag -> files
+def fit_bag(
+    bag_paths,
+    topic: str = "/joint_states",
+    joint: str | None = None,
+    models=DEFAULT_MODELS,
+    out_dir="friction_fit",
+    *,
+    events_topic: str | None = "/experiment_events",
+    current_topic: str | None = None,
+    current_field: str | None = None,
+    torque_constant: float | None = None,
+    gear_ratio: float = 1.0,
+    params_file: str | None = None,
+    plots: bool = True,
+    **options,
+) -> FitResult:
+    """Read bags, fit ``models`` and write into ``out_dir``:
+
+    ``report.md`` (Markdown report), ``summary.json`` (every model's coefficients, metrics and
+    steady-state map), ``friction_params.yaml`` (or ``params_file``: ROS parameters of the
+    recommended model for compensating_controller, friction_estimator, plant_simulator),
+    ``plots/*.png`` (friction-velocity map, presliding hysteresis, time-domain validation,
+    residuals).
+    """
+    from friction_ros.core.identification import report
+
+    if isinstance(bag_paths, (str, Path)):
+        bag_paths = [bag_paths]
+    check_model_names(models)
+    recs = [
+        load_bag(
+            p,
+            topic,
+            joint,
+            events_topic=events_topic,
+            current_topic=current_topic,
+            current_field=current_field,
+            torque_constant=torque_constant,
+            gear_ratio=gear_ratio,
+        )
+        for p in bag_paths
+    ]
+    res = fit_records(recs, models, label=", ".join(str(p) for p in bag_paths), **options)
+    report.write_outputs(
+        res,
+        Path(out_dir),
+        params_file=params_file,
+        plots=plots,
+        sources=[str(p) for p in bag_paths],
+        topic=topic,
+        joint=joint,
+    )
+    return res

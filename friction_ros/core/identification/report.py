@@ -1,0 +1,331 @@
+"""Outputs of a fit: Markdown report with PNG plots, JSON summary, ROS parameter YAML.
+
+Layout of ``out_dir`` (FIGAROH-style report + machine-readable summary):
+
+* ``report.md``: data, excitation, plateaus/breakaway, seed 003 Table 1 analogue (validation NMSE
+  high/low velocity, max error, parameter count, AIC/BIC), recommended model, coefficients with
+  95 % confidence intervals, identifiability flags, notes;
+* ``summary.json``: for every model ``coefficients``, ``config`` (library form or null),
+  ``metrics``, ``identifiability`` and ``steady_state`` (``velocity``/``friction`` on a
+  log-spaced grid covering the data in both directions), plus data description and recommendation;
+* ``friction_params.yaml``: ``node_name: ros__parameters:`` for compensating_controller,
+  friction_estimator and plant_simulator (recommended model);
+* ``plots/friction_velocity.png``, ``plots/presliding.png``, ``plots/validation.png``,
+  ``plots/residuals.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from friction_ros.core.identification import export
+
+
+def _clean(x):
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    if isinstance(x, (np.floating, float)):
+        f = float(x)
+        return f if math.isfinite(f) else None
+    if isinstance(x, np.integer):
+        return int(x)
+    return x
+
+
+def summary(res, sources=None, topic=None, joint=None) -> dict:
+    tr, va = res.train, res.validation
+    return _clean(
+        {
+            "tool": "friction-fit",
+            "created": time.strftime("%Y-%m-%dT%H:%M:%S"),
+            "sources": sources or [],
+            "topic": topic,
+            "joint": joint,
+            "units": {"velocity": "rad/s", "friction": "N*m", "J": "kg*m^2"},
+            "data": {
+                "train_samples": sum(r.n for r in tr),
+                "validation_samples": sum(r.n for r in va),
+                "dt": tr[0].dt,
+                "encoder_resolution": tr[0].resolution,
+                "high_velocity_threshold": res.high_threshold,
+                "velocity_filter": "Savitzky-Golay order 3, 21 ms (velocity) / 41 ms (acceleration)",
+            },
+            "excitation": vars(res.excitation),
+            "plateaus": [vars(p) for p in res.plateaus],
+            "breakaways": [vars(b) for b in res.breakaways],
+            "options": res.options,
+            "recommended": res.recommended,
+            "models": {
+                n: {
+                    "method": m.method,
+                    "coefficients": m.coefficients,
+                    "config": m.config,
+                    "metrics": m.metrics,
+                    "identifiability": m.identifiability,
+                    "fit_seconds": m.seconds,
+                    "notes": m.notes,
+                    "steady_state": m.extra.get("steady_state_grid"),
+                }
+                for n, m in res.models.items()
+            },
+            "seconds": res.seconds,
+        }
+    )
+
+
+def _fmt(x, nd=4):
+    if x is None:
+        return "-"
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(_fmt(v, nd) for v in x) + "]"
+    if isinstance(x, (int, np.integer)):
+        return str(x)
+    try:
+        f = float(x)
+    except (TypeError, ValueError):
+        return str(x)
+    return "nan" if not math.isfinite(f) else f"{f:.{nd}g}"
+
+
+def markdown(res, sources=None, plots: dict | None = None) -> str:
+    L = ["# Friction identification report", ""]
+    if sources:
+        L += ["Sources: " + ", ".join(f"`{s}`" for s in sources), ""]
+    tr, va = res.train, res.validation
+    ex = res.excitation
+    L += [
+        "## Data",
+        f"- training: {sum(r.n for r in tr)} samples, validation: {sum(r.n for r in va)} samples, "
+        f"dt = {tr[0].dt * 1e3:.3g} ms, encoder resolution {tr[0].resolution:.3g} rad",
+        f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
+        "(seed 003 A.3)",
+        "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)",
+        f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
+        f"{len(res.plateaus)} plateaus, {len(res.breakaways)} breakaway events",
+        f"- high/low velocity split: 1 s velocity RMS above/below {res.high_threshold:.3g} rad/s",
+        "",
+        "## Model comparison (validation data; seed 003 Table 1 analogue)",
+        "",
+        "| model | method | NMSE high [%] (max err) | NMSE low [%] (max err) | NMSE all [%] | params | AIC | BIC | fit [s] |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for n, m in res.models.items():
+        mt = m.metrics
+        star = " **(recommended)**" if n == res.recommended else ""
+        L.append(
+            f"| {n}{star} | {m.method} | {_fmt(mt.get('nmse_high_percent'), 3)} ({_fmt(mt.get('max_error_high'), 3)}) | "
+            f"{_fmt(mt.get('nmse_low_percent'), 3)} ({_fmt(mt.get('max_error_low'), 3)}) | {_fmt(mt.get('nmse_percent'), 3)} | "
+            f"{mt.get('n_params')} | {_fmt(mt.get('aic'), 6)} | {_fmt(mt.get('bic'), 6)} | {m.seconds:.2f} |"
+        )
+    L += [
+        "",
+        "Seed 003 Table 1 (paper, ABB M19-S): Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
+        "GMS-4 0.40 / 1.39 %, GMS-10 0.38 / 1.19 % (high / low velocity).",
+        "",
+        f"**Recommended model: {res.recommended}** (lowest BIC; a smaller model within 2 % of its low-velocity NMSE "
+        "is preferred).",
+        "",
+        "## Coefficients",
+    ]
+    for n, m in res.models.items():
+        L += ["", f"### {n}", ""]
+        ci = m.identifiability.get("ci95", {}) if m.identifiability else {}
+        L += ["| coefficient | value | 95 % CI |", "|---|---|---|"]
+        for k, v in m.coefficients.items():
+            if isinstance(v, dict):
+                L.append(f"| {k} | {json.dumps(_clean(v))} | |")
+                continue
+            L.append(f"| {k} | {_fmt(v, 5)} | {_fmt(ci.get(k), 4) if k in ci else ''} |")
+        if m.config:
+            L += ["", f"Library config: `{json.dumps(_clean(m.config))}`"]
+        idf = m.identifiability or {}
+        if idf.get("not_identifiable"):
+            L += ["", "**Not separately identifiable:** " + ", ".join(idf["not_identifiable"])]
+            for g in idf.get("collinear_groups", []):
+                L.append(f"- collinear direction: {json.dumps(_clean(g['null_direction']))}")
+        if idf.get("high_correlations"):
+            L += [
+                "",
+                "High correlations: "
+                + ", ".join(f"{p['a']}/{p['b']} ({p['rho']:+.3f})" for p in idf["high_correlations"]),
+            ]
+        if "condition_number" in idf:
+            L.append(
+                f"\nJacobian condition number: {_fmt(idf['condition_number'], 3)} "
+                "(CIs assume white residuals: optimistic when the model is wrong)"
+            )
+        for note in m.notes:
+            L.append(f"- {note}")
+    if res.plateaus:
+        L += [
+            "",
+            "## Plateaus",
+            "",
+            "| v [rad/s] | friction [N*m] | std [N*m] | n | source |",
+            "|---|---|---|---|---|",
+        ]
+        for p in res.plateaus:
+            L.append(f"| {p.velocity:.4g} | {p.torque:.4g} | {p.torque_std:.3g} | {p.n} | {p.source} |")
+    if res.breakaways:
+        L += ["", "## Breakaway", "", "| t [s] | torque [N*m] | direction |", "|---|---|---|"]
+        for b in res.breakaways:
+            L.append(f"| {b.time:.3f} | {b.torque:.4g} | {b.direction:+d} |")
+    if plots:
+        L += ["", "## Plots", ""]
+        for title, rel in plots.items():
+            L += [f"### {title}", "", f"![{title}]({rel})", ""]
+    if res.warnings:
+        L += ["", "## Warnings"] + [f"- {w}" for w in res.warnings]
+    return "\n".join(L) + "\n"
+
+
+def make_plots(res, out: Path) -> dict:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from friction_ros.core.identification.pipeline import _concat
+
+    out.mkdir(parents=True, exist_ok=True)
+    files = {}
+    names = list(res.models)
+    tr = _concat(res.train)
+    va = _concat(res.validation)
+    J = res.inertia
+    # 1 friction-velocity map
+    fig, ax = plt.subplots(figsize=(8, 5))
+    step = max(tr.n // 4000, 1)
+    ax.plot(
+        tr.velocity[::step],
+        (tr.torque - J * tr.acceleration)[::step],
+        ".",
+        ms=1.5,
+        color="0.7",
+        label="samples (tau - J a)",
+    )
+    if res.plateaus:
+        ax.errorbar(
+            [p.velocity for p in res.plateaus],
+            [p.torque for p in res.plateaus],
+            yerr=[p.torque_std for p in res.plateaus],
+            fmt="ko",
+            ms=4,
+            label="plateau means",
+        )
+    for n in names:
+        g = res.models[n].extra.get("steady_state_grid")
+        if g:
+            ax.plot(g["velocity"], g["friction"], label=n)
+    ax.set_xscale("symlog", linthresh=max(1e-3, float(np.min(np.abs(g["velocity"]))) if g else 1e-3))
+    ax.set_xlabel("velocity [rad/s]")
+    ax.set_ylabel("friction [N*m]")
+    ax.set_title("Steady-state friction-velocity map")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "friction_velocity.png", dpi=110)
+    plt.close(fig)
+    files["Friction-velocity map"] = "plots/friction_velocity.png"
+    # predictions on validation
+    preds = {n: res.models[n].extra["validation_prediction"] for n in names}
+    hm = res.high_threshold
+    from friction_ros.core.identification.data import velocity_envelope
+
+    env = velocity_envelope(va.velocity, va.dt)
+    low_idx = np.nonzero(env <= hm)[0]
+    high_idx = np.nonzero(env > hm)[0]
+    # 2 presliding hysteresis: friction vs position in a low-velocity window
+    fig, ax = plt.subplots(figsize=(7, 5))
+    if low_idx.size > 10:
+        i0 = int(low_idx[low_idx.size // 2])
+        sl = slice(max(i0 - int(1.0 / va.dt), 0), min(i0 + int(1.0 / va.dt), va.n))
+        x = va.position[sl] - va.position[sl].mean()
+        ax.plot(x * 1e3, (va.torque - J * va.acceleration)[sl], "k.", ms=2, label="measured")
+        for n in names:
+            m = res.models[n]
+            jm = m.coefficients.get("J", 0.0)
+            ax.plot(x * 1e3, (preds[n] - jm * va.acceleration)[sl], lw=1, label=n)
+    ax.set_xlabel("position - mean [mrad]")
+    ax.set_ylabel("friction [N*m]")
+    ax.set_title("Presliding hysteresis (2 s low-velocity window, validation)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(out / "presliding.png", dpi=110)
+    plt.close(fig)
+    files["Presliding hysteresis"] = "plots/presliding.png"
+    # 3 time-domain validation
+    fig, axs = plt.subplots(2, 1, figsize=(9, 6))
+    for ax, idx, title in ((axs[0], high_idx, "high velocity"), (axs[1], low_idx, "low velocity")):
+        if idx.size > 10:
+            i0 = int(idx[idx.size // 2])
+            sl = slice(max(i0 - int(0.5 / va.dt), 0), min(i0 + int(0.5 / va.dt), va.n))
+            t = va.t[sl]
+            ax.plot(t, va.torque[sl], "k", lw=1.5, label="measured")
+            for n in names:
+                ax.plot(t, preds[n][sl], lw=0.8, label=n)
+        ax.set_title(f"validation, {title}")
+        ax.set_ylabel("torque [N*m]")
+        ax.grid(True, alpha=0.3)
+    axs[1].set_xlabel("time [s]")
+    axs[0].legend(fontsize=7, ncol=3)
+    fig.tight_layout()
+    fig.savefig(out / "validation.png", dpi=110)
+    plt.close(fig)
+    files["Time-domain validation"] = "plots/validation.png"
+    # 4 residuals
+    fig, axs = plt.subplots(1, 2, figsize=(10, 4))
+    for n in names:
+        e = preds[n] - va.torque
+        axs[0].plot(va.t, e, lw=0.5, label=n)
+        axs[1].hist(e, bins=80, histtype="step", label=n)
+    axs[0].set_xlabel("time [s]")
+    axs[0].set_ylabel("residual [N*m]")
+    axs[1].set_xlabel("residual [N*m]")
+    axs[0].legend(fontsize=7)
+    for a in axs:
+        a.grid(True, alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(out / "residuals.png", dpi=110)
+    plt.close(fig)
+    files["Residuals"] = "plots/residuals.png"
+    return files
+
+
+def write_outputs(
+    res, out_dir: Path, *, params_file=None, plots=True, sources=None, topic=None, joint=None
+) -> dict:
+    """Write report.md, summary.json, the parameter YAML and the plots; returns {kind: path}."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    files = {}
+    plot_files = make_plots(res, out_dir / "plots") if plots else {}
+    for k, v in plot_files.items():
+        files[f"plot:{k}"] = str(out_dir / v)
+    js = summary(res, sources, topic, joint)
+    (out_dir / "summary.json").write_text(json.dumps(js, indent=1) + "\n")
+    files["summary"] = str(out_dir / "summary.json")
+    pf = Path(params_file) if params_file else out_dir / "friction_params.yaml"
+    if res.recommended:
+        doc = res.parameter_document()
+        header = (
+            f"# friction-fit: recommended model {res.recommended} from {', '.join(sources or [])}\n"
+            f"# coefficients SI (N*m, rad/s, kg*m^2); see {out_dir / 'report.md'}"
+        )
+        pf.parent.mkdir(parents=True, exist_ok=True)
+        pf.write_text(export.dump_yaml(doc, header))
+        files["params"] = str(pf)
+    (out_dir / "report.md").write_text(markdown(res, sources, plot_files))
+    files["report"] = str(out_dir / "report.md")
+    res.files = files
+    return files

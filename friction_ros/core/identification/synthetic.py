@@ -1,0 +1,231 @@
+"""Known-truth identification records from the simulated plant (tests, benchmarks, demos).
+
+``seed003_experiment`` runs seed 003's identification excitation (A.3) on a plant preset
+(default ``abb_m19s``: J = 0.0012 kg m^2, GMS-4 truth, 1.05e-4 rad encoder, current noise) in
+closed velocity loop at 1 kHz:
+
+    v_ref(t) = e(t) r(t),  r = 4th-order Butterworth (4 Hz) band-limited white noise, unit RMS,
+    e(t) = (H+L)/2 + (H-L)(2/pi)[sin w0 t + sin(3 w0 t)/3],  w0 = 2 pi / 10 s   (extract A.3 (a)),
+    floored at L (the 3-term series undershoots);
+
+``plateau_experiment`` runs constant-velocity plateaus in both directions over a log-spaced speed
+range (seed 004 B.3 experiment 2) with ExperimentEvent markers. ``write_bag`` stores either as a
+rosbag2 MCAP directory (sensor_msgs/JointState + friction_msgs/ExperimentEvent).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import signal
+
+from friction_ros.core.identification.data import END, START, Event
+
+
+@dataclass
+class Record:
+    """Raw measured arrays of a simulated experiment plus the truth."""
+
+    t: np.ndarray
+    position: np.ndarray
+    velocity: np.ndarray
+    effort: np.ndarray
+    current: np.ndarray
+    true_velocity: np.ndarray
+    true_friction: np.ndarray
+    events: list[Event] = field(default_factory=list)
+    truth: dict = field(default_factory=dict)
+    inertia: float = 0.0
+    torque_constant: float = 1.0
+
+
+def seed003_velocity(duration: float, dt: float, high: float, low: float, seed: int = 3) -> np.ndarray:
+    """Seed 003's excitation velocity (module docstring)."""
+    n = int(round(duration / dt))
+    t = np.arange(n) * dt
+    rng = np.random.default_rng(seed)
+    sos = signal.butter(4, 4.0, fs=1.0 / dt, output="sos")
+    r = signal.sosfilt(sos, rng.standard_normal(n + 2000))[2000:]
+    r /= np.sqrt(np.mean(r**2))
+    w0 = 2 * math.pi / 10.0
+    e = (high + low) / 2 + (high - low) * (2 / math.pi) * (np.sin(w0 * t) + np.sin(3 * w0 * t) / 3)
+    return np.maximum(e, low) * r
+
+
+def _make_plant(preset: str, friction=None, overrides: dict | None = None):
+    from friction_ros.core.friction import model_from_config
+    from friction_ros.core.plant import GearheadServoPlant
+    from friction_ros.core.presets import load_preset
+
+    pre = load_preset(preset)
+    params = pre.params
+    changes = dict(overrides or {})
+    if friction is not None:
+        changes["friction_motor"] = model_from_config(friction)
+    if changes:
+        params = params.replace(**changes)
+    return GearheadServoPlant(params), params
+
+
+def run_velocity_loop(
+    v_ref: np.ndarray,
+    dt: float,
+    *,
+    preset: str = "abb_m19s",
+    friction=None,
+    overrides: dict | None = None,
+    kp: float | None = None,
+    ki: float | None = None,
+    events: list[Event] | None = None,
+) -> Record:
+    """Track ``v_ref`` with a PI velocity loop (+ inertia feed-forward) on the plant; record sensors."""
+    plant, params = _make_plant(preset, friction, overrides)
+    J = params.reflected_inertia if hasattr(params, "reflected_inertia") else params.motor_inertia
+    kt_out = params.torque_constant * params.ratio * params.gear_efficiency
+    kp = 400.0 * J if kp is None else kp
+    ki = 40.0 * kp if ki is None else ki
+    a_ref = np.gradient(v_ref, dt)
+    n = v_ref.size
+    out = {k: np.empty(n) for k in ("t", "p", "v", "e", "i", "tv", "tf")}
+    integ = 0.0
+    v_meas = 0.0
+    for k in range(n):
+        err = v_ref[k] - v_meas
+        integ += err * dt
+        tau = kp * err + ki * integ + J * a_ref[k]
+        cmd = tau / kt_out if params.actuation == "current" else tau
+        m = plant.step(cmd, dt)
+        v_meas = m.velocity
+        out["t"][k] = m.time
+        out["p"][k] = m.position
+        out["v"][k] = m.velocity
+        out["e"][k] = m.effort
+        out["i"][k] = m.motor_current
+        out["tv"][k] = m.true_velocity
+        out["tf"][k] = m.friction_motor
+    fm = params.friction_motor
+    return Record(
+        out["t"],
+        out["p"],
+        out["v"],
+        out["e"],
+        out["i"],
+        out["tv"],
+        out["tf"],
+        list(events or []),
+        fm.to_config(),
+        float(J),
+        float(kt_out),
+    )
+
+
+def seed003_experiment(
+    duration: float = 50.0,
+    dt: float = 1e-3,
+    *,
+    high: float = 1.0,
+    low: float = 0.02,
+    seed: int = 3,
+    preset: str = "abb_m19s",
+    friction=None,
+    overrides: dict | None = None,
+) -> Record:
+    """Seed 003's identification run (50 s at 1 kHz by default) on a plant preset."""
+    v = seed003_velocity(duration, dt, high, low, seed)
+    ev = [Event(0.0, "random", "seed003", 0, START, math.nan), Event(duration, "random", "seed003", 0, END)]
+    return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=ev)
+
+
+def plateau_experiment(
+    speeds=None,
+    *,
+    dt: float = 1e-3,
+    hold: float = 1.0,
+    ramp: float = 0.1,
+    preset: str = "abb_m19s",
+    friction=None,
+    overrides: dict | None = None,
+) -> Record:
+    """Constant-velocity plateaus at ``speeds`` in both directions with ExperimentEvent markers."""
+    if speeds is None:
+        speeds = np.geomspace(0.005, 2.0, 12)
+    segs = []
+    t = 0.0
+    v_parts = []
+    events = []
+    idx = 0
+    for sgn in (1.0, -1.0):
+        for s in speeds:
+            target = sgn * float(s)
+            nr = int(round(ramp / dt))
+            nh = int(round(hold / dt))
+            prev = v_parts[-1][-1] if v_parts else 0.0
+            v_parts.append(np.linspace(prev, target, nr))
+            t += nr * dt
+            events.append(Event(t, "plateaus", f"plateau{target:+.4g}", idx, START, target))
+            v_parts.append(np.full(nh, target))
+            t += nh * dt
+            events.append(Event(t, "plateaus", f"plateau{target:+.4g}", idx, END, target))
+            segs.append(target)
+            idx += 1
+    v = np.concatenate(v_parts + [np.linspace(v_parts[-1][-1], 0.0, int(round(ramp / dt)))])
+    return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=events)
+
+
+def write_bag(
+    path: str | Path,
+    rec: Record,
+    *,
+    joint: str = "joint1",
+    topic: str = "/joint_states",
+    events_topic: str | None = "/experiment_events",
+    with_effort: bool = True,
+    extra_joint: str | None = "other_joint",
+    t0: float = 1_700_000_000.0,
+) -> Path:
+    """Write ``rec`` as a rosbag2 MCAP directory (JointState with 1-2 joints + ExperimentEvent)."""
+    from friction_ros.core.bag import BagWriter, encode, load_installed, make_qos
+
+    js_defs = load_installed("sensor_msgs/msg/JointState")
+    ev_defs = load_installed("friction_msgs/msg/ExperimentEvent") if events_topic else None
+    path = Path(path)
+    names = [joint] + ([extra_joint] if extra_joint else [])
+    with BagWriter(path, overwrite=True) as w:
+        w.add_topic(topic, "sensor_msgs/msg/JointState", qos_profiles=[make_qos()])
+        if events_topic:
+            w.add_topic(events_topic, "friction_msgs/msg/ExperimentEvent", qos_profiles=[make_qos()])
+        evs = sorted(rec.events, key=lambda e: e.time)
+        ei = 0
+        for k in range(rec.t.size):
+            ts = t0 + rec.t[k]
+            while events_topic and ei < len(evs) and evs[ei].time <= rec.t[k]:
+                e = evs[ei]
+                te = t0 + e.time
+                msg = {
+                    "header": {
+                        "stamp": {"sec": int(te), "nanosec": int(round((te % 1) * 1e9)) % 1_000_000_000}
+                    },
+                    "program": e.program,
+                    "segment": e.segment,
+                    "index": e.index,
+                    "event": e.event,
+                    "target": e.target,
+                    "note": e.note,
+                }
+                w.write(
+                    events_topic, encode(ev_defs, "friction_msgs/msg/ExperimentEvent", msg), int(te * 1e9)
+                )
+                ei += 1
+            sec = int(ts)
+            msg = {
+                "header": {"stamp": {"sec": sec, "nanosec": int(round((ts - sec) * 1e9)) % 1_000_000_000}},
+                "name": names,
+                "position": [rec.position[k]] + [0.0] * (len(names) - 1),
+                "velocity": [rec.velocity[k]] + [0.0] * (len(names) - 1),
+                "effort": ([rec.effort[k]] + [0.0] * (len(names) - 1)) if with_effort else [],
+            }
+            w.write(topic, encode(js_defs, "sensor_msgs/msg/JointState", msg), int(ts * 1e9))
+    return path
