@@ -18,6 +18,7 @@ ENTRY_POINTS = [
     "bag_recorder = friction_ros.nodes.bag_recorder:main",
     "bag_player = friction_ros.nodes.bag_player:main",
     "friction-bag = friction_ros.cli.bag:main",
+    "friction-fit = friction_ros.cli.fit:main",
 ]
 
 setup(

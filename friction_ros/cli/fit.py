@@ -1,0 +1,134 @@
+"""friction-fit: identify friction models from bags; write a report, a JSON summary and ROS parameters.
+
+Example::
+
+    friction-fit bags/run_1 --joint joint1 --models coulomb stribeck lugre gms4 --out fit_run_1
+
+Writes ``<out>/report.md``, ``<out>/summary.json``, ``<out>/plots/*.png`` and the parameter file
+(``<out>/friction_params.yaml`` or ``--params``) for compensating_controller, friction_estimator
+and plant_simulator. Exit codes: 0 ok, 2 bad input (missing topic/joint, no motion, too little
+excitation, bad option), 1 unexpected error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="friction-fit", description=__doc__.splitlines()[0])
+    p.add_argument("bags", nargs="+", help="rosbag2 directories or .mcap files")
+    p.add_argument("--topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)")
+    p.add_argument("--joint", default=None, help="joint name (required when the topic carries several joints)")
+    p.add_argument(
+        "--models",
+        nargs="+",
+        default=["coulomb", "stribeck", "lugre", "gms4"],
+        help="models: coulomb coulomb_viscous stribeck dahl lugre gms<N> anfis nusvr (default: coulomb stribeck lugre gms4)",
+    )
+    p.add_argument("--out", default="friction_fit", help="output directory (default friction_fit)")
+    p.add_argument("--params", default=None, help="parameter YAML path (default <out>/friction_params.yaml)")
+    p.add_argument("--events-topic", default="/experiment_events", help="ExperimentEvent topic (plateau/breakaway markers)")
+    p.add_argument("--current-topic", default=None, help="topic carrying the motor current (default: the joint-state topic)")
+    p.add_argument("--current-field", default=None, help="current field [A]; torque = current x torque constant x gear ratio")
+    p.add_argument("--torque-constant", type=float, default=None, help="motor torque constant [N*m/A]")
+    p.add_argument("--gear-ratio", type=float, default=1.0, help="gear ratio (joint torque / motor torque), default 1")
+    p.add_argument("--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)")
+    p.add_argument("--optimizer", choices=["de", "ga"], default="de", help="global optimiser: differential evolution or seed 001's GA")
+    p.add_argument("--maxiter", type=int, default=None, help="global-search generations (default 40 + 15 x dimension)")
+    p.add_argument("--seed", type=int, default=3, help="random seed (default 3)")
+    p.add_argument("--eps", type=float, default=1e-3, help="linear-zone width of sgn(v) for static models [rad/s]")
+    p.add_argument("--high-threshold", type=float, default=None, help="high/low velocity split [rad/s] (default automatic)")
+    p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    from friction_ros.core.validation import ParameterError
+
+    try:
+        from rich.console import Console
+        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+        console = Console(stderr=True)
+    except ImportError:  # pragma: no cover
+        Progress = None
+        console = None
+    from friction_ros.core.identification import fit_bag
+    from friction_ros.core.identification.models import check_model_names
+
+    try:
+        models = check_model_names(args.models)
+        progress = None
+        if Progress is not None and not args.quiet:
+            progress = Progress(
+                TextColumn("[bold]{task.description:<8}"),
+                BarColumn(),
+                TextColumn("{task.percentage:>3.0f}%"),
+                TimeElapsedColumn(),
+                console=console,
+                transient=False,
+            )
+        tasks: dict[str, int] = {}
+
+        def on_progress(name: str, frac: float) -> None:
+            if progress is None:
+                return
+            if name not in tasks:
+                tasks[name] = progress.add_task(name, total=1.0)
+            progress.update(tasks[name], completed=frac)
+
+        if progress is not None:
+            progress.start()
+        try:
+            res = fit_bag(
+                args.bags,
+                args.topic,
+                args.joint,
+                models,
+                args.out,
+                events_topic=args.events_topic,
+                current_topic=args.current_topic,
+                current_field=args.current_field,
+                torque_constant=args.torque_constant,
+                gear_ratio=args.gear_ratio,
+                params_file=args.params,
+                plots=not args.no_plots,
+                train_seconds=args.train_seconds,
+                optimizer=args.optimizer,
+                maxiter=args.maxiter,
+                seed=args.seed,
+                eps=args.eps,
+                high_threshold=args.high_threshold,
+                progress=on_progress,
+            )
+        finally:
+            if progress is not None:
+                progress.stop()
+    except (ParameterError, ValueError) as exc:
+        print(f"friction-fit: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("friction-fit: interrupted", file=sys.stderr)
+        return 130
+    print(f"{'model':<16}{'NMSE high %':>12}{'NMSE low %':>12}{'params':>8}{'BIC':>14}")
+    for n, m in res.models.items():
+        mt = m.metrics
+        mark = "  <- recommended" if n == res.recommended else ""
+        print(
+            f"{n:<16}{mt['nmse_high_percent']:>12.3f}{mt['nmse_low_percent']:>12.3f}{mt['n_params']:>8d}"
+            f"{mt['bic']:>14.4g}{mark}"
+        )
+    for w in res.warnings:
+        print(f"warning: {w}")
+    for kind, path in res.files.items():
+        if not kind.startswith("plot:"):
+            print(f"wrote {kind}: {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
