@@ -154,6 +154,15 @@ PARAMS = [
     Param(
         "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
     ),
+    Param(
+        "loop_spin",
+        0.0,
+        "busy-wait before each period for timing accuracy (costs spin/period of a core)",
+        lo=0.0,
+        hi=0.001,
+        read_only=True,
+        unit="s",
+    ),
     Param("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
     Param("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
     Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
@@ -258,6 +267,7 @@ class DriveInterface(Node):
         if v["enable_on_start"]:
             self.axis.request_enable()
         self.loop = FixedRateLoop(self.period, self._cycle, name="drive_interface_loop")
+        self.loop.SPIN_S = v["loop_spin"]  # node_utils default 0.2 ms = 20 % of a core at 1 kHz
         self.loop.start()
         self.get_logger().info(
             f"{v['protocol']} node {v['node_id']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "

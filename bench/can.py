@@ -1,0 +1,224 @@
+"""CAN drive interface benchmark: codec cost per frame, node CPU at 1 kHz, highest sustainable rate.
+
+    .venv/bin/python bench/can.py [--duration 8] [--rates 1000,2000,2600,3000]
+
+CPU: the child process runs drive_interface (main thread executor + control loop + CAN reader) and
+the drive emulator (own thread) on a python-can virtual bus; per-thread CPU from /proc separates
+the node's threads from the emulator's. The parent publishes joint_commands at 1 kHz over DDS.
+3 frames per cycle per axis = Set_Input_Torque out + Get_Encoder_Estimates + Get_Iq in.
+A 1 Mbit/s bus carries about 8,000 8-byte standard frames/s (~125 bit each with stuffing).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+import timeit
+import uuid
+from pathlib import Path
+
+# This file is named like python-can's package: take the bench folder off sys.path before any
+# "import can", and load the shared helpers by path.
+_BENCH = Path(__file__).resolve().parent
+sys.path[:] = [p for p in sys.path if Path(p or ".").resolve() != _BENCH]
+_spec = importlib.util.spec_from_file_location("_bench_common", _BENCH / "_common.py")
+_common = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_common)
+print_table, write_results = _common.print_table, _common.write_results
+
+BUS_LIMIT_FPS = 8000.0
+
+
+def codec_costs() -> list[list]:
+    from friction_ros.core.can import mit as mitc
+    from friction_ros.core.can import odrive as od
+
+    enc = od.encode_encoder_estimates(1, 1.0, 2.0)
+    iq = od.encode_iq(1, 1.0, 2.0)
+    dec = od.OdriveDecoder([1])
+    codec = mitc.MitCodec(1)
+    mdec = mitc.MitDecoder(codec)
+    reply = codec.encode_reply(0.1, 0.2, 0.3)
+    import can
+
+    cases = {
+        "odrive encode Set_Input_Torque": lambda: od.encode_set_input_torque(1, 0.5),
+        "odrive encode Get_Encoder_Estimates": lambda: od.encode_encoder_estimates(1, 1.0, 2.0),
+        "odrive decode Get_Encoder_Estimates": lambda: dec.decode(enc.arbitration_id, enc.data),
+        "odrive decode Get_Iq": lambda: dec.decode(iq.arbitration_id, iq.data),
+        "odrive decode foreign id (ignored)": lambda: dec.decode(0x049, enc.data),
+        "mit encode command": lambda: codec.encode_command(0.1, 0.2, 10.0, 1.0, 0.5),
+        "mit decode reply": lambda: mdec.decode(0, reply.data),
+        "python-can Message() (for reference)": lambda: can.Message(arbitration_id=0x2E, data=enc.data),
+    }
+    rows = []
+    for name, fn in cases.items():
+        n = 50_000
+        t = min(timeit.repeat(fn, number=n, repeat=3)) / n
+        rows.append([name, t * 1e6])
+    return rows
+
+
+# ---- child: node + emulator in one process ---------------------------------------------------------
+def child(rate: float, duration: float, out: str, spin: float) -> None:
+    import signal
+
+    import can
+
+    from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
+    from friction_ros.nodes import drive_interface
+
+    channel = f"b{uuid.uuid4().hex[:6]}"
+    plant, conv = plant_from_preset("abb_m19s")
+    emu_bus = can.Bus(interface="virtual", channel=channel)
+    emu = DriveEmulator(
+        emu_bus,
+        plant,
+        EmulatorConfig(
+            node_id=1, conversion=conv, encoder_rate_hz=rate, iq_rate_hz=rate, physics_rate_hz=rate
+        ),
+    )
+    emu.start()
+    holder: dict = {}
+    orig = drive_interface.DriveInterface.__init__
+
+    def init(self, **kw):
+        orig(self, **kw)
+        holder["node"] = self
+
+    drive_interface.DriveInterface.__init__ = init
+
+    def task_cpu() -> dict[int, float]:
+        tick = os.sysconf("SC_CLK_TCK")
+        res = {}
+        for tid in os.listdir("/proc/self/task"):
+            with open(f"/proc/self/task/{tid}/stat") as fh:
+                f = fh.read().rsplit(")", 1)[1].split()
+            res[int(tid)] = (int(f[11]) + int(f[12])) / tick
+        return res
+
+    def measure():
+        time.sleep(2.0)  # warm-up (numba, discovery)
+        node = holder["node"]
+        c0, t0 = task_cpu(), time.monotonic()
+        cyc0, rx0, tx0 = node.loop.stats.cycles, node.axis.counters.frames_rx, node.axis.counters.frames_tx
+        ov0, cmd0 = node.loop.stats.overruns, node.axis.counters.commands
+        time.sleep(duration)
+        c1, t1 = task_cpu(), time.monotonic()
+        dt = t1 - t0
+        emu_tid = emu._thread.native_id
+        cpu = {tid: (c1.get(tid, 0) - c0.get(tid, 0)) / dt for tid in c1}
+        names = {t.native_id: t.name for t in threading.enumerate()}
+        total = sum(cpu.values())
+        result = {
+            "rate_hz": rate,
+            "process_cpu": total,
+            "emulator_cpu": cpu.get(emu_tid, 0.0),
+            "node_cpu": total - cpu.get(emu_tid, 0.0),
+            "threads": {names.get(t, str(t)): v for t, v in cpu.items() if v > 0.005},
+            "cycle_rate_hz": (node.loop.stats.cycles - cyc0) / dt,
+            "overruns": node.loop.stats.overruns - ov0,
+            "rx_fps": (node.axis.counters.frames_rx - rx0) / dt,
+            "tx_fps": (node.axis.counters.frames_tx - tx0) / dt,
+            "command_rate_hz": (node.axis.counters.commands - cmd0) / dt,
+            "enabled": node.axis.enabled,
+            "loop_spin_s": node.loop.SPIN_S,
+        }
+        Path(out).write_text(json.dumps(result))
+        os.kill(os.getpid(), signal.SIGINT)
+
+    threading.Thread(target=measure, daemon=True).start()
+    ros = ["-p", "interface:=virtual", "-p", f"channel:={channel}", "-p", "node_id:=1", "-p", "joint_name:=j1",
+           "-p", "enable_on_start:=true", "-p", f"control_rate_hz:={rate}", "-p", "torque_constant:=0.49",
+           "-p", "telemetry_timeout:=0.05", "-p", "command_timeout:=0.2", "-p", f"loop_spin:={spin}"]  # fmt: skip
+    drive_interface.main(["drive_interface", "--ros-args", *ros])
+    emu.stop()
+
+
+def run_rate(rate: float, duration: float, spin: float) -> dict:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+
+    from friction_ros.nodes.node_utils import COMMAND_QOS, STATE_QOS
+
+    out = f"/tmp/can_bench_{uuid.uuid4().hex[:6]}.json"
+    proc = subprocess.Popen([sys.executable, __file__, "--child", str(rate), str(duration), out, str(spin)])
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    node = rclpy.create_node("can_bench_controller", context=ctx)
+    pub = node.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+
+    def on_state(msg):  # a PD holding 0 rad: one command per received joint state
+        pub.publish(JointState(name=["j1"], effort=[-5.0 * msg.position[0] - 0.1 * msg.velocity[0]]))
+
+    node.create_subscription(JointState, "joint_states", on_state, STATE_QOS)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(node)
+    while proc.poll() is None:
+        ex.spin_once(timeout_sec=0.05)
+    node.destroy_node()
+    rclpy.shutdown(context=ctx)
+    res = json.loads(Path(out).read_text())
+    os.unlink(out)
+    return res
+
+
+def main() -> None:
+    if len(sys.argv) > 1 and sys.argv[1] == "--child":
+        child(float(sys.argv[2]), float(sys.argv[3]), sys.argv[4], float(sys.argv[5]))
+        return
+    import argparse
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--duration", type=float, default=8.0)
+    ap.add_argument("--rates", default="1000,2000,2600,3000")
+    a = ap.parse_args()
+    os.environ.setdefault("ROS_DOMAIN_ID", str(os.getpid() % 100 + 1))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+    codec = codec_costs()
+    print_table("codec cost per frame", ["operation", "us/frame"], codec)
+    runs = [run_rate(1000.0, a.duration, 0.0002)]  # node_utils' default spin, for comparison
+    runs += [run_rate(float(r), a.duration, 0.0) for r in a.rates.split(",")]
+    rows = []
+    for r in runs:
+        fps = r["rx_fps"] + r["tx_fps"]
+        rows.append([
+            f"{r['rate_hz']:.0f}", f"{r['loop_spin_s'] * 1e6:.0f}", r["cycle_rate_hz"], r["overruns"], r["command_rate_hz"], fps,
+            100 * fps / BUS_LIMIT_FPS, 100 * r["node_cpu"], 100 * r["emulator_cpu"],
+        ])  # fmt: skip
+    print_table(
+        "drive_interface, 1 axis, 3 frames/cycle (python-can virtual bus, emulator in the same process)",
+        [
+            "rate Hz",
+            "spin us",
+            "cycles/s",
+            "overruns",
+            "cmds/s",
+            "frames/s",
+            "% of 1 Mbit/s",
+            "node CPU %",
+            "emulator CPU %",
+        ],
+        rows,
+    )
+    for r in runs:
+        print(
+            f"threads at {r['rate_hz']:.0f} Hz: "
+            + ", ".join(f"{k} {100 * v:.1f}%" for k, v in r["threads"].items())
+        )
+    write_results(
+        "can",
+        {"codec_us_per_frame": {n: v for n, v in codec}, "runs": runs, "bus_limit_fps": BUS_LIMIT_FPS},
+        command=".venv/bin/python bench/can.py " + " ".join(sys.argv[1:]),
+    )
+
+
+if __name__ == "__main__":
+    main()
