@@ -196,7 +196,7 @@ def fit_records(
     *,
     train_seconds: float = 10.0,
     optimizer: str = "de",
-    maxiter: int | None = None,
+    maxiter: int | dict | None = None,
     popsize: int = 12,
     seed: int = 3,
     eps: float = DEFAULT_EPS,
@@ -267,14 +267,21 @@ def fit_records(
             static0 = None
             if static_from_plateaus and "stribeck" in results:
                 static0 = results["stribeck"].coefficients
+            x0 = spec.initial_theta(static0) if static0 else None
+            if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
+                smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
+                if smaller:
+                    th = np.asarray(smaller[-1].extra["theta"])
+                    x0 = np.concatenate([th[:4], np.resize(th[4:], spec.n_elements)])
+            mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
             fit = fit_time_domain(
                 spec,
                 train,
                 optimizer=optimizer,
-                maxiter=maxiter,
+                maxiter=mi,
                 popsize=popsize,
                 seed=seed,
-                x0=spec.initial_theta(static0) if static0 else None,
+                x0=x0,
                 progress=prog(name),
             )
             res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, train)
