@@ -233,6 +233,10 @@ class CompensatingControllerNode(Node):
         sel = select_joint(msg, self.joint)
         if sel is None:
             self.counts["rejected_states"] += 1
+            self.get_logger().warning(
+                f"joint_states without joint {self.joint!r} (names: {list(msg.name)}): check joint_name",
+                throttle_duration_sec=5.0,
+            )
             return
         pos, vel, _effort = sel
         t_ns = stamp_to_ns(msg.header.stamp)
