@@ -105,6 +105,12 @@ PARAMS = [
         unit="s",
         read_only=True,
     ),
+    Param(
+        "stats_file",
+        "",
+        "write loop/latency statistics as JSON here on shutdown (benchmarks)",
+        read_only=True,
+    ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
 
@@ -151,6 +157,9 @@ class PlantSimulator(Node):
         self._last_state_wall = 0.0
         self.plant.reset(position=self.p["initial_position"])
         self._t_ns = 0
+        self._start_wall = time.monotonic()
+        self._answered_ns = -1
+        self._missed = 0
         self._next_clock_ns = 0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
         self._pending = self._state_msg(self.p["initial_position"], 0.0, 0.0)
@@ -211,9 +220,11 @@ class PlantSimulator(Node):
             self._command_wall = now
         sent = stamp_to_ns(msg.header.stamp)
         if sent:
+            with self._lock:
+                self._answered_ns = sent
             self._latency.append(self.get_clock().now().nanoseconds * 1e-9 - sent * 1e-9)
-            if len(self._latency) > 20000:
-                del self._latency[:10000]
+            if len(self._latency) > 2_000_000:
+                del self._latency[:1_000_000]
 
     # -- stepping -------------------------------------------------------------------------------------
     def _advance(self, torque: float) -> None:
@@ -240,6 +251,8 @@ class PlantSimulator(Node):
         with self._lock:
             fresh = time.monotonic() - self._command_wall <= self.p["command_timeout"]
             torque = self._command if fresh else 0.0
+            if self._steps and self._answered_ns != self._t_ns:
+                self._missed += 1  # the command for the last published state did not arrive in time
         self._advance(torque)
         self._t_ns = self.get_clock().now().nanoseconds
         self._publish_pending()
@@ -256,7 +269,12 @@ class PlantSimulator(Node):
         level, text = OK, "running"
         if self.loop is not None:
             s = self.loop.stats
-            values.update(cycles=s.cycles, overruns=s.overruns, max_lateness_s=s.max_lateness)
+            values.update(
+                cycles=s.cycles,
+                overruns=s.overruns,
+                missed_commands=self._missed,
+                max_lateness_s=s.max_lateness,
+            )
             with self._lock:
                 stale = time.monotonic() - self._command_wall > self.p["command_timeout"]
             if stale:
@@ -270,9 +288,44 @@ class PlantSimulator(Node):
             level, text = max(level, WARN), f"{self._commands_rejected} non-finite commands rejected"
         self.diag.publish(level if level != ERROR else ERROR, text, values)
 
+    def loop_statistics(self) -> dict:
+        """Loop rate, overruns, missed commands and state-to-command latency percentiles."""
+        wall = time.monotonic() - self._start_wall
+        out = {
+            "mode": self.p["mode"],
+            "steps": self._steps,
+            "sim_time": self.plant.time,
+            "wall_time": wall,
+            "sim_seconds_per_wall_second": self.plant.time / wall if wall > 0 else 0.0,
+            "commands_rejected": self._commands_rejected,
+        }
+        if self.loop is not None:
+            s = self.loop.stats
+            out.update(
+                cycles=s.cycles,
+                overruns=s.overruns,
+                missed_commands=self._missed,
+                rate_hz=s.cycles / wall if wall > 0 else 0.0,
+                max_lateness_s=s.max_lateness,
+            )
+            if self._latency:
+                lat = np.asarray(self._latency)
+                out.update(
+                    latency_samples=int(lat.size),
+                    latency_p50_s=float(np.percentile(lat, 50)),
+                    latency_p99_s=float(np.percentile(lat, 99)),
+                    latency_max_s=float(lat.max()),
+                )
+        return out
+
     def on_shutdown(self) -> None:
         if self.loop is not None:
             self.loop.stop()
+        if self.p["stats_file"]:
+            import json
+
+            with open(self.p["stats_file"], "w", encoding="utf-8") as fh:
+                json.dump(self.loop_statistics(), fh, indent=2)
 
 
 def main(args=None) -> int:

@@ -1,0 +1,174 @@
+"""Benchmark `loop` (issue 5): the closed loop across separate processes over real DDS.
+
+1. Real time: plant_simulator (1 kHz wall-clock loop) + compensating_controller (+ estimator) for
+   ``--realtime-seconds`` (default 60): achieved rate, state-to-command latency p50/p99 (measured
+   by the plant: command arrival minus the stamp of the state it answers), missed cycles (periods in
+   which the answer to the previous state had not arrived), loop overruns.
+2. Lockstep: the three-node graph at a 1 kHz control period: simulated seconds per wall second.
+3. Soak: ``--soak-seconds`` (default 600) at 1 kHz real time; resident memory growth per node
+   between the end of warm-up and the end, overruns in the worst 10 s window.
+
+    .venv/bin/python bench/loop.py                       # full (about 13 minutes)
+    .venv/bin/python bench/loop.py --realtime-seconds 20 --soak-seconds 60   # quick look
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _common import print_table, write_results  # noqa: E402
+
+from friction_ros.cli.bringup import Bringup, NodeSpec  # noqa: E402
+
+CONTROLLER = {
+    "mode": "pid",
+    "pid": {"p": 30.0, "i": 60.0, "d": 0.3},
+    "compensation": {"source": "feedforward"},
+    "friction": {"model": "coulomb_viscous", "fc": 0.8, "fv": 0.01},
+    "reference": {"type": "sinusoid", "amplitude": 0.2, "frequency": 0.5},
+}
+ESTIMATOR = {"model": "coulomb_viscous", "inertia": 0.0012}
+
+
+def rss_kb(pid: int) -> int:
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1])
+    except OSError:
+        return 0
+    return 0
+
+
+def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_every: float = 0.0) -> dict:
+    params = tmp / "params.yaml"
+    params.write_text(
+        yaml.safe_dump(
+            {
+                "compensating_controller": {"ros__parameters": CONTROLLER},
+                "friction_estimator": {"ros__parameters": ESTIMATOR},
+            }
+        )
+    )
+    stats = tmp / f"stats_{mode}.json"
+    specs = [
+        NodeSpec("plant_simulator", "", [], {"preset": "abb_m19s", "mode": mode, "stats_file": str(stats)}),
+        NodeSpec(
+            "compensating_controller", "", [str(params)], {"use_sim_time": True} if mode == "lockstep" else {}
+        ),
+        NodeSpec(
+            "friction_estimator", "", [str(params)], {"use_sim_time": True} if mode == "lockstep" else {}
+        ),
+    ]
+    bring = Bringup(specs, quiet=True)
+    bring.start()
+    time.sleep(warmup)
+    rss0 = {s.node: rss_kb(p.pid) for s, p in bring.procs}
+    samples = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        time.sleep(min(sample_every or 1.0, max(0.0, end - time.monotonic())))
+        if sample_every:
+            samples.append({s.node: rss_kb(p.pid) for s, p in bring.procs})
+        if bring.failed():
+            break
+    rss1 = {s.node: rss_kb(p.pid) for s, p in bring.procs}
+    failed = bring.failed()
+    bring.stop()
+    if failed:
+        raise SystemExit(f"nodes failed: {failed}\n" + "\n".join(sum(bring.output.values(), [])[-40:]))
+    out = json.loads(stats.read_text())
+    out["rss_start_kb"] = rss0
+    out["rss_end_kb"] = rss1
+    out["rss_growth_kb"] = {k: rss1[k] - rss0[k] for k in rss0}
+    if samples:
+        out["rss_samples_kb"] = samples
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--realtime-seconds", type=float, default=60.0)
+    parser.add_argument("--lockstep-seconds", type=float, default=20.0)
+    parser.add_argument("--soak-seconds", type=float, default=600.0)
+    args = parser.parse_args()
+    figures: dict = {}
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        rt = run_graph(tmp, "realtime", args.realtime_seconds)
+        cycles = max(rt["cycles"], 1)
+        figures["realtime"] = {
+            "seconds": args.realtime_seconds,
+            "rate_hz": rt["rate_hz"],
+            "latency_p50_ms": rt["latency_p50_s"] * 1e3,
+            "latency_p99_ms": rt["latency_p99_s"] * 1e3,
+            "latency_max_ms": rt["latency_max_s"] * 1e3,
+            "missed_cycles": rt["missed_commands"],
+            "missed_percent": 100.0 * rt["missed_commands"] / cycles,
+            "overruns": rt["overruns"],
+            "cycles": rt["cycles"],
+        }
+        ls = run_graph(tmp, "lockstep", args.lockstep_seconds, warmup=3.0)
+        figures["lockstep"] = {
+            "wall_seconds": args.lockstep_seconds,
+            "sim_seconds_per_wall_second": ls["sim_time"] / (args.lockstep_seconds + 3.0),
+            "sim_seconds_per_wall_second_total": ls["sim_seconds_per_wall_second"],
+            "steps": ls["steps"],
+        }
+        if args.soak_seconds > 0:
+            soak = run_graph(tmp, "realtime", args.soak_seconds, warmup=30.0, sample_every=10.0)
+            figures["soak"] = {
+                "seconds": args.soak_seconds,
+                "rss_growth_kb": soak["rss_growth_kb"],
+                "rss_end_kb": soak["rss_end_kb"],
+                "overruns": soak["overruns"],
+                "missed_percent": 100.0 * soak["missed_commands"] / max(soak["cycles"], 1),
+                "latency_p99_ms": soak["latency_p99_s"] * 1e3,
+                "rate_hz": soak["rate_hz"],
+            }
+    r = figures["realtime"]
+    print_table(
+        f"Real-time closed loop, 1 kHz, {args.realtime_seconds:g} s, 3 processes (goal: p99 < 1 ms, missed < 0.1 %)",
+        ["rate Hz", "latency p50 ms", "latency p99 ms", "max ms", "missed cycles", "missed %", "overruns"],
+        [
+            [
+                r["rate_hz"],
+                r["latency_p50_ms"],
+                r["latency_p99_ms"],
+                r["latency_max_ms"],
+                r["missed_cycles"],
+                r["missed_percent"],
+                r["overruns"],
+            ]
+        ],
+    )
+    lk = figures["lockstep"]
+    print_table(
+        "Lockstep, 3-node graph, 1 kHz control period (goal: >= 3x real time)",
+        ["sim s / wall s", "steps"],
+        [[lk["sim_seconds_per_wall_second"], lk["steps"]]],
+    )
+    if "soak" in figures:
+        s = figures["soak"]
+        print_table(
+            f"Soak, {args.soak_seconds:g} s at 1 kHz (goal: RSS growth < 5 MB per node)",
+            ["node", "RSS end MB", "growth MB"],
+            [[k, s["rss_end_kb"][k] / 1024, s["rss_growth_kb"][k] / 1024] for k in s["rss_growth_kb"]],
+        )
+        print(
+            f"soak: overruns {s['overruns']}, missed {s['missed_percent']:.3f} %, p99 {s['latency_p99_ms']:.3f} ms"
+        )
+    write_results("loop", figures)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
