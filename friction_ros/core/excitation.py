@@ -141,6 +141,11 @@ def _merge(base: dict, over: Mapping) -> dict:
     return out
 
 
+def profile_defaults(profile: str = "default") -> dict[str, Any]:
+    """The complete default config of ``profile`` (not yet merged with user values)."""
+    return _merge(DEFAULTS, PROFILES[check_choice("profile", profile, PROFILES)])
+
+
 def resolve_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Profile defaults merged with ``config`` (``profile`` key, default ``default``), validated.
 

@@ -1,0 +1,268 @@
+"""friction-experiment: record a whole identification experiment into a rosbag2 (MCAP) directory.
+
+Examples::
+
+    # simulated ABB M19-S joint, deterministic and faster than real time, ~30 s program
+    friction-experiment --profile quick --mode lockstep
+
+    # the full default program (~2 min of joint time) on another preset, in real time
+    friction-experiment --preset seed004_dc_motor --mode realtime -o bags/dc_motor_run1
+
+    # a real joint: start drive_interface yourself (same namespace/joint name), then
+    friction-experiment --no-sim --program plateaus --set plateaus.v_max=2.0 --set limits.max_travel=3.0
+
+Starts separate processes (friction-bringup machinery): ``plant_simulator`` (unless ``--no-sim``),
+``bag_recorder`` (joint_states, experiment_events, optionally diagnostics) and
+``identification_experiment``, which waits for the recorder before it begins. When the program is
+over the experiment node exits by itself (zero torque), then the recorder gets SIGINT so the bag
+is finished properly, then the plant. Ctrl-C stops the experiment first (zero torque). Prints the
+bag location and a summary: segments, aborts, breakaway torques and the plateau map (mean and
+spread of velocity and torque per plateau; with the simulated plant also the preset's true
+steady-state friction). Exit code: 0 completed, 3 stopped by a safety limit, 2 bad arguments,
+1 a process failed or timed out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import yaml
+
+from friction_ros.cli.bringup import Bringup, NodeSpec
+from friction_ros.core.excitation import PROFILES, PROGRAM_NAMES, ExcitationProgram
+from friction_ros.core.validation import ParameterError
+
+
+def _parse_sets(items: list[str]) -> dict[str, object]:
+    out: dict[str, object] = {}
+    for item in items:
+        if "=" not in item:
+            raise ParameterError(f"--set {item!r} must be KEY=VALUE, e.g. plateaus.v_max=2.0")
+        key, raw = item.split("=", 1)
+        try:
+            out[key.strip()] = yaml.safe_load(raw)
+        except yaml.YAMLError:
+            raise ParameterError(f"--set {item!r}: cannot parse the value {raw!r}") from None
+    return out
+
+
+def _nest(flat: dict[str, object]) -> dict:
+    nested: dict = {}
+    for key, value in flat.items():
+        parts = key.split(".")
+        d = nested
+        for p in parts[:-1]:
+            d = d.setdefault(p, {})
+            if not isinstance(d, dict):
+                raise ParameterError(f"--set {key}: {p} is not a section")
+        d[parts[-1]] = value
+    return nested
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="friction-experiment",
+        description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.RawTextHelpFormatter,
+    )
+    p.add_argument(
+        "--profile", choices=tuple(PROFILES), default="default", help="program defaults (%(default)s)"
+    )
+    p.add_argument(
+        "--program", choices=PROGRAM_NAMES, default="sequence", help="excitation program (%(default)s)"
+    )
+    p.add_argument("--preset", default="abb_m19s", help="plant preset of the simulated joint (%(default)s)")
+    p.add_argument(
+        "--mode", choices=("lockstep", "realtime"), default="lockstep", help="plant mode (%(default)s)"
+    )
+    p.add_argument(
+        "--no-sim", action="store_true", help="real joint: do not start the plant (run drive_interface)"
+    )
+    p.add_argument("-o", "--output", help="bag directory (default bags/experiment_<preset>_<date>)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing bag directory")
+    p.add_argument("--joint", default="joint1", help="joint name (%(default)s)")
+    p.add_argument("--namespace", default="", help="namespace of the joint's topics")
+    p.add_argument(
+        "--params", action="append", default=[], help="parameter YAML for the plant and the experiment"
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="experiment parameter, e.g. plateaus.repeats=5, limits.max_velocity=20",
+    )
+    p.add_argument("--diagnostics", action="store_true", help="also record /diagnostics")
+    p.add_argument("--timeout", type=float, help="give up after this wall time (default 60 s + 10 x planned)")
+    p.add_argument("--quiet", action="store_true", help="do not forward node output")
+    return p
+
+
+def _topic(ns: str, name: str) -> str:
+    ns = ns.strip("/")
+    return f"/{ns}/{name}" if ns else f"/{name}"
+
+
+def _stop_proc(proc: subprocess.Popen, grace: float = 5.0) -> None:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, states_topic: str) -> str:
+    """The text printed after a run: segments, aborts, breakaways, plateau map."""
+    from friction_ros.core.identification.pipeline import load_bag
+    from friction_ros.core.plateaus import plateau_map
+
+    data = load_bag(bag, topic=states_topic, joint=joint, events_topic=events_topic)
+    ev = data.events
+    starts = sum(e.event == 0 for e in ev)
+    ends = sum(e.event == 1 for e in ev)
+    aborts = [e for e in ev if e.event == 2]
+    programs = list(dict.fromkeys(e.program for e in ev))
+    lines = [
+        f"joint {joint}: {data.n} joint states ({data.duration:.1f} s), {len(ev)} events: {starts} START, "
+        f"{ends} END, {len(aborts)} ABORT; programs: {', '.join(programs) or '-'}"
+    ]
+    for e in aborts:
+        lines.append(f"  ABORT {e.program}/{e.segment} at {e.time:.2f} s: {e.note}")
+    brk = [e for e in ev if e.event == 1 and "breakaway" in e.program]
+    if brk:
+        lines.append(
+            "breakaway torques [N*m]: " + ", ".join(f"{e.segment[-1]}{abs(e.target):.4f}" for e in brk)
+        )
+    if any("plateau" in e.program for e in ev):
+        truth = None
+        if preset:
+            from friction_ros.core.presets import load_preset
+
+            model = load_preset(preset).friction
+            truth = lambda v: float(model.steady_state(__import__("numpy").array([v]))[0])  # noqa: E731
+        pm = plateau_map(bag, joint, topic=states_topic, events_topic=events_topic)
+        lines.append(f"plateau map (first {pm.settle:g} s of each plateau discarded):")
+        lines.append(pm.to_text(truth))
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        sets = _parse_sets(args.set)
+        core = {"program": args.program, "profile": args.profile, **_nest(sets)}
+        program = ExcitationProgram(core)  # validates everything before any process starts
+        preset = None if args.no_sim else args.preset
+        if preset:
+            from friction_ros.core.presets import load_preset
+
+            load_preset(preset)
+        stamp = time.strftime("%Y%m%d_%H%M%S")
+        out = Path(args.output or Path("bags") / f"experiment_{preset or 'joint'}_{stamp}")
+        if out.exists() and any(out.iterdir()) and not args.overwrite:
+            raise ParameterError(
+                f"output {out} exists and is not empty: choose another -o or pass --overwrite"
+            )
+        out.parent.mkdir(parents=True, exist_ok=True)
+        states, events = _topic(args.namespace, "joint_states"), _topic(args.namespace, "experiment_events")
+        topics = [states, events] + ([_topic(args.namespace, "diagnostics")] if args.diagnostics else [])
+        exp_over = {
+            "profile": args.profile,
+            "program": args.program,
+            "joint_name": args.joint,
+            "wait_for_subscribers": 1,
+            **sets,
+        }
+        specs = [
+            NodeSpec(
+                "bag_recorder",
+                "",
+                [],
+                {
+                    "topics": topics,
+                    "output": str(out),
+                    "overwrite": bool(args.overwrite),
+                    "preset": preset or "real joint",
+                    "program": f"{args.program} ({args.profile})",
+                },
+            )
+        ]
+        if preset:
+            specs.append(
+                NodeSpec(
+                    "plant_simulator",
+                    args.namespace,
+                    list(args.params),
+                    {"preset": preset, "mode": args.mode, "joint_name": args.joint},
+                )
+            )
+        specs.append(NodeSpec("identification_experiment", args.namespace, list(args.params), exp_over))
+        for s in specs:
+            s.command()
+    except (ParameterError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+    timeout = args.timeout if args.timeout else 60.0 + 10.0 * program.total_duration
+    print(
+        f"[experiment] {program.name} ({args.profile}): {program.marked_count} segments, "
+        f"{program.total_duration:.1f} s planned; "
+        + (f"simulated {preset} ({args.mode})" if preset else "real joint (drive_interface must run)")
+        + f"; recording {', '.join(topics)} to {out}",
+        flush=True,
+    )
+    bring = Bringup(specs, quiet=args.quiet)
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    t0 = time.monotonic()
+    bring.start()
+    procs = {s.node: p for s, p in bring.procs}
+    exp = procs["identification_experiment"]
+    status = "ok"
+    while exp.poll() is None:
+        if stop.is_set():
+            status = "interrupted"
+            break
+        if any(p.poll() is not None for n, p in procs.items() if n != "identification_experiment"):
+            status = "failed"
+            break
+        if time.monotonic() - t0 > timeout:
+            status = "timeout"
+            break
+        time.sleep(0.05)
+    _stop_proc(exp)  # no-op when it exited by itself; else zero torque first
+    time.sleep(0.5)  # last events/states reach the recorder
+    failed_early = [(s.label, p.returncode) for s, p in bring.procs if p.returncode not in (None, 0)]
+    bring.stop()
+    wall = time.monotonic() - t0
+    rc_exp = exp.returncode
+    for label, code in failed_early:
+        if label.endswith("identification_experiment") and code == 3:
+            continue
+        print(f"[experiment] {label} exited with code {code}", file=sys.stderr)
+        status = "failed" if status == "ok" else status
+    if status != "ok":
+        print(f"[experiment] {status} after {wall:.1f} s wall", file=sys.stderr)
+    print(f"[experiment] bag: {out.resolve()} ({wall:.1f} s wall)", flush=True)
+    try:
+        print(summarize(out, args.joint, preset, events, states), flush=True)
+    except (ParameterError, ValueError, OSError) as exc:
+        print(f"[experiment] summary not available: {exc}", file=sys.stderr)
+        if status == "ok":
+            status = "failed"
+    if status != "ok":
+        return 1
+    return 3 if rc_exp == 3 else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,323 @@
+"""identification_experiment: run an excitation program (friction_ros.core.excitation) on one joint.
+
+Drives the joint directly with a joint torque, event-driven like the controller: every
+``joint_states`` message is one control period and is answered by one ``joint_commands`` message
+whose header stamp is the state's stamp (lockstep-safe: a duplicate state, same stamp, is answered
+with the cached command, nothing is recomputed).
+
+Topics (relative, so one namespace per joint works):
+
+* in  ``joint_states`` (sensor_msgs/JointState; STATE_QOS)
+* out ``joint_commands`` (sensor_msgs/JointState effort = joint torque N*m; COMMAND_QOS),
+  ``experiment_events`` (friction_msgs/ExperimentEvent, START/END/ABORT segment markers stamped
+  with the state they belong to; STATE_QOS), ``diagnostics``
+
+Parameters: the node's own (below) and the program's sections, one ROS parameter per leaf
+(``plateaus.v_min``, ``breakaway.resolution``, ``limits.max_velocity`` ...; defaults from
+``profile``, ranges checked by the core: a bad value refuses to start with one clear line).
+
+The program starts with the first joint state once ``wait_for_subscribers`` subscribers (e.g. the
+bag recorder) listen on ``experiment_events`` and ``joint_states``; until then states are not
+answered (lockstep: the plant waits; realtime: the plant/drive applies zero torque by timeout).
+When the program is over (completed or stopped by a safety limit) the node answers with zero
+torque, waits ``exit_delay`` and exits by itself: exit code 0 when it completed, 3 when a safety
+limit stopped it. Ctrl-C/SIGTERM: zero torque, exit. Progress (percentage, segment) is logged every
+``progress_period`` s of wall time.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import signal
+import time
+
+from friction_msgs.msg import ExperimentEvent
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from friction_ros.core.excitation import (
+    DEFAULTS,
+    EVENT_NAMES,
+    PROFILES,
+    SECTIONS,
+    ExcitationProgram,
+    profile_defaults,
+)
+from friction_ros.nodes.node_utils import (
+    COMMAND_QOS,
+    ERROR,
+    OK,
+    STATE_QOS,
+    WARN,
+    DiagnosticsPublisher,
+    Param,
+    add_runtime_validation,
+    declare,
+    run_node,
+    section_specs,
+    select_joint,
+    stamp_to_ns,
+    unflatten,
+)
+
+EXIT_ABORTED = 3
+
+NODE_PARAMS = [
+    Param("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
+    Param(
+        "profile",
+        "default",
+        "program defaults: default (~2 min, ABB M19-S scale) or quick (~30 s, tests/demo)",
+        choices=tuple(PROFILES),
+        read_only=True,
+    ),
+    Param(
+        "program",
+        "sequence",
+        "excitation program: plateaus, breakaway, random, chirp, presliding or sequence",
+        choices=("plateaus", "breakaway", "random", "chirp", "presliding", "sequence"),
+        read_only=True,
+    ),
+    Param(
+        "sequence",
+        list(DEFAULTS["sequence"]),
+        "programs run by 'sequence', in order",
+        read_only=True,
+    ),
+    Param(
+        "gap",
+        float(DEFAULTS["gap"]),
+        "zero-torque pause between programs",
+        lo=0.0,
+        hi=60.0,
+        unit="s",
+        read_only=True,
+    ),
+    Param(
+        "control_period",
+        0.001,
+        "nominal period of the joint states",
+        lo=1e-5,
+        hi=0.1,
+        unit="s",
+        read_only=True,
+    ),
+    Param(
+        "wait_for_subscribers",
+        0,
+        "start only once this many subscribers listen on experiment_events (the recorder)",
+        lo=0,
+        hi=100,
+        read_only=True,
+    ),
+    Param("exit_when_done", True, "exit by itself when the program is over", read_only=True),
+    Param(
+        "exit_delay", 0.5, "wall time between the end of the program and the exit", lo=0.0, hi=60.0, unit="s"
+    ),
+    Param(
+        "progress_period",
+        2.0,
+        "log progress every this much wall time (0: never)",
+        lo=0.0,
+        hi=3600.0,
+        unit="s",
+    ),
+    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+]
+_RESULT = {"code": 0}
+
+
+def _profile_of(node: Node) -> str:
+    given = getattr(node, "_parameter_overrides", {}).get("profile")
+    return given.value if given is not None and given.value in PROFILES else "default"
+
+
+class IdentificationExperiment(Node):
+    """Thin adapter over :class:`ExcitationProgram`; see the module docstring."""
+
+    def __init__(self):
+        super().__init__("identification_experiment")
+        base = profile_defaults(_profile_of(self))
+        specs = [
+            Param(
+                p.name, copy.deepcopy(base[p.name]), p.description, p.lo, p.hi, p.choices, p.read_only, p.unit
+            )
+            if p.name in ("sequence", "gap")
+            else p
+            for p in NODE_PARAMS
+        ]  # program-level defaults follow the chosen profile
+        for s in SECTIONS:
+            specs += section_specs(self, s, base[s], f"{s} parameter", read_only=True)
+        values = declare(self, specs)
+        self.values = unflatten(values)
+        cfg = {s: self.values[s] for s in SECTIONS}
+        cfg.update(
+            program=self.values["program"],
+            profile=self.values["profile"],
+            sequence=list(self.values["sequence"]),
+            gap=self.values["gap"],
+            dt=self.values["control_period"],
+        )
+        self.program = ExcitationProgram(cfg)  # ParameterError -> refuses to start
+        add_runtime_validation(self, specs, self._apply)
+
+        self.joint = self.values["joint_name"]
+        self.cmd_pub = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+        self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", STATE_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
+        self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
+        self.create_timer(0.05, self._check_exit)
+
+        self._t0_ns: int | None = None
+        self._last_ns: int | None = None
+        self._last_stamp = None
+        self._last_cmd: JointState | None = None
+        self._ready = self.values["wait_for_subscribers"] == 0
+        self._done_wall: float | None = None
+        self._last_progress = time.monotonic()
+        self._wall0: float | None = None
+        self.counts = {"cycles": 0, "duplicates": 0, "rejected_states": 0, "events": 0, "aborts": 0}
+        self.get_logger().info(
+            f"program {self.program.name} (profile {self.values['profile']}): {self.program.marked_count} "
+            f"segments, {self.program.total_duration:.1f} s planned; joint {self.joint}"
+            + ("" if self._ready else f"; waiting for {self.values['wait_for_subscribers']} recorder(s)")
+        )
+
+    def _apply(self, changes: dict) -> None:
+        self.values.update(changes)
+
+    # -- loop -------------------------------------------------------------------------------------
+    def _subscribers_ready(self) -> bool:
+        n = self.values["wait_for_subscribers"]
+        return (
+            self.count_subscribers("experiment_events") >= n
+            and self.count_subscribers("joint_states") >= n + 1
+        )
+
+    def _on_state(self, msg: JointState) -> None:
+        sel = select_joint(msg, self.joint)
+        if sel is None:
+            self.counts["rejected_states"] += 1
+            return
+        if not self._ready:
+            if not self._subscribers_ready():
+                return  # not answered: lockstep plant waits and re-sends, realtime plant times out to 0
+            self._ready = True
+            self.get_logger().info("subscribers present: starting the program")
+        t_ns = stamp_to_ns(msg.header.stamp)
+        if self._last_ns is not None and t_ns <= self._last_ns:
+            if t_ns == self._last_ns and self._last_cmd is not None:
+                self.counts["duplicates"] += 1
+                self.cmd_pub.publish(self._last_cmd)  # lockstep re-send: same answer, no recompute
+            return
+        pos, vel, _effort = sel
+        if vel is None:
+            vel = math.nan
+        if self._t0_ns is None:
+            self._t0_ns = t_ns
+            self._wall0 = time.monotonic()
+        self._last_ns = t_ns
+        self._last_stamp = msg.header.stamp
+        torque, events = self.program.update((t_ns - self._t0_ns) * 1e-9, pos, vel)
+        for e in events:
+            self._publish_event(msg.header.stamp, e)
+        self._publish_command(msg.header.stamp, torque)
+        self.counts["cycles"] += 1
+        self._report_progress()
+        if self.program.done and self._done_wall is None:
+            self._done_wall = time.monotonic()
+            st = self.program.status()
+            wall = time.monotonic() - (self._wall0 or time.monotonic())
+            if self.program.aborted and self.program.on_limit == "stop":
+                _RESULT["code"] = EXIT_ABORTED
+                self.get_logger().error(
+                    f"program stopped by a safety limit at t = {st.time:.2f} s: {self.program.abort_reasons[-1]}"
+                )
+            else:
+                self.get_logger().info(
+                    f"[100%] program {self.program.name} complete: {st.time:.2f} s simulated/real joint time "
+                    f"in {wall:.1f} s wall"
+                )
+
+    def _publish_event(self, stamp, e) -> None:
+        m = ExperimentEvent()
+        m.header.stamp = stamp
+        m.program = e.program
+        m.segment = e.segment
+        m.index = int(e.index)
+        m.event = int(e.event)
+        m.target = float(e.target)
+        m.note = e.note
+        self.event_pub.publish(m)
+        self.counts["events"] += 1
+        if e.event != 0:
+            level = self.get_logger().warning if e.event == 2 else self.get_logger().debug
+            level(f"{EVENT_NAMES[e.event]} {e.program}/{e.segment} at {e.time:.3f} s {e.note}".rstrip())
+        if e.event == 2:
+            self.counts["aborts"] += 1
+
+    def _publish_command(self, stamp, torque: float) -> None:
+        cmd = JointState()
+        cmd.header.stamp = stamp
+        cmd.name = [self.joint]
+        cmd.effort = [float(torque)]
+        self._last_cmd = cmd
+        self.cmd_pub.publish(cmd)
+
+    def _report_progress(self) -> None:
+        period = self.values["progress_period"]
+        now = time.monotonic()
+        if period <= 0 or now - self._last_progress < period or self.program.done:
+            return
+        self._last_progress = now
+        st = self.program.status()
+        self.get_logger().info(
+            f"[{100 * st.progress:3.0f}%] {st.program} {st.segment} ({st.segment_number}/{st.segments}) "
+            f"t = {st.time:.1f} / {st.total:.1f} s"
+        )
+
+    # -- end, safety, health ----------------------------------------------------------------------
+    def _check_exit(self) -> None:
+        if self._done_wall is None or not self.values["exit_when_done"]:
+            return
+        if time.monotonic() - self._done_wall >= self.values["exit_delay"]:
+            self._done_wall = math.inf  # once
+            os.kill(os.getpid(), signal.SIGTERM)  # run_node's handler: leave the loop, on_shutdown()
+
+    def _publish_diagnostics(self) -> None:
+        st = self.program.status()
+        values = dict(self.counts)
+        values.update(
+            progress=round(st.progress, 4),
+            program=st.program,
+            segment=st.segment,
+            time_s=st.time,
+            total_s=st.total,
+        )
+        level, text = OK, "running" if self._t0_ns is not None else "waiting for joint states"
+        if self.program.aborted:
+            level, text = WARN, f"segment aborted: {self.program.abort_reasons[-1]}"
+            if self.program.done and self.program.on_limit == "stop":
+                level = ERROR
+        elif self.program.done:
+            text = "complete"
+        self.diag.publish(level, text, values)
+
+    def on_shutdown(self) -> None:
+        """Leave the joint safe: answer the newest state (or now) with zero torque."""
+        stamp = self._last_stamp if self._last_stamp is not None else self.get_clock().now().to_msg()
+        for _ in range(3):
+            self._publish_command(stamp, 0.0)
+            time.sleep(0.01)
+
+
+def main(args=None) -> int:
+    rc = run_node(IdentificationExperiment, args)
+    return rc or _RESULT["code"]
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
