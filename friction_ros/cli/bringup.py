@@ -38,6 +38,7 @@ NODES = (
     "friction_estimator",
     "drive_interface",
     "bag_recorder",
+    "identification_experiment",
 )
 # Stop order: whatever commands torque goes first, so it can publish zero before the rest exits.
 STOP_ORDER = (
