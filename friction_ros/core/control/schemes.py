@@ -128,7 +128,9 @@ class GainScheduling:
 
     Mode 1 (gross sliding): ``u = kp e + kd e_dot + F_c sgn(v_c)`` (Coulomb compensation with a
     linear zone |v_c| < coulomb_velocity; v_c = measured velocity, or the reference velocity with
-    ``coulomb_source = reference``).
+    ``coulomb_source = reference``). ``coulomb_deadband`` > 0 switches the compensation off while
+    |v_c| <= coulomb_deadband (a measured-velocity linear zone acts as negative damping
+    F_c / coulomb_velocity on the presliding spring; a dead band does not).
     Switch to mode 2 when |v| <= standstill_velocity and |e| < q_h (presliding); back to mode 1 when
     |e| > q_h. In mode 2, at entry and again at every standstill that lasts ``dwell`` seconds while
     |e| > tolerance, with A = |e| [schedule NOT IN PAPER, extract A.4.3 suggestion, made cumulative]:
@@ -147,6 +149,7 @@ class GainScheduling:
         "coulomb": 0.8,
         "coulomb_velocity": 0.01,
         "coulomb_source": "measured",
+        "coulomb_deadband": 0.0,
         "q_h": 0.004,
         "standstill_velocity": 1e-3,
         "dwell": 0.01,
@@ -172,6 +175,7 @@ class GainScheduling:
                 f"{n}.coulomb_source = {c['coulomb_source']!r} is not allowed: must be one of measured, reference"
             )
         self.coulomb_source = c["coulomb_source"]
+        self.coulomb_deadband = check_real(f"{n}.coulomb_deadband", c["coulomb_deadband"], 0.0, unit="rad/s")
         self.q_h = check_real(f"{n}.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
         self.standstill_velocity = check_real(
             f"{n}.standstill_velocity", c["standstill_velocity"], 0.0, unit="rad/s"
@@ -243,7 +247,9 @@ class GainScheduling:
                 self.adjustments += 1
             return SchemeOutput(p_term=self.kp2 * e, d_term=self.kd2 * edot)
         vc = ref[1] if self.coulomb_source == "reference" else v
-        if self.coulomb_velocity > 0.0:
+        if abs(vc) <= self.coulomb_deadband:
+            fc = 0.0
+        elif self.coulomb_velocity > 0.0:
             fc = self.coulomb * max(-1.0, min(1.0, vc / self.coulomb_velocity))
         else:
             fc = math.copysign(self.coulomb, vc) if vc != 0.0 else 0.0

@@ -19,7 +19,12 @@ class GMS(DynamicModel):
 
     stick:  dF_i/dt = k_i v
     slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|)
-    s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v;  sum_i alpha_i = 1.
+    s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v + F_damp;  sum_i alpha_i = 1.
+    Optional presliding micro-damping (extract C.6, Lampaert et al.: F = sum_i (k_i z_i + sigma_i
+    dz_i/dt) + sigma_2 v) with one coefficient ``sigma1`` shared in proportion to the element
+    stiffness, sigma_i = sigma1 k_i / sum_j k_j (Rayleigh stiffness-proportional damping), i.e.
+    F_damp = (sigma1 / sum_j k_j) sum_i dF_i/dt, which is sigma1 v while every element sticks and
+    fades as elements slip. ``sigma1 = 0`` (default) is the undamped model of seed 003.
     An element slips when |F_i| reaches alpha_i s(v) and sticks again on reversal or at v = 0.
     Virgin curve y(x) = sum_i min(k_i x, alpha_i Fs); Masing rule and wiping-out follow (extract E.7).
 
@@ -40,6 +45,8 @@ class GMS(DynamicModel):
         Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
         Coef("k", lo=0.0, lo_open=True, unit="N*m/rad", is_list=True, doc="element stiffnesses"),
         Coef("alpha", lo=0.0, lo_open=True, hi=1.0, is_list=True, doc="element weights (sum 1)"),
+        # appended last so positional users of param_names / param_vector() keep their indices
+        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="presliding micro-damping (0 = none)"),
     )
 
     def _validate(self):
@@ -64,6 +71,7 @@ class GMS(DynamicModel):
             [float(self.n_elements), c["fc"], c["fs"], c["vs"], c["delta"], c["attraction"], c["fv"]]
             + c["k"]
             + c["alpha"]
+            + [c["sigma1"]]
         )
 
     def initial_state(self) -> np.ndarray:
@@ -108,11 +116,14 @@ class GMS(DynamicModel):
         fc, fs, vs, de, c, fv = (pm[:, j] for j in range(6))
         k = pm[:, 6 : 6 + n]
         al = pm[:, 6 + n : 6 + 2 * n]
+        sig = pm[:, 6 + 2 * n] if pm.shape[1] > 6 + 2 * n else np.zeros(pm.shape[0])
+        damp = sig / k.sum(axis=1)
         f = np.zeros_like(k)
         stuck = np.ones_like(k, dtype=bool)
         out = np.empty((pm.shape[0], v.size))
         for t, vt in enumerate(v):
             s = stribeck_np(abs(vt), fc, fs, vs, de)[:, None]
+            f_old = f
             if vt == 0.0:
                 stuck[:] = True
             else:
@@ -125,7 +136,7 @@ class GMS(DynamicModel):
                 fsl = tgt + (f - tgt) * np.exp(-c[:, None] * dt / s)
                 f = np.where(stuck, np.where(brk, tgt, fst), fsl)
                 stuck = stuck & ~brk
-            out[:, t] = f.sum(axis=1) + fv * vt
+            out[:, t] = f.sum(axis=1) + fv * vt + damp * (f - f_old).sum(axis=1) / dt
         return out
 
 
