@@ -1,8 +1,10 @@
 """Seed compensation experiments (shortened runs of bench/compensation.py): orderings and thresholds.
 
 Goals of issue 4 that the simulation does NOT reach are not asserted here; the benchmark prints
-their figures (see the report / README): seed 003 Table 2 GMS -89 %, the 0.4 rad PTP ranking,
-seed 001 item 7 and the seed 002 P-control limit cycle.
+their figures (see the report / README): the 0.4 rad PTP ranking (gain scheduling does not end
+within 1e-4 rad, the cascade is faster; DNPF hunts instead of stopping short), seed 001 item 7 and
+the seed 002 P-control limit cycle. Seed 003 runs use the truth GMS with presliding micro-damping
+(bench.SIGMA1, see bench/compensation.py).
 """
 
 import sys
@@ -14,6 +16,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
 
 import compensation as bench  # noqa: E402
+
+OURS = bench.FF_CASES[-1][0]
 
 
 @pytest.fixture(scope="module")
@@ -33,14 +37,22 @@ def test_seed003_table2_ordering(table2):
         assert lugre < 0.8 * none and gms < lugre  # none ~ Coulomb > LuGre > GMS
         assert 0.8e-3 < none < 1.6e-3  # the paper's 1.2 mrad scale
     # our feed-forward + feedback combination: >= 95 % with ideal sensing, >= 90 % with the encoder
-    assert table2["ideal"]["ours: GMS FF 70% + FB 30%"]["reduction"] >= 0.97
-    assert table2["preset"]["ours: GMS FF 70% + FB 30%"]["reduction"] >= 0.90
+    assert table2["ideal"][OURS]["reduction"] >= 0.97
+    assert table2["preset"][OURS]["reduction"] >= 0.90
+
+
+def test_seed003_table2_goals_gms_89_and_ours_95_with_encoder(table2):
+    rows = table2["preset"]  # encoder 1.05e-4 rad, 0.5 ms current lag, current noise
+    assert rows["GMS"]["reduction"] >= 0.89 + 0.03  # paper 1.20 -> 0.13 mrad (-89 %); ours ~ -96 %
+    assert rows[OURS]["reduction"] >= 0.95  # issue goal (ours ~ -96.5 %)
+    assert rows["GMS"]["rms_error"] < 0.5 * rows["LuGre"]["rms_error"]  # paper: GMS 62 % better
+    assert 0.0 < rows["Coulomb"]["reduction"] < 0.15  # paper -8.3 % ("almost identical")
 
 
 def test_seed003_table3_thresholds(table3):
     none = table3["none"]["rms_error"]
     assert table3["GMS"]["reduction"] >= 0.56 + 0.2  # goal -56 %, with margin
-    assert table3["ours: GMS FF 70% + FB 30%"]["reduction"] >= 0.70 + 0.2  # goal -70 %
+    assert table3[OURS]["reduction"] >= 0.70 + 0.2  # goal -70 %
     assert (
         table3["Coulomb"]["rms_error"] < none
         and table3["LuGre"]["rms_error"] < table3["Coulomb"]["rms_error"]
@@ -65,3 +77,17 @@ def test_seed003_ptp_schemes_run_and_dnpf_beats_pd_coulomb_inside_presliding():
     assert rows["DNPF"]["error_0.5s"] < 0.7 * rows["PD + Coulomb (mode 1 only)"]["error_0.5s"]
     for r in rows.values():
         assert np.isfinite(r["final_error"]) and r["final_error"] < 0.02
+
+
+def test_seed003_ptp_pd_coulomb_stalls_inside_presliding_cascade_settles():
+    rows = {r["case"]: r for r in bench.seed003_ptp(1.0, "preset")}
+    stall = rows["PD + Coulomb (mode 1 only)"]
+    # stalls: at rest, inside Q_h = 4e-3 rad, but far outside the 1e-4 rad encoder resolution
+    assert 3e-4 < stall["final_error"] < 4e-3
+    assert abs(stall["error_0.5s"] - stall["final_error"]) < 1e-6
+    # the integrating cascade ends within the encoder resolution (paper: < 1e-4 rad)
+    assert rows["cascade (PI velocity loop)"]["settle_1e-4"] < 0.5
+    # gain scheduling at least beats its own mode 1 inside presliding (the 1e-4 goal is NOT met)
+    assert rows["gain scheduling"]["final_error"] < 0.5 * stall["final_error"]
+    # DNPF: fast inside Q_h (first within 1e-4 rad well before the end) but it does not come to rest
+    assert rows["DNPF"]["first_1e-4"] < 0.5 and rows["DNPF"]["hunting_reversals"] >= 100
