@@ -15,6 +15,7 @@ ENTRY_POINTS = [
     "compensating_controller = friction_ros.nodes.compensating_controller:main",
     "friction_estimator = friction_ros.nodes.friction_estimator:main",
     "friction-bringup = friction_ros.cli.bringup:main",
+    "friction-demo = friction_ros.cli.demo:main",
     "bag_recorder = friction_ros.nodes.bag_recorder:main",
     "bag_player = friction_ros.nodes.bag_player:main",
     "friction-bag = friction_ros.cli.bag:main",

@@ -17,7 +17,7 @@ from friction_ros.core.can.axis import AxisConfig, DriveAxis
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
 
-DBC = Path(__file__).resolve().parents[2] / "shared" / "specs" / "odrive-cansimple.dbc"
+DBC = Path(__file__).resolve().parent / "data" / "odrive-cansimple.dbc"  # copy of shared/specs (the oracle)
 TWO_PI = 2 * math.pi
 
 # 0.6.x messages the shared DBC (0.5.x) lacks, written from the anchors table (section 2.1).
