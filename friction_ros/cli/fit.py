@@ -19,8 +19,12 @@ import sys
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="friction-fit", description=__doc__.splitlines()[0])
     p.add_argument("bags", nargs="+", help="rosbag2 directories or .mcap files")
-    p.add_argument("--topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)")
-    p.add_argument("--joint", default=None, help="joint name (required when the topic carries several joints)")
+    p.add_argument(
+        "--topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)"
+    )
+    p.add_argument(
+        "--joint", default=None, help="joint name (required when the topic carries several joints)"
+    )
     p.add_argument(
         "--models",
         nargs="+",
@@ -29,17 +33,58 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--out", default="friction_fit", help="output directory (default friction_fit)")
     p.add_argument("--params", default=None, help="parameter YAML path (default <out>/friction_params.yaml)")
-    p.add_argument("--events-topic", default="/experiment_events", help="ExperimentEvent topic (plateau/breakaway markers)")
-    p.add_argument("--current-topic", default=None, help="topic carrying the motor current (default: the joint-state topic)")
-    p.add_argument("--current-field", default=None, help="current field [A]; torque = current x torque constant x gear ratio")
+    p.add_argument(
+        "--events-topic",
+        default="/experiment_events",
+        help="ExperimentEvent topic (plateau/breakaway markers)",
+    )
+    p.add_argument(
+        "--current-topic",
+        default=None,
+        help="topic carrying the motor current (default: the joint-state topic)",
+    )
+    p.add_argument(
+        "--current-field",
+        default=None,
+        help="current field [A]; torque = current x torque constant x gear ratio",
+    )
     p.add_argument("--torque-constant", type=float, default=None, help="motor torque constant [N*m/A]")
-    p.add_argument("--gear-ratio", type=float, default=1.0, help="gear ratio (joint torque / motor torque), default 1")
-    p.add_argument("--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)")
-    p.add_argument("--optimizer", choices=["de", "ga"], default="de", help="global optimiser: differential evolution or seed 001's GA")
-    p.add_argument("--maxiter", type=int, default=None, help="global-search generations (default 40 + 15 x dimension)")
+    p.add_argument(
+        "--gear-ratio", type=float, default=1.0, help="gear ratio (joint torque / motor torque), default 1"
+    )
+    p.add_argument(
+        "--torque-delay",
+        type=float,
+        default=0.0,
+        help="shift the torque earlier by this lag behind the motion [s] (default 0)",
+    )
+    p.add_argument(
+        "--plant-preset",
+        default=None,
+        help="preset whose plant parameters the plant_simulator section starts from (e.g. abb_m19s)",
+    )
+    p.add_argument(
+        "--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)"
+    )
+    p.add_argument(
+        "--optimizer",
+        choices=["de", "ga"],
+        default="de",
+        help="global optimiser: differential evolution or seed 001's GA",
+    )
+    p.add_argument(
+        "--maxiter", type=int, default=None, help="global-search generations (default 40 + 15 x dimension)"
+    )
     p.add_argument("--seed", type=int, default=3, help="random seed (default 3)")
-    p.add_argument("--eps", type=float, default=1e-3, help="linear-zone width of sgn(v) for static models [rad/s]")
-    p.add_argument("--high-threshold", type=float, default=None, help="high/low velocity split [rad/s] (default automatic)")
+    p.add_argument(
+        "--eps", type=float, default=1e-3, help="linear-zone width of sgn(v) for static models [rad/s]"
+    )
+    p.add_argument(
+        "--high-threshold",
+        type=float,
+        default=None,
+        help="high/low velocity split [rad/s] (default automatic)",
+    )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     return p
@@ -97,6 +142,8 @@ def main(argv: list[str] | None = None) -> int:
                 gear_ratio=args.gear_ratio,
                 params_file=args.params,
                 plots=not args.no_plots,
+                torque_delay=args.torque_delay,
+                plant_preset=args.plant_preset,
                 train_seconds=args.train_seconds,
                 optimizer=args.optimizer,
                 maxiter=args.maxiter,

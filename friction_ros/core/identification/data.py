@@ -150,6 +150,7 @@ def prepare(
     events: list[Event] | None = None,
     velocity_window: float = 0.021,
     acceleration_window: float = 0.041,
+    torque_delay: float = 0.0,
     source: str = "arrays",
 ) -> JointData:
     """Build a uniform :class:`JointData` from raw arrays (see module docstring for the steps).
@@ -157,7 +158,8 @@ def prepare(
     ``t`` are message stamps [s]; ``position`` [rad], ``velocity`` [rad/s] and ``effort`` [N*m]
     are per-message arrays (None when absent). When ``effort`` is None, ``current`` [A] (with its
     own stamps ``current_t`` if from another topic) times ``torque_constant`` [N*m/A] times
-    ``gear_ratio`` gives the joint torque.
+    ``gear_ratio`` gives the joint torque. ``torque_delay`` [s] aligns a torque that lags the
+    motion (e.g. half a sample period plus the current-loop time constant of a simulated plant).
     """
     t = np.asarray(t, dtype=float)
     if t.ndim != 1 or t.size < 3:
@@ -202,7 +204,10 @@ def prepare(
         ok = np.isfinite(x)
         return np.interp(grid, ts[ok], x[ok])
 
-    tau = interp(eff)
+    # a torque measured ``torque_delay`` after the motion it causes (current-loop lag, a torque that
+    # is the average over the sample period ...) is shifted back: tau(t) := tau_meas(t + delay)
+    ok = np.isfinite(eff)
+    tau = np.interp(grid + torque_delay, ts[ok], eff[ok])
     resolution = 0.0
     if pos is not None and np.any(np.isfinite(pos)):
         p = interp(pos)
@@ -312,8 +317,9 @@ def find_plateaus(
 ) -> list[Plateau]:
     """Constant-velocity plateaus: from ``plateau`` event markers if any, else automatic detection.
 
-    Automatic: a sample belongs to a plateau when the velocity stays within
-    ``max(rel_tol |v|, 3 noise)`` of its 0.1 s running mean and |v| > ``min_speed``; runs shorter
+    Automatic: a sample belongs to a plateau when the 0.25 s running mean of the velocity is steady
+    within ``max(rel_tol |v|, 3 noise)``, the samples scatter by less than 60 % around it
+    (stick-slip at low speed is allowed) and |v| > ``min_speed``; runs shorter
     than ``settle + min_duration`` are dropped and the first ``settle`` seconds discarded.
     """
     v, tau, dt = data.velocity, data.torque, data.dt
@@ -339,15 +345,17 @@ def find_plateaus(
                 )
             )
         return out
-    w = max(int(round(0.1 / dt)), 3)
+    w = max(int(round(0.25 / dt)), 3)
     k = np.ones(w) / w
     vm = np.convolve(v, k, mode="same")
     dev = np.sqrt(np.convolve((v - vm) ** 2, k, mode="same"))
     noise = float(np.median(np.abs(np.diff(v)))) / math.sqrt(2) + 1e-12
     if min_speed is None:
         min_speed = max(10 * noise, 1e-3)
-    steady = (np.abs(vm - np.convolve(vm, k, mode="same")) < np.maximum(rel_tol * np.abs(vm), 3 * noise)) & (
-        dev < np.maximum(rel_tol * np.abs(vm), 3 * noise)
+    # the 0.25 s running mean must be steady; the samples may scatter (stick-slip at low speed)
+    drift = np.abs(vm - np.convolve(vm, k, mode="same"))
+    steady = (drift < np.maximum(rel_tol * np.abs(vm), 3 * noise)) & (
+        dev < np.maximum(0.6 * np.abs(vm), 3 * noise)
     )
     steady &= np.abs(vm) > min_speed
     sign = np.sign(vm)
@@ -360,7 +368,7 @@ def find_plateaus(
         if np.any(sign[i0s:i1] != sign[i0s]):
             continue
         ref = np.median(seg_v)
-        if np.max(np.abs(vm[i0s:i1] - ref)) > max(2 * rel_tol * abs(ref), 6 * noise):
+        if np.max(np.abs(vm[i0s:i1] - ref)) > max(3 * rel_tol * abs(ref), 6 * noise):
             continue
         tt = tau[i0s:i1]
         out.append(
@@ -441,7 +449,7 @@ def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
     moving = np.abs(v) > max(5 * noise, 1e-4)
     sv = np.sign(v[moving])
     rev = int(np.sum(sv[1:] != sv[:-1])) if sv.size > 1 else 0
-    pv = [abs(p.velocity) for p in plateaus]
+    pv = [abs(p.velocity) for p in plateaus if abs(p.velocity) > 0]
     dec = math.log10(max(pv) / min(pv)) if len(pv) >= 2 else 0.0
     return Excitation(
         float(max(v.max(), 0.0)),

@@ -146,7 +146,7 @@ def fit_time_domain(
             updating="deferred",
             popsize=popsize,
             maxiter=maxiter,
-            tol=1e-6,
+            tol=0.01,
             atol=0.0,
             seed=seed,
             polish=False,

@@ -41,7 +41,7 @@ def library_config(
                 "positive": _static(name, per_direction["positive"], 0.0, bare=True),
                 "negative": _static(name, per_direction["negative"], 0.0, bare=True),
             }
-        return _static(name, c, eps)
+        return _static(name, c, float(c.get("eps", eps)))
     if name == "dahl":
         return {"model": "dahl", "sigma": c["sigma"], "fc": c["fc"], "alpha": 1.0}
     if name == "lugre":
@@ -153,8 +153,21 @@ def estimator_section(config: dict, inertia: float) -> dict:
     return out
 
 
-def parameter_document(config: dict, inertia: float, *, description: str = "") -> dict:
-    """The ROS parameter YAML document for the three nodes."""
+def parameter_document(config: dict, inertia: float, *, description: str = "", plant_preset=None) -> dict:
+    """The ROS parameter YAML document for the three nodes.
+
+    ``plant_preset`` (name or path): the plant_simulator section starts from that preset's plant
+    parameters (torque constant, encoder ...) with the identified inertia and friction; without it
+    only ``motor_inertia`` is written and the node must get the rest from its preset.
+    """
+    plant: dict = {"motor_inertia": float(inertia)}
+    if plant_preset:
+        from friction_ros.core.presets import load_preset
+
+        pc = load_preset(plant_preset).params.to_config()["plant"]
+        if pc.get("gear_ratio", 1.0) == 1.0 and not pc.get("load_inertia"):
+            pc["motor_inertia"] = float(inertia)
+        plant = pc
     return {
         "compensating_controller": {
             "ros__parameters": {"inertia": float(inertia), "friction": {"model": config}}
@@ -164,7 +177,7 @@ def parameter_document(config: dict, inertia: float, *, description: str = "") -
             "ros__parameters": {
                 "preset": "identified",
                 "description": description or f"identified by friction-fit ({config.get('model')})",
-                "plant": {"motor_inertia": float(inertia)},
+                "plant": plant,
                 "friction_motor": config,
             }
         },

@@ -79,8 +79,8 @@ class FitSpec:
         if f == "coulomb":
             return sat_sign(v, self.eps)[:, None]
         if f == "stribeck":
-            vs, delta = theta
-            sg = sat_sign(v, self.eps)
+            vs, delta, eps = theta
+            sg = sat_sign(v, eps)
             return np.column_stack([sg, sg * np.exp(-(np.abs(v / vs) ** delta))])
         if f == "dahl":
             return kernels.dahl_features(theta, v, dt)
@@ -137,7 +137,14 @@ class FitSpec:
             if self.viscous:
                 c["fv"] = fv
         elif f == "stribeck":
-            c = {"fc": lin["fc"], "fs": lin["fc"] + lin["dfs"], "vs": theta[0], "delta": theta[1], "fv": fv}
+            c = {
+                "fc": lin["fc"],
+                "fs": lin["fc"] + lin["dfs"],
+                "vs": theta[0],
+                "delta": theta[1],
+                "fv": fv,
+                "eps": theta[2],
+            }
         elif f == "dahl":
             c = {"fc": lin["fc"], "sigma": theta[0] * lin["fc"], "fv": fv}
         elif f == "lugre":
@@ -202,13 +209,14 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
     if name == "coulomb_viscous":
         return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=True, eps=eps)
     if name == "stribeck":
+        # seed 003 A.2.2: the linear-zone width eps is a coefficient of this model (fitted)
         return FitSpec(
             name,
             "stribeck",
-            ["vs", "delta"],
-            arr([1e-4, 0.3]),
-            arr([2.0, 4.0]),
-            arr([True, False]),
+            ["vs", "delta", "eps"],
+            arr([1e-4, 0.3, 1e-4]),
+            arr([2.0, 4.0, 0.5]),
+            arr([True, False, True]),
             ["fc", "dfs"],
             eps=eps,
         )

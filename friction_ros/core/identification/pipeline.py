@@ -79,7 +79,9 @@ class FitResult:
         m = self.models[name]
         if m.config is None:
             raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
-        return export.parameter_document(m.config, m.coefficients.get("J", 0.0))
+        return export.parameter_document(
+            m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset")
+        )
 
 
 # ------------------------------------------------------------------------------------ loading
@@ -95,6 +97,7 @@ def load_bag(
     gear_ratio: float = 1.0,
     velocity_window: float = 0.021,
     acceleration_window: float = 0.041,
+    torque_delay: float = 0.0,
 ) -> D.JointData:
     """Read a joint of a JointState topic (and event markers) from a bag into JointData."""
     from friction_ros.core.bag import BagError, read_bag
@@ -176,6 +179,7 @@ def load_bag(
         events=events,
         velocity_window=velocity_window,
         acceleration_window=acceleration_window,
+        torque_delay=torque_delay,
         source=str(path),
     )
 
@@ -437,7 +441,7 @@ def _wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> Model
         if spec.family == "dahl":
             return c["fc"] * np.sign(v)
         if spec.family in ("coulomb", "stribeck"):
-            return stribeck_map(v, {**c, "fs": c.get("fs", c["fc"])}) * np.abs(sat_sign(v, eps))
+            return stribeck_map(v, {**c, "fs": c.get("fs", c["fc"])}) * np.abs(sat_sign(v, c.get("eps", eps)))
         return stribeck_map(v, {**c, "fv": c.get("fv", c.get("sigma2", 0.0))})
 
     ident = {}
@@ -484,6 +488,8 @@ def fit_bag(
     gear_ratio: float = 1.0,
     params_file: str | None = None,
     plots: bool = True,
+    torque_delay: float = 0.0,
+    plant_preset: str | None = None,
     **options,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
@@ -509,10 +515,12 @@ def fit_bag(
             current_field=current_field,
             torque_constant=torque_constant,
             gear_ratio=gear_ratio,
+            torque_delay=torque_delay,
         )
         for p in bag_paths
     ]
     res = fit_records(recs, models, label=", ".join(str(p) for p in bag_paths), **options)
+    res.options["plant_preset"] = plant_preset
     report.write_outputs(
         res,
         Path(out_dir),

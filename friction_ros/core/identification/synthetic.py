@@ -81,13 +81,14 @@ def run_velocity_loop(
     ki: float | None = None,
     events: list[Event] | None = None,
 ) -> Record:
-    """Track ``v_ref`` with a PI velocity loop (+ inertia feed-forward) on the plant; record sensors."""
+    """Track ``v_ref`` with a PI velocity loop (K_v = 400 J, integral gain = a position gain of
+    200 K_v, so plateaus break away quickly) plus inertia feed-forward; record the sensors."""
     plant, params = _make_plant(preset, friction, overrides)
-    J = params.reflected_inertia if hasattr(params, "reflected_inertia") else params.motor_inertia
+    J = params.reflected_inertia
     kt_out = params.torque_constant * params.ratio * params.gear_efficiency
-    kp = 400.0 * J if kp is None else kp
-    ki = 40.0 * kp if ki is None else ki
     a_ref = np.gradient(v_ref, dt)
+    kp = 400.0 * J if kp is None else kp
+    ki = 200.0 * kp if ki is None else ki
     n = v_ref.size
     out = {k: np.empty(n) for k in ("t", "p", "v", "e", "i", "tv", "tf")}
     integ = 0.0

@@ -1,0 +1,196 @@
+"""friction-fit CLI and data preparation: outputs, clear one-line errors (exit code 2), loading."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from friction_ros.cli.fit import main
+from friction_ros.core.identification import data as D
+from friction_ros.core.identification import learned, metrics, synthetic
+from friction_ros.core.identification.synthetic import Record
+
+
+def _record(t, pos, eff, events=None):
+    z = np.zeros_like(t)
+    return Record(t, pos, np.gradient(pos, t), eff, eff / 0.49, z, z, events or [])
+
+
+@pytest.fixture(scope="module")
+def small_bag(tmp_path_factory):
+    rec = synthetic.seed003_experiment(12.0, low=0.05)
+    return synthetic.write_bag(tmp_path_factory.mktemp("cli") / "run", rec)
+
+
+def test_cli_end_to_end(small_bag, tmp_path, capsys):
+    out = tmp_path / "fit"
+    rc = main(
+        [
+            str(small_bag),
+            "--joint",
+            "joint1",
+            "--models",
+            "coulomb",
+            "dahl",
+            "nusvr",
+            "--out",
+            str(out),
+            "--quiet",
+            "--no-plots",
+            "--params",
+            str(tmp_path / "p.yaml"),
+        ]
+    )
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "recommended" in text and (tmp_path / "p.yaml").exists()
+    assert (out / "summary.json").exists() and (out / "report.md").exists()
+
+
+def _expect_error(argv, capsys, *words):
+    rc = main(argv)
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert err.startswith("friction-fit: error:") and err.count("\n") == 1  # one line, no traceback
+    for w in words:
+        assert w in err, err
+    return err
+
+
+def test_bag_without_topic(small_bag, capsys):
+    _expect_error(
+        [str(small_bag), "--topic", "/arm/joint_states", "--quiet"],
+        capsys,
+        "no topic /arm/joint_states",
+        "/joint_states",
+    )
+
+
+def test_missing_joint_and_bad_model(small_bag, capsys):
+    _expect_error([str(small_bag), "--joint", "elbow", "--quiet"], capsys, "elbow", "joint1")
+    _expect_error(
+        [str(small_bag), "--joint", "joint1", "--models", "karnopp9", "--quiet"], capsys, "karnopp9"
+    )
+    _expect_error([str(small_bag), "--quiet"], capsys, "--joint")  # two joints on the topic
+
+
+def test_bag_without_motion(tmp_path, capsys):
+    t = np.arange(3000) * 1e-3
+    bag = synthetic.write_bag(tmp_path / "still", _record(t, np.zeros_like(t), 0.01 * np.ones_like(t)))
+    _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "no motion", "plateaus")
+
+
+def test_too_little_excitation(tmp_path, capsys):
+    # one slow ramp in one direction: no negative motion, no reversals
+    t = np.arange(15000) * 1e-3
+    pos = 0.2 * t
+    bag = synthetic.write_bag(tmp_path / "ramp", _record(t, pos, 0.8 * np.ones_like(t)))
+    err = _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "too little excitation")
+    assert "negative direction" in err and "random" in err
+
+
+def test_bag_without_effort_needs_current(tmp_path, capsys):
+    rec = synthetic.seed003_experiment(3.0)
+    bag = synthetic.write_bag(tmp_path / "noeff", rec, with_effort=False)
+    _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "no effort", "--torque-constant")
+
+
+def test_console_script_installed():
+    out = subprocess.run(
+        [sys.executable, "-m", "friction_ros.cli.fit", "--help"], capture_output=True, text=True
+    )
+    assert out.returncode == 0 and "--models" in out.stdout
+
+
+# ------------------------------------------------------------------------------ data preparation
+def test_prepare_time_alignment_current_and_derivatives():
+    rng = np.random.default_rng(0)
+    n = 4000
+    t = np.arange(n) * 1e-3 + rng.uniform(-2e-4, 2e-4, n)  # jittered stamps, shuffled order
+    pos_true = 0.3 * np.sin(2 * np.pi * 1.0 * t)
+    q = 1.05e-4
+    pos = np.floor(pos_true / q) * q
+    cur = 0.5 * np.cos(2 * np.pi * t)
+    perm = rng.permutation(n)
+    d = D.prepare(
+        t[perm],
+        pos[perm],
+        None,
+        None,
+        current=cur[perm],
+        current_t=t[perm],
+        torque_constant=0.49,
+        gear_ratio=3.0,
+    )
+    assert abs(d.dt - 1e-3) < 1e-5 and abs(d.resolution - q) / q < 0.05
+    v_true = 0.3 * 2 * np.pi * np.cos(2 * np.pi * (d.t + d.t0))
+    inner = slice(100, -100)
+    assert np.max(np.abs(d.velocity - v_true)[inner]) < 0.02
+    assert np.allclose(
+        d.torque[inner], (0.5 * 0.49 * 3.0 * np.cos(2 * np.pi * (d.t + d.t0)))[inner], atol=0.01
+    )
+    a_true = -0.3 * (2 * np.pi) ** 2 * np.sin(2 * np.pi * (d.t + d.t0))
+    assert np.max(np.abs(d.acceleration - a_true)[inner]) < 0.5
+
+
+def test_split_and_breakaway_detection():
+    dt = 1e-3
+    t = np.arange(14000) * dt
+    tau = np.where(t < 1.0, 0.0, 0.1 * (t - 1.0))  # ramp 0.1 N*m/s from t = 1 s
+    q = 1.05e-4
+    # the joint leaves rest when the torque reaches 0.35 N*m (t = 4.5 s)
+    pos = np.where(tau > 0.35, (t - 4.5) * 0.01, 0.0)
+    pos = np.floor(pos / q) * q
+    ev = [
+        D.Event(1.0, "breakaway", "ramp+", 0, D.START, math.nan),
+        D.Event(13.0, "breakaway", "ramp+", 0, D.END),
+    ]
+    d = D.prepare(t, pos, None, tau, events=ev)
+    br = D.find_breakaways(d)
+    assert len(br) == 1 and br[0].source == "events" and br[0].direction == 1
+    assert abs(br[0].torque - 0.35) < 0.01
+    tr, va = D.split(d, 10.0)
+    assert tr.n == 10000 and va.n == 4000
+    with pytest.raises(D.ExcitationError, match="no validation"):
+        D.split(d, 14.0)
+
+
+def test_automatic_plateaus_without_events():
+    rec = synthetic.plateau_experiment([0.05, 0.5], hold=1.5)
+    d = D.prepare(rec.t, rec.position, rec.velocity, rec.effort)  # no events
+    pl = D.find_plateaus(d)
+    got = sorted(round(p.velocity, 2) for p in pl)
+    assert got == [-0.5, -0.05, 0.05, 0.5], got
+    assert all(p.source == "auto" for p in pl)
+
+
+# ------------------------------------------------------------------------------ metrics and learned maps
+def test_nmse_definition_and_recommendation():
+    y = np.sin(np.linspace(0, 10, 1000))
+    assert abs(metrics.nmse_percent(np.full_like(y, y.mean()), y) - 100.0) < 1e-9
+    assert metrics.nmse_percent(y, y) == 0.0
+    m = {
+        "a": {"bic": -100.0, "nmse_low_percent": 1.0, "n_params": 15},
+        "b": {"bic": -99.0, "nmse_low_percent": 1.01, "n_params": 9},
+    }
+    assert metrics.recommend(m) == "b"
+
+
+def test_anfis_and_nusvr_per_direction():
+    v = np.concatenate([np.geomspace(0.01, 2, 60), -np.geomspace(0.01, 2, 60)])
+    f = (0.2 + 0.05 * np.exp(-((np.abs(v) / 0.1) ** 2)) + 0.02 * np.abs(v)) * np.sign(v)
+    f[v < 0] *= 0.9  # asymmetric
+    a = learned.fit_directional("anfis", v, f)
+    s = learned.fit_directional("nusvr", v, f)
+    # epsilon-completeness initialisation: both MFs 0.5 at the midpoint
+    x = np.array([0.0, 1.0])
+    wb, mu = learned.Anfis._wbar(np.array([0.5]), x, np.full(2, 1.0 / (2 * math.sqrt(2 * math.log(2)))))
+    assert np.allclose(mu, 0.5)
+    for mdl in (a, s):
+        err = mdl.steady_state(v) - f
+        assert np.sqrt(np.mean(err**2)) < 0.02
+        assert mdl.steady_state(np.array([0.0]))[0] == 0.0
