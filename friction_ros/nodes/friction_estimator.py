@@ -48,7 +48,13 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param("publish_every", 1, "publish one estimate every N samples", lo=1, hi=100000),
+    Param(
+        "publish_every",
+        10,
+        "publish one estimate every N samples (every sample is still processed)",
+        lo=1,
+        hi=100000,
+    ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
 DOCS = {

@@ -248,16 +248,19 @@ class FixedRateLoop:
     """Run ``callback()`` at a fixed period on a dedicated thread, counting overruns.
 
     rclpy timers drift at 1 kHz (anchors: rcl#289, rclpy#1452); this loop sleeps to absolute
-    deadlines on the monotonic clock and spins the last ~0.2 ms for accuracy. A cycle that starts
+    deadlines on the monotonic clock. It does not busy-wait: a Python spin holds the GIL and would
+    delay the executor thread (command callbacks) by up to the interpreter's switch interval;
+    ``spin`` > 0 re-enables a final busy-wait for timing accuracy at that cost. A cycle that starts
     more than one period late counts as an overrun and the schedule is re-anchored (no burst of
     catch-up cycles).
     """
 
-    SPIN_S = 0.0002
-
-    def __init__(self, period: float, callback: Callable[[], None], name: str = "control_loop"):
+    def __init__(
+        self, period: float, callback: Callable[[], None], name: str = "control_loop", spin: float = 0.0
+    ):
         if not period > 0:
             raise ParameterError(f"loop period = {period} must be > 0 s")
+        self.SPIN_S = spin
         self.period = period
         self.callback = callback
         self.stats = LoopStats()
@@ -279,7 +282,7 @@ class FixedRateLoop:
             remaining = next_t - now
             if remaining > self.SPIN_S:
                 time.sleep(remaining - self.SPIN_S)
-            while time.monotonic() < next_t:
+            while self.SPIN_S and time.monotonic() < next_t:
                 pass
             start = time.monotonic()
             lateness = start - next_t
@@ -291,6 +294,49 @@ class FixedRateLoop:
             self.stats.cycles += 1
             self.stats.last_exec = time.monotonic() - start
             next_t += self.period
+
+
+class DeadlineLoop:
+    """Fixed-rate loop run by the node's own executor thread (no second Python thread).
+
+    Between deadlines the executor processes callbacks (``spin_once`` with the time left as the
+    timeout); at each deadline ``callback()`` runs. Compared with :class:`FixedRateLoop` there is no
+    GIL hand-over between a loop thread and the executor thread, which otherwise delays command
+    callbacks by up to the interpreter's switch interval (5 ms). :func:`run_node` drives it when a
+    node's ``loop`` attribute is a DeadlineLoop. Same statistics and overrun rule as FixedRateLoop.
+    """
+
+    def __init__(self, period: float, callback: Callable[[], None]):
+        if not period > 0:
+            raise ParameterError(f"loop period = {period} must be > 0 s")
+        self.period = period
+        self.callback = callback
+        self.stats = LoopStats()
+        self._next: float | None = None
+
+    def stop(self, timeout: float = 0.0) -> None:
+        self._next = None
+
+    def run_once(self, executor, max_wait: float = 0.05) -> None:
+        """Process callbacks until the next deadline (at most ``max_wait``), then tick if it is due."""
+        now = time.monotonic()
+        if self._next is None:
+            self._next = now
+        remaining = self._next - now
+        if remaining > 0:
+            executor.spin_once(timeout_sec=min(remaining, max_wait))
+            if time.monotonic() < self._next:
+                return
+        start = time.monotonic()
+        lateness = start - self._next
+        self.stats.max_lateness = max(self.stats.max_lateness, lateness)
+        if lateness > self.period:
+            self.stats.overruns += 1
+            self._next = start
+        self.callback()
+        self.stats.cycles += 1
+        self.stats.last_exec = time.monotonic() - start
+        self._next += self.period
 
 
 class DiagnosticsPublisher:
@@ -370,7 +416,11 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     signal.signal(signal.SIGINT, _on_signal)
     executor = make_executor()
     executor.add_node(node)
+    loop = getattr(node, "loop", None)
     try:
+        if isinstance(loop, DeadlineLoop):
+            while not stop.is_set() and rclpy.ok():
+                loop.run_once(executor)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
     except rclpy.executors.ExternalShutdownException:

@@ -38,8 +38,8 @@ from friction_ros.nodes.node_utils import (
     OK,
     STATE_QOS,
     WARN,
+    DeadlineLoop,
     DiagnosticsPublisher,
-    FixedRateLoop,
     Param,
     add_runtime_validation,
     declare,
@@ -98,8 +98,8 @@ PARAMS = [
     ),
     Param(
         "clock_period",
-        0.001,
-        "lockstep: publish /clock every this much simulated time (>= control period)",
+        0.01,
+        "lockstep: publish /clock every this much simulated time (0: every period)",
         lo=0.0,
         hi=1.0,
         unit="s",
@@ -171,8 +171,7 @@ class PlantSimulator(Node):
             self.loop = None
         else:
             self._t0_ns = self.get_clock().now().nanoseconds
-            self.loop = FixedRateLoop(self.dt, self._tick, name="plant_loop")
-            self.loop.start()
+            self.loop = DeadlineLoop(self.dt, self._tick)  # driven by run_node's executor loop
         self.get_logger().info(
             f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
             f"command scale {self.scale:.6g} (plant unit per N*m)"
