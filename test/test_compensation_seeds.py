@@ -2,8 +2,10 @@
 
 Goals of issue 4 that the simulation does NOT reach are not asserted here; the benchmark prints
 their figures (see the report / README): the 0.4 rad PTP ranking (gain scheduling does not end
-within 1e-4 rad, the cascade is faster; DNPF hunts instead of stopping short), seed 001 item 7 and
-the seed 002 P-control limit cycle. Seed 003 runs use the truth GMS with presliding micro-damping
+within 1e-4 rad, the cascade is faster; DNPF hunts instead of stopping short) and the seed 002
+P-control limit cycle. Seed 001 item 7 is met on the thesis's own plant model (explicit F(v),
+sgn(0) = 0, no stick logic); with the preset's GKF stick logic it is not (ratio ~1, asserted as the
+documented cause: the backward-difference velocity is exactly 0 while stuck, so F_hat = 0). Seed 003 runs use the truth GMS with presliding micro-damping
 (bench.SIGMA1, see bench/compensation.py).
 """
 
@@ -58,6 +60,36 @@ def test_seed003_table3_thresholds(table3):
         and table3["LuGre"]["rms_error"] < table3["Coulomb"]["rms_error"]
     )
     assert table3["GMS"]["rms_error"] <= table3["LuGre"]["rms_error"]
+
+
+@pytest.fixture(scope="module")
+def seed001():
+    return bench.seed001(quick=True)
+
+
+def test_seed001_item7_compensated_rms_at_most_25_percent_thesis_model(seed001):
+    res = seed001["item7"]["thesis model"]  # 40 s of the parabola (extract 9.7 full 141 s: 0.797 / 0.138)
+    unc = res["uncompensated"]["rms_deviation"]
+    comp = res["compensated k_c=0.95"]["rms_deviation"]
+    assert 0.6 < unc < 1.0  # lags T(s) by ~ the 1 rad break-away error
+    assert res["ratio"] <= 0.25 - 0.05  # goal <= 25 %; ours ~14 % (40 s), ~17 % (141 s)
+    assert comp < 0.15 and res["compensated k_c=0.95"]["max_deviation"] < 1.0
+    assert res["compensated k_c=0.95"]["max_command"] < bench.SEED001_LOOP["u_clamp_max"]
+
+
+def test_seed001_stick_logic_plant_disables_measured_velocity_compensation(seed001):
+    # the cause of the 0.90 ratio: exact sticking -> omega_hat == 0 -> F_hat(0) = 0 (sgn(0) = 0)
+    assert seed001["item7"]["GKF stick logic (preset)"]["ratio"] > 0.8
+    rs = seed001["item8"]["GKF stick logic (preset)"]  # |u| <= 1 rad < F_ST: never breaks away
+    assert rs["compensated k_c=0.95"]["rms_deviation"] == rs["uncompensated"]["rms_deviation"]
+    # on the thesis model the random steps move the compensated shaft (thesis Fig. 5.8)
+    assert seed001["item8"]["thesis model"]["ratio"] < 0.95
+
+
+def test_seed001_item9_thesis_model_over_compensation_runs_away(seed001):
+    m = seed001["item9"]["thesis model"]
+    assert m["F_hat = 1.1 F, k_c = 1"] > 0.5  # negative friction: self-motion
+    assert m["accurate, k_c = 0.95"] < 0.02  # stops (friction-free coast would be 0.05 rad)
 
 
 def test_seed001_item9_over_compensation_self_motion():
