@@ -14,6 +14,7 @@ ENTRY_POINTS = [
     "plant_simulator = friction_ros.nodes.plant_simulator:main",
     "compensating_controller = friction_ros.nodes.compensating_controller:main",
     "friction_estimator = friction_ros.nodes.friction_estimator:main",
+    "simulated_drive = friction_ros.nodes.simulated_drive:main",
     "friction-bringup = friction_ros.cli.bringup:main",
     "friction-demo = friction_ros.cli.demo:main",
     "bag_recorder = friction_ros.nodes.bag_recorder:main",

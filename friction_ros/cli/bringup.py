@@ -33,6 +33,7 @@ import yaml
 from friction_ros.core.validation import ParameterError
 
 NODES = (
+    "simulated_drive",
     "plant_simulator",
     "compensating_controller",
     "friction_estimator",
@@ -42,10 +43,12 @@ NODES = (
 )
 # Stop order: whatever commands torque goes first, so it can publish zero before the rest exits.
 STOP_ORDER = (
+    "identification_experiment",
     "compensating_controller",
     "friction_estimator",
     "bag_recorder",
     "drive_interface",
+    "simulated_drive",
     "plant_simulator",
 )
 
@@ -58,13 +61,14 @@ class NodeSpec:
     namespace: str = ""
     params: list[str] = field(default_factory=list)
     overrides: dict[str, object] = field(default_factory=dict)
+    args: list[str] = field(default_factory=list)  # node options before --ros-args (simulated_drive)
 
     def command(self) -> list[str]:
         if self.node not in NODES:
             raise ParameterError(
                 f"node {self.node!r} is not a friction_ros node: must be one of {', '.join(NODES)}"
             )
-        cmd = [sys.executable, "-m", f"friction_ros.nodes.{self.node}", "--ros-args"]
+        cmd = [sys.executable, "-m", f"friction_ros.nodes.{self.node}", *self.args, "--ros-args"]
         if self.namespace:
             cmd += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
         for p in self.params:

@@ -42,6 +42,8 @@ DEFAULT_REFERENCE = {
 }
 # seed 003's PD (Kp = 200 N m/rad, Kd = 0.15 N m s/rad) at 1 kHz
 DEFAULT_GAINS = {"p": 200.0, "d": 0.15}
+# real time (CAN path): one period of command delay and scheduling jitter -> softer gains
+REALTIME_GAINS = {"p": 30.0, "i": 60.0, "d": 0.3}
 SCHEMES = ("feedforward", "feedback", "blended")
 
 
@@ -125,8 +127,14 @@ def controller_document(
 
 
 # -- step 3 -------------------------------------------------------------------------------------------
-def track(preset: str, params_file: Path, duration: float, label: str, joint: str = "joint1") -> TrackingRun:
-    """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds."""
+def track(
+    preset: str, params_file: Path, duration: float, label: str, joint: str = "joint1", can_path: bool = False
+) -> TrackingRun:
+    """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
+
+    ``can_path``: instead, the real drive_interface node talks CAN frames to the emulated drive
+    (``simulated_drive``) in real time, and the controller runs on the wall clock.
+    """
     import threading
 
     import rclpy
@@ -136,12 +144,24 @@ def track(preset: str, params_file: Path, duration: float, label: str, joint: st
     from friction_ros.cli.bringup import Bringup, NodeSpec
     from friction_ros.nodes.node_utils import STATE_QOS
 
-    specs = [
-        NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
-        NodeSpec(
-            "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
-        ),
-    ]
+    if can_path:
+        specs = [
+            NodeSpec(
+                "simulated_drive",
+                "",
+                [],
+                {"joint_name": joint, "torque_limit": 5.0, "enable_on_start": True},
+                args=["--preset", preset],
+            ),
+            NodeSpec("compensating_controller", "", [str(params_file)], {"joint_name": joint}),
+        ]
+    else:
+        specs = [
+            NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
+            NodeSpec(
+                "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
+            ),
+        ]
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
@@ -166,7 +186,7 @@ def track(preset: str, params_file: Path, duration: float, label: str, joint: st
             if bring.failed():
                 out = "\n".join(sum(bring.output.values(), [])[-20:])
                 raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
-            t_sim = _stamp(states[-1]) if states else 0.0
+            t_sim = _stamp(states[-1]) - _stamp(states[0]) if states else 0.0
             if t_sim >= duration:
                 break
             if time.monotonic() - t0 > 60 + 20 * duration:
@@ -186,13 +206,14 @@ def track(preset: str, params_file: Path, duration: float, label: str, joint: st
         flush=True,
     )
     by_k: dict[int, object] = {}
+    t_first = _stamp(states[0]) if states else 0.0
     for m in states:
-        by_k[int(round(_stamp(m) * 1000))] = m
+        by_k[int(round((_stamp(m) - t_first) * 1000))] = m
     ks = sorted(k for k in by_k if k <= duration * 1000)
     msgs = [by_k[k] for k in ks]
     return TrackingRun(
         label=label,
-        t=np.array([_stamp(m) for m in msgs]),
+        t=np.array([_stamp(m) - t_first for m in msgs]),
         reference=np.array([m.reference_position for m in msgs]),
         position=np.array([m.position for m in msgs]),
         error=np.array([m.error for m in msgs]),
@@ -326,14 +347,21 @@ def run(args) -> DemoResult:
     res.params_file = str(params_file)
     _say(f"   recommended model: {name}; parameters -> {params_file.relative_to(ROOT)}")
 
-    _say(f"3/4 tracking runs ({args.duration:g} s each, lockstep): none, " + ", ".join(SCHEMES))
+    path = "CAN path, real time" if args.can else "lockstep"
+    _say(f"3/4 tracking runs ({args.duration:g} s each, {path}): none, " + ", ".join(SCHEMES))
     reference = dict(DEFAULT_REFERENCE, duration=max(args.duration, 1.0))
     t = time.monotonic()
     runs_spec = [("none", None)] + [(s, model.config) for s in SCHEMES]
     for label, cfg in runs_spec:
         f = results_dir / f"controller_{label}.yaml"
-        f.write_text(dump_yaml(controller_document(cfg, inertia, label, reference, DEFAULT_GAINS)))
-        res.runs[label] = track(args.preset, f, args.duration, label, args.joint)
+        f.write_text(
+            dump_yaml(
+                controller_document(
+                    cfg, inertia, label, reference, REALTIME_GAINS if args.can else DEFAULT_GAINS
+                )
+            )
+        )
+        res.runs[label] = track(args.preset, f, args.duration, label, args.joint, can_path=args.can)
     res.timings["tracking"] = time.monotonic() - t
 
     _say("4/4 results")
@@ -390,6 +418,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--results", help="results folder (default results/demo_<preset>_<time>)")
     p.add_argument("--quick", action="store_true", help="shorter fit and tracking runs (tests, CI)")
+    p.add_argument(
+        "--can",
+        action="store_true",
+        help="tracking runs on the CAN path: drive_interface + emulated ODrive (real time, simulated_drive)",
+    )
     return p
 
 
