@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).resolve().parent / "results"
+_TABLES: list[str] = []  # every table printed by this benchmark run (copied into README by make bench)
 
 
 def machine() -> dict:
@@ -31,11 +32,15 @@ def print_table(title: str, headers: list[str], rows: list[list]) -> None:
 
     cells = [[fmt(c) for c in r] for r in rows]
     widths = [max(len(h), *(len(r[i]) for r in cells)) if cells else len(h) for i, h in enumerate(headers)]
-    print(f"\n{title}")
-    print("| " + " | ".join(h.ljust(w) for h, w in zip(headers, widths)) + " |")
-    print("|" + "|".join("-" * (w + 2) for w in widths) + "|")
-    for r in cells:
-        print("| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |")
+    lines = [
+        f"{title}",
+        "",
+        "| " + " | ".join(h.ljust(w) for h, w in zip(headers, widths)) + " |",
+        "|" + "|".join("-" * (w + 2) for w in widths) + "|",
+    ]
+    lines += ["| " + " | ".join(c.ljust(w) for c, w in zip(r, widths)) + " |" for r in cells]
+    print("\n" + "\n".join(lines[:1] + lines[2:]))
+    _TABLES.append("\n".join(lines))
 
 
 def write_results(name: str, figures: dict, command: str | None = None) -> Path:
@@ -47,6 +52,7 @@ def write_results(name: str, figures: dict, command: str | None = None) -> Path:
         "command": command or f".venv/bin/python bench/{name}.py",
         "machine": machine(),
         "figures": figures,
+        "tables": list(_TABLES),
     }
     path.write_text(json.dumps(payload, indent=2, default=float) + "\n")
     print(f"\nwrote {path.relative_to(RESULTS.parent.parent)}")

@@ -9,3 +9,4 @@ for b in bench/*.py; do
   echo "== $b"
   .venv/bin/python "$b" "$@"
 done
+.venv/bin/python scripts/update-readme-results.py
