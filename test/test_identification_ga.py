@@ -23,8 +23,13 @@ def test_initialisation_uniform_in_ranges():
 def test_no_clipping_after_initialisation():
     # a quadratic with its optimum at 4.37 (outside [0.01, 1.5]): the GA must get there (gamma case)
     target = np.array([4.3743, 0.2])
-    res = ga.run_ga(lambda P: np.sum((P - target) ** 2, axis=1), np.full(2, 0.01), np.full(2, 1.5),
-                    max_generations=400, seed=2)
+    res = ga.run_ga(
+        lambda P: np.sum((P - target) ** 2, axis=1),
+        np.full(2, 0.01),
+        np.full(2, 1.5),
+        max_generations=400,
+        seed=2,
+    )
     assert res.best[0] > 1.5
     assert abs(res.best[0] - 4.3743) < 0.05
 
@@ -70,7 +75,9 @@ def test_mask_freezes_genes():
     w1, w2, _ = ga.crossover(p, p[::-1].copy(), rng, mask)
     assert w1[1] == 0.6 and w2[3] == p[::-1][3]
     init = ga.initial_population(lo, hi, 10, np.random.default_rng(9))
-    res = ga.run_ga(lambda P: np.sum(P**2, axis=1), lo, hi, mask=mask, initial=init.copy(), max_generations=30)
+    res = ga.run_ga(
+        lambda P: np.sum(P**2, axis=1), lo, hi, mask=mask, initial=init.copy(), max_generations=30
+    )
     assert np.array_equal(res.parents[:, ~mask], init[:, ~mask])
 
 
@@ -85,13 +92,25 @@ def test_crossover_is_convex_combination():
 
 
 def test_fit_never_increases_per_parent_and_termination():
-    res = ga.run_ga(lambda P: np.sum((P - 0.3) ** 2, axis=1), np.full(3, 0.01), np.full(3, 1.5),
-                    max_generations=200, threshold=1e-6, seed=0)
+    res = ga.run_ga(
+        lambda P: np.sum((P - 0.3) ** 2, axis=1),
+        np.full(3, 0.01),
+        np.full(3, 1.5),
+        max_generations=200,
+        threshold=1e-6,
+        seed=0,
+    )
     H = np.array(res.parent_history)
     assert np.all(np.diff(H, axis=0) <= 0)  # elitist per-Parent replacement
     assert res.reason == "threshold" and res.best_fit <= 1e-6
-    res = ga.run_ga(lambda P: np.ones(P.shape[0]), np.full(2, 0.01), np.full(2, 1.5),
-                    max_generations=1000, stagnation=25, seed=0)
+    res = ga.run_ga(
+        lambda P: np.ones(P.shape[0]),
+        np.full(2, 0.01),
+        np.full(2, 1.5),
+        max_generations=1000,
+        stagnation=25,
+        seed=0,
+    )
     assert res.reason == "stagnation" and res.generations == 25
 
 

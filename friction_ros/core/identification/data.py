@@ -332,6 +332,11 @@ def find_plateaus(
             if i1 - i0 < max(int(min_duration / dt / 3), 5):
                 continue
             vv, tt = v[i0:i1], tau[i0:i1]
+            # not at the commanded speed (stuck or stick-slip below the breakaway): not a plateau
+            if math.isfinite(s.target) and abs(vv.mean() - s.target) > 0.2 * abs(s.target):
+                continue
+            if vv.std() > 0.6 * abs(vv.mean()):
+                continue
             out.append(
                 Plateau(
                     data.t[i0],

@@ -86,7 +86,8 @@ def dahl_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def dahl_gram(P, v, a, tau, dt):
+def dahl_gram(P, vm, v, a, tau, dt):
+    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
     npop = P.shape[0]
     n = v.shape[0]
     m = 4
@@ -97,12 +98,12 @@ def dahl_gram(P, v, a, tau, dt):
         feats = np.empty(m)
         gram = np.zeros((m, m))
         for k in range(n):
-            vk = v[k]
+            vk = vm[k]
             if vk != 0.0:
                 s = _sgn(vk)
                 g = s + (g - s) * math.exp(-st * abs(vk) * dt)
             feats[0] = g
-            feats[1] = vk
+            feats[1] = v[k]
             feats[2] = a[k]
             feats[3] = tau[k]
             _accumulate(gram, feats, m)
@@ -139,7 +140,8 @@ def lugre_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def lugre_gram(P, v, a, tau, dt):
+def lugre_gram(P, vm, v, a, tau, dt):
+    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
     npop = P.shape[0]
     n = v.shape[0]
     m = 5
@@ -150,11 +152,10 @@ def lugre_gram(P, v, a, tau, dt):
         feats = np.empty(m)
         gram = np.zeros((m, m))
         for k in range(n):
-            vk = v[k]
-            w, zd = _lugre_step(w, vk, r, vs, delta, s0, dt)
+            w, zd = _lugre_step(w, vm[k], r, vs, delta, s0, dt)
             feats[0] = w
             feats[1] = zd
-            feats[2] = vk
+            feats[2] = v[k]
             feats[3] = a[k]
             feats[4] = tau[k]
             _accumulate(gram, feats, m)
@@ -204,7 +205,8 @@ def gms_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def gms_gram(P, v, a, tau, dt):
+def gms_gram(P, vm, v, a, tau, dt):
+    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
     npop = P.shape[0]
     n = v.shape[0]
     ne = P.shape[1] - 4
@@ -218,12 +220,12 @@ def gms_gram(P, v, a, tau, dt):
         feats = np.empty(m)
         gram = np.zeros((m, m))
         for k in range(n):
-            vk = v[k]
+            vk = vm[k]
             s = _shape(vk, r, vs, delta)
             _gms_step(G, stuck, vk, s, ct, xs, dt)
             for i in range(ne):
                 feats[i] = G[i]
-            feats[ne] = vk
+            feats[ne] = v[k]
             feats[ne + 1] = a[k]
             feats[ne + 2] = tau[k]
             _accumulate(gram, feats, m)

@@ -206,6 +206,7 @@ def fit_records(
     eps: float = DEFAULT_EPS,
     high_threshold: float | None = None,
     identifiability_check: bool = True,
+    two_stage: bool = True,
     progress: Callable[[str, float], None] | None = None,
     label: str = "data",
 ) -> FitResult:
@@ -269,9 +270,17 @@ def fit_records(
                 progress(name, 1.0)
         else:
             static0 = None
-            if static_from_plateaus and "stribeck" in results:
+            if static_from_plateaus and "stribeck" in results and results["stribeck"].method == "plateaus":
                 static0 = results["stribeck"].coefficients
             x0 = spec.initial_theta(static0) if static0 else None
+            if static0 and two_stage and spec.dynamic and "r" in spec.nonlinear:
+                # two-stage identification (anchors 3.3): the Stribeck curve from the plateaus is
+                # kept, only the presliding/dynamic coefficients are searched in the time domain
+                for nme in ("r", "vs", "delta"):
+                    i = spec.nonlinear.index(nme)
+                    val = float(np.clip(x0[i], spec.lower[i], spec.upper[i]))
+                    spec.lower[i], spec.upper[i] = val * 0.999, val * 1.001
+                    x0[i] = val
             if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
                 smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
                 if smaller:
