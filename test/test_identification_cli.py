@@ -194,3 +194,24 @@ def test_anfis_and_nusvr_per_direction():
         err = mdl.steady_state(v) - f
         assert np.sqrt(np.mean(err**2)) < 0.02
         assert mdl.steady_state(np.array([0.0]))[0] == 0.0
+
+
+def test_fit_kernels_match_the_friction_library():
+    """The normalised VarPro kernels reproduce the library's GMS and LuGre for the same coefficients."""
+    from friction_ros.core.friction import make_model
+    from friction_ros.core.identification import kernels
+
+    rng = np.random.default_rng(0)
+    v = np.repeat(rng.normal(0, 0.05, 400), 5) + 0.02 * np.sin(np.arange(2000) * 0.01)
+    dt = 1e-3
+    g = dict(fc=0.8, fs=0.95, vs=0.05, delta=2.0, attraction=50.0, fv=0.0, k=[190.0, 95.0], alpha=[0.4, 0.6])
+    lib = make_model("gms", **g).simulate(v, dt)
+    x = np.array(g["alpha"]) * g["fs"] / np.array(g["k"])
+    theta = np.array([g["fc"] / g["fs"], g["vs"], g["delta"], g["attraction"] / g["fs"], *x])
+    ours = kernels.gms_features(theta, v, dt) @ (np.array(g["alpha"]) * g["fs"])
+    assert np.max(np.abs(ours - lib)) < 1e-9
+    lg = dict(sigma0=600.0, sigma1=0.3, fv=0.0, fc=0.8, fs=0.95, vs=0.05, delta=2.0)
+    lib = make_model("lugre", **lg).simulate(v, dt)
+    th = np.array([lg["fc"] / lg["fs"], lg["vs"], lg["delta"], lg["sigma0"] / lg["fs"]])
+    ours = kernels.lugre_features(th, v, dt) @ np.array([lg["fs"], lg["sigma1"]])
+    assert np.max(np.abs(ours - lib)) < 1e-9
