@@ -65,14 +65,15 @@ def test_outputs_json_yaml_report(gms_fit):
     assert np.abs(js["models"]["gms4"]["steady_state"]["velocity"]).max() >= 0.9 * vmax
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     assert set(doc) == {"compensating_controller", "friction_estimator", "plant_simulator"}
-    from friction_ros.core.control.controller import CompensatingController
+    from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
     from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
     from friction_ros.core.friction import model_from_config
     from friction_ros.core.presets import preset_from_config
 
-    cfg = doc["compensating_controller"]["ros__parameters"]["friction"]["model"]
+    cfg = doc["compensating_controller"]["ros__parameters"]["friction"]
     assert model_from_config(cfg).name == "gms"
-    CompensatingController(doc["compensating_controller"]["ros__parameters"])
+    ctrl_cfg, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
+    assert CompensatingController(ctrl_cfg).friction.model.name == "gms"
     OnlineFrictionEstimator(doc["friction_estimator"]["ros__parameters"])
     pre = preset_from_config({"plant_simulator": doc["plant_simulator"]})
     assert pre.params.friction_motor.name == "gms"
@@ -86,7 +87,9 @@ def _round_trip(out):
     from friction_ros.core.harness import make_plant, run_closed_loop
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
-    fitted = doc["compensating_controller"]["ros__parameters"]
+    from friction_ros.core.control.controller import config_from_ros_parameters
+
+    fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
     truth = make_plant("abb_m19s").params.friction_motor.to_config()
     pd = {"p": 200.0, "d": 0.15}
     results = {}

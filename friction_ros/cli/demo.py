@@ -107,11 +107,11 @@ def run_experiment(preset: str, profile: str, bag: Path) -> None:
 
 
 # -- step 2 -------------------------------------------------------------------------------------------
-def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool):
+def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool, preset: str):
     from friction_ros.core.identification import fit_bag
 
     options = {"maxiter": 25} if quick else {}
-    return fit_bag([str(bag)], "/joint_states", joint, models, out_dir, **options)
+    return fit_bag([str(bag)], "/joint_states", joint, models, out_dir, plant_preset=preset, **options)
 
 
 def controller_document(
@@ -326,7 +326,7 @@ def run(args) -> DemoResult:
     _say(f"2/4 fitting {', '.join(args.models)} from the bag")
     t = time.monotonic()
     fit_dir = results_dir / "fit"
-    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick)
+    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, args.preset)
     res.timings["fit"] = time.monotonic() - t
     res.fit_dir = str(fit_dir)
     name = fit_result.recommended

@@ -607,22 +607,7 @@ class GearheadServoPlant:
             self._cmd_q.append(c)
             c = self._cmd_q.popleft() if len(self._cmd_q) > self._da else 0.0
         self._cmd[0] = c
-        _plant_run(
-            self._P,
-            self._x,
-            self._km,
-            self._pm,
-            self._sm,
-            self._dm,
-            self._kl,
-            self._pl,
-            self._sl,
-            self._dl,
-            self._cmd,
-            self._n_sub,
-            self._h,
-            self._out,
-        )
+        self._run(self._cmd, self._n_sub, self._h, self._out)
         self._t += dt
         m = self._measure(dt)
         if self._dmeas:
@@ -688,6 +673,13 @@ class GearheadServoPlant:
                 out[n][k] = getattr(m, n)
         return out
 
+    def _run(self, cmds: np.ndarray, n_sub: int, h: float, out: np.ndarray) -> None:
+        """Advance the compiled loop over ``cmds`` (one control period each) writing ``out`` rows."""
+        _plant_run(
+            self._P, self._x, self._km, self._pm, self._sm, self._dm, self._kl, self._pl, self._sl, self._dl,
+            cmds, n_sub, h, out,
+        )  # fmt: skip
+
     def run_open_loop(self, commands: Any, dt: float) -> np.ndarray:
         """Fast path: run a whole command sequence in one compiled call (no sensing, no delays).
 
@@ -697,21 +689,6 @@ class GearheadServoPlant:
         cmds = np.ascontiguousarray([self._current_ref(c) for c in np.asarray(commands, dtype=float).ravel()])
         n_sub, h = self.substeps(dt)
         out = np.empty((cmds.size, 7))
-        _plant_run(
-            self._P,
-            self._x,
-            self._km,
-            self._pm,
-            self._sm,
-            self._dm,
-            self._kl,
-            self._pl,
-            self._sl,
-            self._dl,
-            cmds,
-            n_sub,
-            h,
-            out,
-        )
+        self._run(cmds, n_sub, h, out)
         self._t += dt * cmds.size
         return out

@@ -156,3 +156,26 @@ def save_preset(preset: Preset, path: str | os.PathLike) -> Path:
     path = Path(path)
     path.write_text(yaml.safe_dump(preset.to_config(), sort_keys=False), encoding="utf-8")
     return path
+
+
+def resolve_preset(name_or_path: str, overrides: Mapping[str, Any] | None = None) -> Preset:
+    """A preset by name/path with its ``plant`` / ``friction_motor`` / ``friction_load`` sections
+    overridden (how plant_simulator combines ``preset`` with sections from parameter files).
+
+    A friction section that names a ``model`` replaces the preset's model as a whole; ``plant`` keys
+    are merged key by key. ``name_or_path`` = "" means no base preset: the sections are the whole
+    plant (as in a ``friction-fit`` parameter file), missing plant keys take their defaults.
+    """
+    overrides = dict(overrides or {})
+    if name_or_path:
+        doc = load_preset(name_or_path).to_config()[NODE_NAME]["ros__parameters"]
+    else:
+        doc = {"preset": "custom", "plant": {}}
+    for sec, given in overrides.items():
+        if not given:
+            continue
+        if sec.startswith("friction") and "model" in given:
+            doc[sec] = dict(given)
+        else:
+            doc[sec] = {**(doc.get(sec) or {}), **dict(given)}
+    return preset_from_config(doc, source=str(name_or_path) or "parameter file")

@@ -19,7 +19,6 @@ leaf (``pid.p``, ``compensation.source``, ``friction.model`` + that model's coef
 
 from __future__ import annotations
 
-import copy
 import math
 import time
 
@@ -29,7 +28,11 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from friction_ros.core.coefficient_exchange import from_fields
-from friction_ros.core.control.controller import CONTROLLER_DEFAULTS, CompensatingController
+from friction_ros.core.control.controller import (
+    CONTROLLER_DEFAULTS,
+    CompensatingController,
+    config_from_ros_parameters,
+)
 from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
@@ -98,24 +101,6 @@ SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
 DEFAULT_REFERENCE = {"type": "constant"}
 
 
-def node_to_core(values: dict) -> tuple[dict, dict]:
-    """ROS parameters (nested) -> (core controller config, reference config).
-
-    ROS layout: ``compensation.*`` holds the compensator options and ``friction.*`` the friction
-    model (``friction.model`` = model name + its coefficients, as written by ``friction-fit`` and the
-    presets); the core keeps the model inside its ``friction`` section.
-    """
-    cfg = {k: values[k] for k in TOP_KEYS if k in values}
-    for s in SCHEME_SECTIONS:
-        if s in values:
-            cfg[s] = copy.deepcopy(values[s])
-    comp = dict(values.get("compensation", {}))
-    model = dict(values.get("friction", {}))
-    comp["model"] = model if model.get("model", "none") not in ("none", "") else None
-    cfg["friction"] = comp
-    return cfg, dict(values.get("reference", DEFAULT_REFERENCE))
-
-
 class CompensatingControllerNode(Node):
     """Thin adapter over CompensatingController; see the module docstring."""
 
@@ -145,7 +130,7 @@ class CompensatingControllerNode(Node):
         self.specs = specs
         values = declare(self, specs)
         self.values = unflatten(values)
-        cfg, ref_cfg = node_to_core(self.values)
+        cfg, ref_cfg = config_from_ros_parameters(self.values)
         self.controller = CompensatingController(cfg)  # ParameterError -> refuses to start
         self.reference = reference_from_config(ref_cfg)
         self.trajectory: TrajectoryReference | None = None
@@ -190,7 +175,7 @@ class CompensatingControllerNode(Node):
         values = unflatten(
             {k: (list(v) if hasattr(v, "tolist") or isinstance(v, tuple) else v) for k, v in flat.items()}
         )
-        cfg, ref_cfg = node_to_core(values)
+        cfg, ref_cfg = config_from_ros_parameters(values)
         new_ctrl = CompensatingController(cfg)  # raises ParameterError -> change rejected
         new_ref = reference_from_config(ref_cfg)
         self.controller, self.reference, self.values = new_ctrl, new_ref, values

@@ -31,7 +31,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.harness import command_scale
-from friction_ros.core.presets import load_preset, preset_from_config
+from friction_ros.core.presets import resolve_preset
 from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
@@ -53,7 +53,7 @@ PARAMS = [
     Param(
         "preset",
         "abb_m19s",
-        "plant preset: a name in params/ (abb_m19s, seed002_x ...) or a YAML path",
+        "plant preset: a name in params/ (abb_m19s, seed002_x ...), a YAML path, or '' (the plant.* / friction_*.* parameters are the whole plant)",
         read_only=True,
     ),
     Param("description", "", "free text describing the preset", read_only=True),
@@ -125,15 +125,7 @@ class PlantSimulator(Node):
             for s in ("plant", "friction_motor", "friction_load")
         }
         self.p = declare(self, PARAMS)
-        preset = load_preset(self.p["preset"])
-        doc = preset.to_config()["plant_simulator"]["ros__parameters"]
-        for s, given in sections.items():
-            if given:
-                if s.startswith("friction") and "model" in given:
-                    doc[s] = dict(given)  # a model in the file replaces the preset's model
-                else:
-                    doc[s] = {**(doc.get(s) or {}), **given}
-        self.preset = preset_from_config(doc, source=self.p["preset"])
+        self.preset = resolve_preset(self.p["preset"], sections)
         self.plant = self.preset.make_plant()
         self.scale = command_scale(self.plant)
         self.dt = self.p["control_period"]

@@ -124,6 +124,27 @@ def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
     return out
 
 
+def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """compensating_controller ROS parameters (nested) -> (core controller config, reference config).
+
+    The ROS layout (README "Key parameters", written by ``friction-fit``) keeps the friction model and
+    the way it is applied apart: ``friction`` is a library model config (``{model: gms, fc: ...}``)
+    and ``compensation`` holds source, gain, blend, smoothing; the core keeps the model inside its
+    ``friction`` section. ``reference`` configures the built-in reference generator. Dotted keys
+    are accepted too. Keys of the node itself (joint_name, control_period ...) are ignored here.
+    """
+    if any("." in str(k) for k in values):
+        values = unflatten(values)
+    cfg: dict[str, Any] = {
+        k: copy.deepcopy(values[k]) for k in CONTROLLER_DEFAULTS if k in values and k != "friction"
+    }
+    comp = dict(values.get("compensation") or {})
+    model = dict(values.get("friction") or {})
+    comp["model"] = model if model.get("model", "none") not in ("none", "", None) else None
+    cfg["friction"] = comp
+    return cfg, dict(values.get("reference") or {"type": "constant"})
+
+
 def default_config() -> dict[str, Any]:
     """A deep copy of :data:`CONTROLLER_DEFAULTS`."""
     return copy.deepcopy(CONTROLLER_DEFAULTS)

@@ -169,13 +169,19 @@ def parameter_document(config: dict, inertia: float, *, description: str = "", p
             pc["motor_inertia"] = float(inertia)
         plant = pc
     return {
+        # node layout (config_from_ros_parameters): friction = the model, compensation = how it is applied
         "compensating_controller": {
-            "ros__parameters": {"inertia": float(inertia), "friction": {"model": config}}
+            "ros__parameters": {
+                "inertia": float(inertia),
+                "friction": config,
+                "compensation": {"source": "feedforward", "gain": 1.0},
+            }
         },
         "friction_estimator": {"ros__parameters": estimator_section(config, inertia)},
         "plant_simulator": {
             "ros__parameters": {
-                "preset": "identified",
+                # "" = no base preset: the plant section below is the whole plant
+                "preset": str(plant_preset) if plant_preset else "",
                 "description": description or f"identified by friction-fit ({config.get('model')})",
                 "plant": plant,
                 "friction_motor": config,

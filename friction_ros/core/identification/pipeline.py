@@ -278,9 +278,9 @@ def fit_records(
                 # kept, only the presliding/dynamic coefficients are searched in the time domain
                 for nme in ("r", "vs", "delta"):
                     i = spec.nonlinear.index(nme)
-                    val = float(np.clip(x0[i], spec.lower[i], spec.upper[i]))
-                    spec.lower[i], spec.upper[i] = val * 0.999, val * 1.001
-                    x0[i] = val
+                    fixed = float(np.clip(x0[i], spec.lower[i], spec.upper[i]))
+                    spec.lower[i], spec.upper[i] = fixed * 0.999, fixed * 1.001
+                    x0[i] = fixed
             if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
                 smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
                 if smaller:
