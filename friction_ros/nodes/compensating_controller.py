@@ -19,6 +19,7 @@ leaf (``pid.p``, ``compensation.source``, ``friction.model`` + that model's coef
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 
@@ -31,6 +32,7 @@ from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.control.controller import (
     CONTROLLER_DEFAULTS,
     CompensatingController,
+    ControllerTerms,
     config_from_ros_parameters,
 )
 from friction_ros.core.references import reference_from_config
@@ -99,6 +101,12 @@ UNITS = {
 }
 SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
 DEFAULT_REFERENCE = {"type": "constant"}
+
+
+# ControllerTerms fields copied into friction_msgs/ControllerState every period (hot path: no asdict)
+_STATE_FIELDS = tuple(
+    f.name for f in dataclasses.fields(ControllerTerms) if f.name not in ("time", "mode", "saturated")
+)
 
 
 class CompensatingControllerNode(Node):
@@ -254,9 +262,10 @@ class CompensatingControllerNode(Node):
         st = ControllerState()
         st.header.stamp = msg.header.stamp
         st.joint_name = self.joint
-        for k, v in terms.as_dict().items():
-            if k != "time":
-                setattr(st, k, v if isinstance(v, (str, bool)) else float(v))
+        for k in _STATE_FIELDS:
+            setattr(st, k, float(getattr(terms, k)))
+        st.mode = terms.mode
+        st.saturated = bool(terms.saturated)
         self.state_pub.publish(st)
 
     def _publish_command(self, stamp, torque: float) -> None:

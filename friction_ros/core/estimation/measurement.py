@@ -35,17 +35,14 @@ class _CriticalLowPass:
         self.x = None
 
     def _matrices(self, dt: float):
+        """Exact ZOH matrices in closed form (A = [[0, 1], [-w^2, -2w]] has a double pole at -w):
+        e^{Ah} = e^{-wh} [[1 + wh, h], [-w^2 h, 1 - wh]], Bd = [1 - e^{-wh}(1 + wh), w^2 h e^{-wh}]
+        (the step response of w^2/(s+w)^2 and its derivative). Cached per dt."""
         if self._dt != dt:
-            from scipy.linalg import expm
-
-            w = self.w
-            A = np.array([[0.0, 1.0], [-w * w, -2.0 * w]])
-            B = np.array([[0.0], [w * w]])
-            M = np.zeros((3, 3))
-            M[:2, :2] = A * dt
-            M[:2, 2:] = B * dt
-            E = expm(M)
-            self._Ad, self._Bd = E[:2, :2], E[:2, 2]
+            w, h = self.w, dt
+            e = math.exp(-w * h)
+            self._Ad = np.array([[e * (1.0 + w * h), e * h], [-e * w * w * h, e * (1.0 - w * h)]])
+            self._Bd = np.array([1.0 - e * (1.0 + w * h), w * w * h * e])
             self._dt = dt
         return self._Ad, self._Bd
 
