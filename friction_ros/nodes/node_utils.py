@@ -22,6 +22,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
 import rclpy
 import rclpy.exceptions
 import rclpy.parameter
@@ -337,6 +338,36 @@ class DeadlineLoop:
         self.stats.cycles += 1
         self.stats.last_exec = time.monotonic() - start
         self._next += self.period
+
+
+class LatencyHistogram:
+    """Constant-memory latency statistics: 10 us bins up to 100 ms (+ overflow), exact max.
+
+    A soak of hours must not grow memory (a list of samples did: ~30 MB per 10 minutes at 1 kHz).
+    Percentiles are resolved to one bin (10 us).
+    """
+
+    BIN_S = 1e-5
+    BINS = 10_000
+
+    def __init__(self):
+        self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
+        self.n = 0
+        self.max = 0.0
+
+    def add(self, seconds: float) -> None:
+        i = int(seconds / self.BIN_S) if seconds > 0 else 0
+        self.counts[min(i, self.BINS)] += 1
+        self.n += 1
+        if seconds > self.max:
+            self.max = seconds
+
+    def percentile(self, q: float) -> float:
+        """Upper edge of the bin holding the q-th percentile (s); NaN without samples."""
+        if self.n == 0:
+            return math.nan
+        k = int(np.searchsorted(np.cumsum(self.counts), q / 100.0 * self.n))
+        return min((k + 1) * self.BIN_S, self.max) if k < self.BINS else self.max
 
 
 class DiagnosticsPublisher:

@@ -24,7 +24,6 @@ import math
 import threading
 import time
 
-import numpy as np
 from rclpy.node import Node
 from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
@@ -40,6 +39,7 @@ from friction_ros.nodes.node_utils import (
     WARN,
     DeadlineLoop,
     DiagnosticsPublisher,
+    LatencyHistogram,
     Param,
     add_runtime_validation,
     declare,
@@ -145,7 +145,7 @@ class PlantSimulator(Node):
         self._commands_rejected = 0
         self._commands_ignored = 0
         self._steps = 0
-        self._latency: list[float] = []
+        self._latency = LatencyHistogram()
         self._last_state_wall = 0.0
         self.plant.reset(position=self.p["initial_position"])
         self._t_ns = 0
@@ -213,9 +213,7 @@ class PlantSimulator(Node):
         if sent:
             with self._lock:
                 self._answered_ns = sent
-            self._latency.append(self.get_clock().now().nanoseconds * 1e-9 - sent * 1e-9)
-            if len(self._latency) > 2_000_000:
-                del self._latency[:1_000_000]
+            self._latency.add(self.get_clock().now().nanoseconds * 1e-9 - sent * 1e-9)
 
     # -- stepping -------------------------------------------------------------------------------------
     def _advance(self, torque: float) -> None:
@@ -270,10 +268,9 @@ class PlantSimulator(Node):
                 stale = time.monotonic() - self._command_wall > self.p["command_timeout"]
             if stale:
                 level, text = WARN, "no fresh command: applying zero torque"
-            if self._latency:
-                lat = np.asarray(self._latency[-5000:])
+            if self._latency.n:
                 values.update(
-                    latency_p50_s=float(np.percentile(lat, 50)), latency_p99_s=float(np.percentile(lat, 99))
+                    latency_p50_s=self._latency.percentile(50), latency_p99_s=self._latency.percentile(99)
                 )
         if self._commands_rejected:
             level, text = max(level, WARN), f"{self._commands_rejected} non-finite commands rejected"
@@ -299,13 +296,12 @@ class PlantSimulator(Node):
                 rate_hz=s.cycles / wall if wall > 0 else 0.0,
                 max_lateness_s=s.max_lateness,
             )
-            if self._latency:
-                lat = np.asarray(self._latency)
+            if self._latency.n:
                 out.update(
-                    latency_samples=int(lat.size),
-                    latency_p50_s=float(np.percentile(lat, 50)),
-                    latency_p99_s=float(np.percentile(lat, 99)),
-                    latency_max_s=float(lat.max()),
+                    latency_samples=self._latency.n,
+                    latency_p50_s=self._latency.percentile(50),
+                    latency_p99_s=self._latency.percentile(99),
+                    latency_max_s=self._latency.max,
                 )
         return out
 

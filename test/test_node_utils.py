@@ -1,0 +1,57 @@
+"""Shared node plumbing: parameter validation, config flattening, loops, latency statistics."""
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.node_utils import DeadlineLoop, LatencyHistogram, Param, flatten, unflatten
+
+
+def test_latency_histogram_matches_exact_percentiles_within_one_bin_in_constant_memory():
+    x = np.random.default_rng(1).exponential(4e-4, 200_000)
+    h = LatencyHistogram()
+    for v in x:
+        h.add(float(v))
+    for q in (50, 90, 99):
+        assert abs(h.percentile(q) - np.percentile(x, q)) <= LatencyHistogram.BIN_S
+    assert h.max == x.max() and h.n == x.size
+    assert h.counts.nbytes < 100_000  # does not grow with the number of samples
+    assert math.isnan(LatencyHistogram().percentile(50))
+
+
+def test_flatten_unflatten_round_trip():
+    cfg = {"mode": "pid", "pid": {"p": 200.0, "d": 0.15}, "friction": {"model": "gms", "k": [1.0, 2.0]}}
+    flat = flatten(cfg)
+    assert flat["pid.p"] == 200.0 and flat["friction.k"] == [1.0, 2.0]
+    assert unflatten(flat) == cfg
+
+
+@pytest.mark.parametrize(
+    "spec, value, message",
+    [
+        (Param("gain", 1.0, "g", lo=0.0, hi=10.0), 20.0, r"gain = 20 is out of range: must be in \[0, 10\]"),
+        (Param("mode", "a", "m", choices=("a", "b")), "c", "must be one of a, b"),
+        (Param("gain", 1.0, "g"), "x", "has type str: must be float"),
+        (Param("gain", 1.0, "g"), math.nan, "nan is not a number"),
+    ],
+)
+def test_param_check_names_the_parameter_and_the_allowed_values(spec, value, message):
+    with pytest.raises(ParameterError, match=message):
+        spec.check(value)
+
+
+def test_deadline_loop_ticks_at_its_period_between_executor_callbacks():
+    class Executor:  # stands in for an rclpy executor: spin_once waits up to the timeout
+        def spin_once(self, timeout_sec):
+            time.sleep(timeout_sec)
+
+    ticks = []
+    loop = DeadlineLoop(0.005, lambda: ticks.append(time.monotonic()))
+    end = time.monotonic() + 0.5
+    while time.monotonic() < end:
+        loop.run_once(Executor())
+    assert 80 <= loop.stats.cycles <= 101
+    assert np.median(np.diff(ticks)) == pytest.approx(0.005, abs=0.001)
