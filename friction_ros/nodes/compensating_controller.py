@@ -39,10 +39,10 @@ from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.node_utils import (
-    COMMAND_QOS,
     OK,
     STATE_QOS,
     WARN,
+    CommandPublisher,
     DiagnosticsPublisher,
     Param,
     add_runtime_validation,
@@ -146,7 +146,7 @@ class CompensatingControllerNode(Node):
 
         self.joint = self.values["joint_name"]
         self.dt = self.values["control_period"]
-        self.cmd_pub = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+        self.commands = CommandPublisher(self, self.joint)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
@@ -157,7 +157,6 @@ class CompensatingControllerNode(Node):
 
         self._t0_ns: int | None = None
         self._last_ns: int | None = None
-        self._last_cmd: JointState | None = None
         self._last_state_wall = time.monotonic()
         self._timed_out = False
         self.counts = {
@@ -234,9 +233,9 @@ class CompensatingControllerNode(Node):
         pos, vel, _effort = sel
         t_ns = stamp_to_ns(msg.header.stamp)
         if self._last_ns is not None and t_ns <= self._last_ns:
-            if t_ns == self._last_ns and self._last_cmd is not None:
+            if t_ns == self._last_ns and self.commands.last is not None:
                 self.counts["duplicates"] += 1
-                self.cmd_pub.publish(self._last_cmd)  # lockstep re-send: same answer, no recompute
+                self.commands.republish()  # lockstep re-send: same answer, no recompute
             return
         if not (math.isfinite(pos) and (vel is None or math.isfinite(vel))):
             self.counts["rejected_states"] += 1
@@ -269,12 +268,7 @@ class CompensatingControllerNode(Node):
         self.state_pub.publish(st)
 
     def _publish_command(self, stamp, torque: float) -> None:
-        cmd = JointState()
-        cmd.header.stamp = stamp
-        cmd.name = [self.joint]
-        cmd.effort = [float(torque)]
-        self._last_cmd = cmd
-        self.cmd_pub.publish(cmd)
+        self.commands.publish(stamp, torque)
 
     # -- safety and health --------------------------------------------------------------------------
     def _check_state_timeout(self) -> None:

@@ -46,11 +46,11 @@ from friction_ros.core.excitation import (
     profile_defaults,
 )
 from friction_ros.nodes.node_utils import (
-    COMMAND_QOS,
     ERROR,
     OK,
     STATE_QOS,
     WARN,
+    CommandPublisher,
     DiagnosticsPublisher,
     Param,
     add_runtime_validation,
@@ -164,7 +164,7 @@ class IdentificationExperiment(Node):
         add_runtime_validation(self, specs, self._apply)
 
         self.joint = self.values["joint_name"]
-        self.cmd_pub = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+        self.commands = CommandPublisher(self, self.joint)
         self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", STATE_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
         self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
@@ -174,7 +174,6 @@ class IdentificationExperiment(Node):
         self._t0_ns: int | None = None
         self._last_ns: int | None = None
         self._last_stamp = None
-        self._last_cmd: JointState | None = None
         self._ready = self.values["wait_for_subscribers"] == 0
         self._done_wall: float | None = None
         self._last_progress = time.monotonic()
@@ -209,9 +208,9 @@ class IdentificationExperiment(Node):
             self.get_logger().info("subscribers present: starting the program")
         t_ns = stamp_to_ns(msg.header.stamp)
         if self._last_ns is not None and t_ns <= self._last_ns:
-            if t_ns == self._last_ns and self._last_cmd is not None:
+            if t_ns == self._last_ns and self.commands.last is not None:
                 self.counts["duplicates"] += 1
-                self.cmd_pub.publish(self._last_cmd)  # lockstep re-send: same answer, no recompute
+                self.commands.republish()  # lockstep re-send: same answer, no recompute
             return
         pos, vel, _effort = sel
         if vel is None:
@@ -260,12 +259,7 @@ class IdentificationExperiment(Node):
             self.counts["aborts"] += 1
 
     def _publish_command(self, stamp, torque: float) -> None:
-        cmd = JointState()
-        cmd.header.stamp = stamp
-        cmd.name = [self.joint]
-        cmd.effort = [float(torque)]
-        self._last_cmd = cmd
-        self.cmd_pub.publish(cmd)
+        self.commands.publish(stamp, torque)
 
     def _report_progress(self) -> None:
         period = self.values["progress_period"]

@@ -549,6 +549,38 @@ def declare_section(
     return unflatten(values).get(prefix, {})
 
 
+class CommandPublisher:
+    """``joint_commands`` publisher of one joint (sensor_msgs/JointState effort, COMMAND_QOS).
+
+    Every command answers a joint state and carries its stamp (lockstep and latency measurement);
+    the last command is kept so a duplicate state (a lockstep re-send) gets the same answer again
+    without recomputing.
+    """
+
+    def __init__(self, node: Node, joint: str, topic: str = "joint_commands"):
+        from sensor_msgs.msg import JointState
+
+        self._msg_type = JointState
+        self.joint = joint
+        self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
+        self.last = None
+
+    def publish(self, stamp, torque: float) -> None:
+        cmd = self._msg_type()
+        cmd.header.stamp = stamp
+        cmd.name = [self.joint]
+        cmd.effort = [float(torque)]
+        self.last = cmd
+        self.pub.publish(cmd)
+
+    def republish(self) -> bool:
+        """Send the last command again; False if there is none yet."""
+        if self.last is None:
+            return False
+        self.pub.publish(self.last)
+        return True
+
+
 def stamp_to_ns(stamp) -> int:
     """builtin_interfaces/Time -> integer nanoseconds."""
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)

@@ -50,3 +50,37 @@ class DecodeStats:
             "rejected": self.rejected,
             "last_reject_reason": self.last_reject_reason,
         }
+
+
+class SafeDecoder:
+    """Base of the protocol decoders: ``decode`` never raises; every frame is counted.
+
+    Subclasses implement ``_decode(arb_id, data, is_remote, is_extended, is_error)`` returning a
+    message or None (after ``_ignore()``/``_reject(reason)``); an unexpected exception in it counts
+    as a rejected frame with the exception as the reason, so a malformed frame cannot take a node down.
+    """
+
+    def __init__(self) -> None:
+        self.stats = DecodeStats()
+
+    def _reject(self, reason: str) -> None:
+        self.stats.rejected += 1
+        self.stats.last_reject_reason = reason
+
+    def decode(
+        self,
+        arb_id: int,
+        data: bytes,
+        is_remote: bool = False,
+        is_extended: bool = False,
+        is_error: bool = False,
+    ):
+        """Return a message NamedTuple, or None when the frame is ignored or rejected."""
+        try:
+            return self._decode(arb_id, data, is_remote, is_extended, is_error)
+        except Exception as exc:  # defensive: a decoder must never take the node down
+            self._reject(f"id 0x{arb_id & 0x1FFFFFFF:X}: {type(exc).__name__}: {exc}")
+            return None
+
+    def _decode(self, arb_id, data, is_remote, is_extended, is_error):  # pragma: no cover
+        raise NotImplementedError

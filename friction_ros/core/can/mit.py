@@ -14,7 +14,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
-from friction_ros.core.can.frame import DecodeStats, Frame
+from friction_ros.core.can.frame import Frame, SafeDecoder
 from friction_ros.core.validation import ParameterError, check_int, check_real
 
 ENTER_MOTOR_MODE = b"\xff\xff\xff\xff\xff\xff\xff\xfc"
@@ -213,7 +213,7 @@ class MitCodec:
         )
 
 
-class MitDecoder:
+class MitDecoder(SafeDecoder):
     """Decode MIT frames for one motor; never raises; counts decoded/ignored/rejected.
 
     ``role="host"``: replies on the master id whose first byte is our motor id.
@@ -227,25 +227,7 @@ class MitDecoder:
             )
         self.codec = codec
         self.role = role
-        self.stats = DecodeStats()
-
-    def _reject(self, reason: str) -> None:
-        self.stats.rejected += 1
-        self.stats.last_reject_reason = reason
-
-    def decode(
-        self,
-        arb_id: int,
-        data: bytes,
-        is_remote: bool = False,
-        is_extended: bool = False,
-        is_error: bool = False,
-    ):
-        try:
-            return self._decode(arb_id, data, is_remote, is_extended, is_error)
-        except Exception as exc:  # defensive: never take the node down
-            self._reject(f"id 0x{arb_id & 0x1FFFFFFF:X}: {type(exc).__name__}: {exc}")
-            return None
+        super().__init__()
 
     def decode_frame(self, frame: Frame):
         return self.decode(frame.arbitration_id, frame.data, frame.is_remote, frame.is_extended)

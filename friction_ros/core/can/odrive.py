@@ -13,7 +13,7 @@ import struct
 from enum import IntEnum
 from typing import NamedTuple
 
-from friction_ros.core.can.frame import DecodeStats, Frame
+from friction_ros.core.can.frame import Frame, SafeDecoder
 from friction_ros.core.validation import ParameterError, check_choice, check_int
 
 TWO_PI = 2.0 * math.pi
@@ -292,7 +292,7 @@ _MIN_LEN = {
 ROLES = ("host", "drive", "any")
 
 
-class OdriveDecoder:
+class OdriveDecoder(SafeDecoder):
     """Decode CANSimple frames for a set of node ids; never raises on arbitrary input.
 
     ``role="host"`` decodes drive telemetry (what a controller PC needs) and ignores commands;
@@ -304,7 +304,7 @@ class OdriveDecoder:
         check_choice("odrive decoder role", role, ROLES)
         self.node_ids = frozenset(check_int("odrive node_id", n, 0, NODE_ID_MAX) for n in node_ids)
         self.role = role
-        self.stats = DecodeStats()
+        super().__init__()
         want = set()
         if role in ("host", "any"):
             want |= TELEMETRY_CMDS
@@ -312,25 +312,6 @@ class OdriveDecoder:
             want |= COMMAND_CMDS
         self._wanted = frozenset(int(c) for c in want)
         self._rtr = role in ("drive", "any")
-
-    def _reject(self, reason: str) -> None:
-        self.stats.rejected += 1
-        self.stats.last_reject_reason = reason
-
-    def decode(
-        self,
-        arb_id: int,
-        data: bytes,
-        is_remote: bool = False,
-        is_extended: bool = False,
-        is_error: bool = False,
-    ):
-        """Return a message NamedTuple, or None when the frame is ignored or rejected."""
-        try:
-            return self._decode(arb_id, data, is_remote, is_extended, is_error)
-        except Exception as exc:  # defensive: a decoder must never take the node down
-            self._reject(f"id 0x{arb_id & 0x1FFFFFFF:X}: {type(exc).__name__}: {exc}")
-            return None
 
     def decode_frame(self, frame: Frame):
         return self.decode(frame.arbitration_id, frame.data, frame.is_remote, frame.is_extended)
