@@ -1,0 +1,36 @@
+"""The parameter files shipped in params/ load into the core objects the nodes build from them."""
+
+from pathlib import Path
+
+import yaml
+
+from friction_ros.cli.bringup import specs_from_config
+from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
+from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
+from friction_ros.core.references import reference_from_config
+
+PARAMS = Path(__file__).resolve().parents[1] / "params"
+
+
+def test_example_controller_file_builds_controller_estimator_and_reference():
+    doc = yaml.safe_load((PARAMS / "controller_abb_m19s.yaml").read_text())
+    ctrl = doc["/**/compensating_controller"]["ros__parameters"]
+    cfg, ref = config_from_ros_parameters(ctrl)
+    c = CompensatingController(cfg)
+    assert c.friction.model.name == "gms" and c.pid.p == 200.0 and c.inertia == 0.0012
+    assert reference_from_config(ref).sample(1.0)[0] != 0.0
+    est = dict(doc["/**/friction_estimator"]["ros__parameters"])
+    est.pop("joint_name")
+    assert OnlineFrictionEstimator(est).model_name == "stribeck"
+
+
+def test_cartesian_bringup_file_starts_three_namespaced_joints():
+    specs = specs_from_config(str(PARAMS / "bringup_cartesian_xyz.yaml"))
+    assert [(s.namespace, s.node) for s in specs] == [
+        (a, n) for a in "xyz" for n in ("plant_simulator", "compensating_controller")
+    ]
+    for s in specs:
+        cmd = s.command()  # parameter files exist, node names valid
+        assert f"__ns:=/{s.namespace}" in cmd
+        assert any(c.endswith("controller_seed002_xyz.yaml") for c in cmd)
+    assert specs[0].overrides == {"preset": "seed002_x", "joint_name": "x_joint"}
