@@ -54,18 +54,10 @@ sys.path.insert(0, str(ROOT / "bench"))
 from _common import print_table, write_results  # noqa: E402
 
 from friction_ros.core.harness import load_plant_config, make_plant, run_closed_loop  # noqa: E402
+from friction_ros.core.presets import load_preset  # noqa: E402
 
-GMS = dict(
-    model="gms",
-    fc=0.8,
-    fs=0.95,
-    vs=0.05,
-    delta=2.0,
-    attraction=50.0,
-    fv=0.01,
-    k=[190.0, 190.0, 142.5, 95.0],
-    alpha=[0.1, 0.2, 0.3, 0.4],
-)
+# the ABB M19-S preset's GMS-4 truth (params/abb_m19s.yaml), read from the preset so the two cannot drift
+GMS = load_preset("abb_m19s").friction.to_config()
 SIGMA1 = 0.86  # presliding micro-damping of the seed 003 truth (see the module docstring)
 TRUTH003 = dict(GMS, sigma1=SIGMA1)
 LUGRE = dict(model="lugre", sigma0=617.5, sigma1=SIGMA1, fv=0.01, fc=0.8, fs=0.95, vs=0.05, delta=2.0)

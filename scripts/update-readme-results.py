@@ -26,7 +26,11 @@ BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"
 
 
 def main() -> int:
-    results = {p.stem: json.loads(p.read_text()) for p in sorted((ROOT / "bench" / "results").glob("*.json"))}
+    results = {
+        p.stem: json.loads(p.read_text())
+        for p in sorted((ROOT / "bench" / "results").glob("*.json"))
+        if not p.stem.endswith("_quick")  # smoke runs (--quick) are not results
+    }
     parts = []
     for name in ORDER + sorted(set(results) - set(ORDER)):
         r = results.get(name)
