@@ -63,8 +63,8 @@ def test_dnpf_law_seed003():
     assert d.proportional(0.004) == pytest.approx(1.0)
 
 
-def test_gain_scheduling_switches_and_raises_gains():
-    gs = GainScheduling({"model": GMS, "dwell": 0.0})
+def test_gain_scheduling_stiffness_schedule_switches_and_raises_gains():
+    gs = GainScheduling({"model": GMS, "dwell": 0.0, "schedule": "stiffness"})
     ref = (0.4, 0.0, 0.0)
     out = gs.compute(0.01, 0.0, ref, (0.39, 0.5), 1e-3)
     assert gs.mode == 1 and out.friction_feedback == pytest.approx(0.8)
@@ -75,7 +75,30 @@ def test_gain_scheduling_switches_and_raises_gains():
     gs.compute(0.001, 0.0, ref, (0.399, 0.0), 1e-3)  # new standstill -> re-adjusted
     assert gs.kp2 > kp_first and gs.adjustments == 2
     gs.compute(0.01, 0.0, ref, (0.39, 0.0), 1e-3)  # leaves presliding
-    assert gs.mode == 1
+    assert gs.mode == 1 and gs.kp2 == gs.kp
+
+
+def test_gain_scheduling_bias_schedule_holds_the_describing_function_torque():
+    """bias schedule: u_b += (kp + k_e(A)) e at each standstill, kd2 = kd - c_e(A); reset on leaving."""
+    gs = GainScheduling({"model": GMS, "dwell": 0.0, "kd": 0.4})
+    ref = (0.4, 0.0, 0.0)
+    e = 0.001
+    out = gs.compute(e, 0.0, ref, (0.4 - e, 0.0), 1e-3)
+    ke = describing_stiffness(gs.virgin, e)
+    assert gs.mode == 2 and gs.adjustments == 1 and gs.kp2 == gs.kp
+    assert 450.0 < ke < sum(GMS["k"])  # the softening virgin curve: k_e(A) < sum k_i
+    assert gs.bias == pytest.approx((gs.kp + ke) * e)
+    assert 0.0 < gs.kd2 < 0.4  # friction supplies part of the damping
+    assert out.p_term == pytest.approx(gs.kp * e + gs.bias)
+    b1 = gs.bias
+    gs.compute(5e-4, 0.0, ref, (0.3995, 0.05), 1e-3)  # moves: no re-adjustment while moving
+    assert gs.bias == b1 and gs.adjustments == 1
+    gs.compute(-2e-4, 0.0, ref, (0.4002, 0.0), 1e-3)  # overshoot and stop: bias steps back
+    assert gs.adjustments == 2 and gs.bias < b1
+    gs.compute(-2e-4, 0.0, (0.4, 0.5, 0.0), (0.4002, 0.0), 1e-3)  # the reference moves -> mode 1
+    assert gs.mode == 1 and gs.bias == 0.0
+    with pytest.raises(ParameterError, match="schedule.*bias, stiffness"):
+        GainScheduling({"model": GMS, "schedule": "integral"})
 
 
 def test_sliding_mode_and_relay():

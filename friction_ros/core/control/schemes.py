@@ -131,15 +131,26 @@ class GainScheduling:
     ``coulomb_source = reference``). ``coulomb_deadband`` > 0 switches the compensation off while
     |v_c| <= coulomb_deadband (a measured-velocity linear zone acts as negative damping
     F_c / coulomb_velocity on the presliding spring; a dead band does not).
-    Switch to mode 2 when |v| <= standstill_velocity and |e| < q_h (presliding); back to mode 1 when
-    |e| > q_h. In mode 2, at entry and again at every standstill that lasts ``dwell`` seconds while
-    |e| > tolerance, with A = |e| [schedule NOT IN PAPER, extract A.4.3 suggestion, made cumulative]:
+    Switch to mode 2 when |v| <= standstill_velocity, |e| < q_h and the reference rests
+    (presliding); back to mode 1 when |e| > q_h or the reference moves. In mode 2 the terms are
+    re-scheduled at entry and again at every standstill that lasts ``dwell`` seconds while
+    |e| > tolerance ("gains adjusted repeatedly", A.4.3), with A = |e|, k_e(A) from eq. (5) and
+    c_e(A) from eq. (6) of the GMS virgin curve [schedules NOT IN PAPER]:
+
+    ``schedule = bias`` (default, ours): the frictional presliding spring is k_e(A); the torque
+    that moves the stuck shaft the remaining distance A is held as a bias,
+
+        u_b <- u_b + (kp + k_e(A)) e,   kd2 = max(0, kd - c_e(A))   (total damping kd kept)
+        u = kp e + kd2 e_dot + u_b
+
+    (a linear spring reaches e = 0 in one re-adjustment; the softening virgin curve needs 1-3).
+    ``schedule = stiffness`` (extract A.4.3 suggestion, made cumulative):
 
         kp2 <- min(kp2 + k_e(A), kp_max)
         kd2 <- max(0, 2 zeta sqrt((kp2 + k_e(A)) J) - c_e(A) omega_A),  omega_A = sqrt((kp2 + k_e) / J)
+        u = kp2 e + kd2 e_dot
 
-    so the controller stiffness grows past the frictional presliding stiffness and the residual
-    error shrinks at each re-adjustment. Mode-2 law: ``u = kp2 e + kd2 e_dot``.
+    so the residual error shrinks geometrically, e <- k_e / (kp2 + k_e) e, until kp_max.
     The virgin curve is the GMS one: ``k``, ``alpha``, ``fs`` (or a GMS ``model`` config).
     """
 
@@ -150,6 +161,7 @@ class GainScheduling:
         "coulomb_velocity": 0.01,
         "coulomb_source": "measured",
         "coulomb_deadband": 0.0,
+        "schedule": "bias",
         "q_h": 0.004,
         "standstill_velocity": 1e-3,
         "dwell": 0.01,
@@ -176,6 +188,11 @@ class GainScheduling:
             )
         self.coulomb_source = c["coulomb_source"]
         self.coulomb_deadband = check_real(f"{n}.coulomb_deadband", c["coulomb_deadband"], 0.0, unit="rad/s")
+        if c["schedule"] not in ("bias", "stiffness"):
+            raise ParameterError(
+                f"{n}.schedule = {c['schedule']!r} is not allowed: must be one of bias, stiffness"
+            )
+        self.schedule_kind = c["schedule"]
         self.q_h = check_real(f"{n}.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
         self.standstill_velocity = check_real(
             f"{n}.standstill_velocity", c["standstill_velocity"], 0.0, unit="rad/s"
@@ -207,7 +224,8 @@ class GainScheduling:
         self.reset()
 
     def config(self) -> dict[str, Any]:
-        out = {k: getattr(self, k) for k in self.DEFAULTS if k != "model"}
+        out = {k: getattr(self, k) for k in self.DEFAULTS if k not in ("model", "schedule")}
+        out["schedule"] = self.schedule_kind
         return out
 
     def reset(self) -> None:
@@ -217,9 +235,10 @@ class GainScheduling:
         self._still = 0.0
         self._adjusted = False
         self.adjustments = 0
+        self.bias = 0.0
 
     def schedule(self, A: float) -> tuple[float, float]:
-        """Return (kp2, kd2) after one re-adjustment at amplitude A (see the class docstring)."""
+        """Return (kp2, kd2) after one ``stiffness`` re-adjustment at amplitude A (class docstring)."""
         A = max(A, 1e-9)
         ke = describing_stiffness(self.virgin, A)
         kp2 = min(self.kp2 + ke, self.kp_max)
@@ -228,24 +247,36 @@ class GainScheduling:
         kd2 = max(0.0, 2.0 * self.zeta * math.sqrt((kp2 + ke) * self.inertia) - ce)
         return kp2, kd2
 
+    def adjust_bias(self, e: float) -> tuple[float, float]:
+        """Return (u_b, kd2) after one ``bias`` re-adjustment at error e (class docstring)."""
+        A = max(abs(e), 1e-9)
+        ke = describing_stiffness(self.virgin, A)
+        ce = describing_damping(self.virgin, A) / math.sqrt((self.kp + ke) / self.inertia)
+        return self.bias + (self.kp + ke) * e, max(0.0, self.kd - ce)
+
     def compute(self, e, edot, ref, meas, dt) -> SchemeOutput:
         v = meas[1]
         still = abs(v) <= self.standstill_velocity
+        ref_rests = abs(ref[1]) <= self.standstill_velocity
         self._still = self._still + dt if still else 0.0
-        if self.mode == 1 and still and abs(e) < self.q_h and abs(ref[1]) <= self.standstill_velocity:
+        if self.mode == 1 and still and abs(e) < self.q_h and ref_rests:
             self.mode = 2
-            self.kp2, self.kd2 = self.kp, self.kd
+            self.kp2, self.kd2, self.bias = self.kp, self.kd, 0.0
             self._adjusted = False
-        elif self.mode == 2 and abs(e) > self.q_h:
+        elif self.mode == 2 and (abs(e) > self.q_h or not ref_rests):
             self.mode = 1
+            self.kp2, self.kd2, self.bias = self.kp, self.kd, 0.0
         if self.mode == 2:
             if not still:
                 self._adjusted = False
             elif self._still >= self.dwell and not self._adjusted and abs(e) > self.tolerance:
-                self.kp2, self.kd2 = self.schedule(abs(e))
+                if self.schedule_kind == "bias":
+                    self.bias, self.kd2 = self.adjust_bias(e)
+                else:
+                    self.kp2, self.kd2 = self.schedule(abs(e))
                 self._adjusted = True
                 self.adjustments += 1
-            return SchemeOutput(p_term=self.kp2 * e, d_term=self.kd2 * edot)
+            return SchemeOutput(p_term=self.kp2 * e + self.bias, d_term=self.kd2 * edot)
         vc = ref[1] if self.coulomb_source == "reference" else v
         if abs(vc) <= self.coulomb_deadband:
             fc = 0.0
