@@ -19,8 +19,14 @@ Setups (documented choices, not in the seeds):
   term "plays on its threshold region"; the width is not in the paper, 0.01 rad/s gives -21 % instead
   of -9 %), LuGre with sigma0 = sum k_i, the truth's sigma1 and Stribeck curve, GMS = the truth.
   "ours" = the truth GMS blended 95 % feed-forward (reference velocity) + 5 % feedback (measured).
-  PTP (preset's own 0.5 ms current lag + the damped truth): gain-scheduling mode 1 takes its Coulomb term from the reference velocity (zero after a
-  step); the cascade gains (kp_position 150 1/s, velocity PI 0.3 N*m*s/rad, 30 N*m/rad) are ours.
+  PTP (preset's own 0.5 ms current lag + the damped truth, 1e-4 rad = the paper's encoder
+  resolution): mode 1 of gain scheduling is PD Kp = 200, Kd = 0.4 (the paper gives no mode-1 gains)
+  with its Coulomb term from the reference velocity (zero after a step); mode 2 uses the
+  describing-function bias schedule (``schedule: bias``, ours; the extract's stiffness schedule is
+  shown as a row and limit-cycles once Kp2 is high). DNPF without a dead zone is a relay inside Q_h
+  and hunts around the target; with a dead zone of Q_h/4 it stops short (the paper's result). The
+  cascade gains (kp_position 150 1/s, velocity PI 0.3 N*m*s/rad, 30 N*m/rad) are ours. A single
+  step can land inside 1e-4 rad by chance, so a sweep of +-8 step sizes is reported too.
 * seed 001: ``seed001_harmonic_drive`` at 100 Hz, unity feedback c = sat((u - theta) + k_c F(omega_hat)),
   omega_hat = backward difference of the held encoder position (lost-bit hold 0.1 rad, sat +-5: both
   [ASSUMED], never reached); reference model T(s) = 1/(J s^2 + B s + 1). Two truths: the thesis's
