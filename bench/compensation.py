@@ -39,8 +39,15 @@ Setups (documented choices, not in the seeds):
   = 0.25 N*m/rad at the motor (B-T6: 25-count dead band) or 2e6 N/m. Under P-only control no
   variant hunts with a bounded few-count amplitude: the loop either sticks in the dead band
   |e| <= F_s/Kp or (C_r = 0.01, Kp 2e6) is destabilised by delay + lag into a current-limited
-  oscillation of ~1300 counts. PI + stiction hunts (B-T8); stiction compensation from the delayed,
-  quantised encoder velocity does not remove it (it makes it larger).
+  oscillation of ~1300 counts. This is expected: with a linearly stable loop every slip ends at a
+  smaller stuck error (a slip from rest at |e| = F_s/Kp stops at |F_s - 2 F_c|/Kp < F_s/Kp), and
+  Coulomb friction's describing-function damping 4 F_c / (pi A w) only falls with amplitude, so
+  delay-driven negative damping gives an unstable limit cycle that grows to the current limit, not a
+  small one; a compliant coupling (1e6-2e6 N/m) gives sub-count stick-slip that dies out within
+  ~5 s. PI + stiction hunts (B-T8); stiction compensation from the delayed, quantised encoder
+  velocity does not remove it (it makes it larger). The seed 000 sliding-mode relay (M = the
+  stiction estimate 16 N, boundary layer 1e-4 m/s) on the paper's P stiffness ends within ~1 count
+  with no hunting.
 * seed 004: ``seed004_dc_motor`` (voltage drive), PD (Kp = 0.3 N*m/rad, Kd = 8.7e-4 N*m*s/rad,
   i.e. 82 V/rad, 0.24 V*s/rad) + the truth's asymmetric Stribeck model.
 """
@@ -311,6 +318,9 @@ def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: boo
 SEED002_COUNT = 1.25e-6  # m per encoder count (B-T4)
 SEED002_COULOMB = {"model": "coulomb", "fc": 11.31}  # tuned 0.01 N*m at the motor [PAPER]
 SEED002_STICTION = {"model": "stribeck", "fc": 11.31, "fs": 16.0, "vs": 2e-4, "delta": 2.0, "fv": 0.0}
+# seed 000 A.5.1 sliding-mode compensator on the paper's P stiffness: k_s lambda = 3.5e5 N/m, relay
+# M = the stiction level 16 N, boundary layer 1e-4 m/s (|e| < phi / lambda = 2e-6 m = 1.6 counts)
+SEED002_SMC = {"lambda": 50.0, "k_s": 3.5e5 / 50.0, "gain": 16.0, "boundary_layer": 1e-4}
 # Kp = 3.5e5 N/m = 0.246 N*m/rad at the motor (Kp_joint / (r^2 eta)): B-T6's 25-count dead band.
 SEED002_CASES = (
     # name, plant overrides, P/PI gains [N/m, N/(m*s)], compensation model, paper / goal
@@ -337,6 +347,13 @@ SEED002_CASES = (
         SEED002_STICTION,
         "goal: few counts",
     ),
+    (
+        "P + seed 000 SMC relay (F_s estimate)",
+        {"friction_load": SEED002_STICTION},
+        {"mode": "sliding_mode", "sliding_mode": SEED002_SMC},
+        None,
+        "goal: few counts",
+    ),
     ("PI, stiction", {"friction_load": SEED002_STICTION}, {"p": 3.5e5, "i": 3.5e6}, None, "- (B-T8: hunts)"),
     (
         "PI + comp. (blended)",
@@ -361,7 +378,14 @@ def seed002(duration: float = 20.0, cases=None) -> list[dict]:
     rows = []
     for name, ov, pid, model, paper in cases or SEED002_CASES:
         plant = make_plant("seed002_x", **ov)
-        ctrl = {"mode": "pid", "pid": pid, "friction": {"model": model, "source": "blended", "blend": 0.5}}
+        if "mode" in pid:  # a whole controller configuration
+            ctrl = dict(pid)
+        else:
+            ctrl = {
+                "mode": "pid",
+                "pid": pid,
+                "friction": {"model": model, "source": "blended", "blend": 0.5},
+            }
         r = run_closed_loop(
             plant, ctrl, {"type": "step", "amplitude": 200 * cnt}, duration, initial_position=0.0
         )

@@ -176,3 +176,18 @@ def test_seed002_p_only_does_not_hunt_documented_gap(seed002):
     assert (
         seed002["PI + comp. (blended)"]["stick_slip_starts"] >= seed002["PI, stiction"]["stick_slip_starts"]
     )
+
+
+def test_seed002_smc_relay_compensation_reaches_a_few_counts_without_hunting(seed002):
+    """Seed 000's sliding-mode relay (M = the stiction estimate) on the paper's P stiffness: the
+    36-count dead band of P + stiction and the PI hunting are both gone (ends within ~1 count)."""
+    smc, p, pi = (
+        seed002["P + seed 000 SMC relay (F_s estimate)"],
+        seed002["P, stiction 16 N"],
+        seed002["PI, stiction"],
+    )
+    assert abs(p["final_error_counts"]) > 30.0
+    assert pi["hunting_amplitude_counts"] > 2.0
+    assert abs(smc["final_error_counts"]) <= 2.0
+    assert smc["stick_slip_starts"] == 0 and smc["hunting_amplitude_counts"] < 0.5
+    assert smc["settle_2counts"] < 4.0
