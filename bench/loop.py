@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import tempfile
 import time
@@ -48,6 +49,15 @@ def rss_kb(pid: int) -> int:
     return 0
 
 
+def cpu_s(pid: int) -> float:
+    """User + system CPU seconds of a process (all threads) from /proc/<pid>/stat."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_every: float = 0.0) -> dict:
     params = tmp / "params.yaml"
     params.write_text(
@@ -72,6 +82,8 @@ def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_
     bring.start()
     time.sleep(warmup)
     rss0 = {s.node: rss_kb(p.pid) for s, p in bring.procs}
+    cpu0 = {s.node: cpu_s(p.pid) for s, p in bring.procs}
+    wall0 = time.monotonic()
     samples = []
     end = time.monotonic() + seconds
     while time.monotonic() < end:
@@ -81,6 +93,8 @@ def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_
         if bring.failed():
             break
     rss1 = {s.node: rss_kb(p.pid) for s, p in bring.procs}
+    cpu1 = {s.node: cpu_s(p.pid) for s, p in bring.procs}
+    wall = time.monotonic() - wall0
     failed = bring.failed()
     bring.stop()
     if failed:
@@ -89,6 +103,7 @@ def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_
     out["rss_start_kb"] = rss0
     out["rss_end_kb"] = rss1
     out["rss_growth_kb"] = {k: rss1[k] - rss0[k] for k in rss0}
+    out["cpu_percent"] = {k: 100.0 * (cpu1[k] - cpu0[k]) / wall for k in cpu0}
     if samples:
         out["rss_samples_kb"] = samples
     return out
@@ -99,7 +114,14 @@ def main() -> int:
     parser.add_argument("--realtime-seconds", type=float, default=60.0)
     parser.add_argument("--lockstep-seconds", type=float, default=20.0)
     parser.add_argument("--soak-seconds", type=float, default=600.0)
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="iterate: 15 s real time, 10 s lockstep, no soak (not for README)",
+    )
     args = parser.parse_args()
+    if args.quick:
+        args.realtime_seconds, args.lockstep_seconds, args.soak_seconds = 15.0, 10.0, 0.0
     figures: dict = {}
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
@@ -115,6 +137,7 @@ def main() -> int:
             "missed_percent": 100.0 * rt["missed_commands"] / cycles,
             "overruns": rt["overruns"],
             "cycles": rt["cycles"],
+            "cpu_percent": rt["cpu_percent"],
         }
         ls = run_graph(tmp, "lockstep", args.lockstep_seconds, warmup=3.0)
         figures["lockstep"] = {
@@ -122,6 +145,7 @@ def main() -> int:
             "sim_seconds_per_wall_second": ls["sim_time"] / (args.lockstep_seconds + 3.0),
             "sim_seconds_per_wall_second_total": ls["sim_seconds_per_wall_second"],
             "steps": ls["steps"],
+            "cpu_percent": ls["cpu_percent"],
         }
         if args.soak_seconds > 0:
             soak = run_graph(tmp, "realtime", args.soak_seconds, warmup=30.0, sample_every=10.0)
@@ -151,6 +175,21 @@ def main() -> int:
         ],
     )
     lk = figures["lockstep"]
+    steps_per_s = 1000.0 * lk["sim_seconds_per_wall_second"]
+    print_table(
+        "CPU per node process (% of one core; us per cycle = CPU time / control cycles)",
+        ["node", "real time %", "real time us/cycle", "lockstep %", "lockstep us/step"],
+        [
+            [
+                k,
+                r["cpu_percent"][k],
+                10.0 * r["cpu_percent"][k] * 1000.0 / max(r["rate_hz"], 1.0),
+                lk["cpu_percent"][k],
+                10_000.0 * lk["cpu_percent"][k] / max(steps_per_s, 1.0),
+            ]
+            for k in r["cpu_percent"]
+        ],
+    )
     print_table(
         "Lockstep, 3-node graph, 1 kHz control period (goal: >= 3x real time)",
         ["sim s / wall s", "steps"],

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
@@ -44,6 +45,7 @@ from friction_ros.nodes.node_utils import (
     WARN,
     CommandPublisher,
     DiagnosticsPublisher,
+    JointStateDecoder,
     Param,
     add_runtime_validation,
     declare,
@@ -51,6 +53,7 @@ from friction_ros.nodes.node_utils import (
     run_node,
     section_specs,
     select_joint,
+    set_realtime_priority,
     stamp_to_ns,
     unflatten,
 )
@@ -76,6 +79,14 @@ NODE_PARAMS = [
         unit="s",
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Param(
+        "realtime_priority",
+        0,
+        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
+        lo=0,
+        hi=99,
+        read_only=True,
+    ),
 ]
 # Core controller keys that are plain values (not sections).
 TOP_KEYS = [k for k, v in CONTROLLER_DEFAULTS.items() if not isinstance(v, dict)]
@@ -107,6 +118,43 @@ DEFAULT_REFERENCE = {"type": "constant"}
 _STATE_FIELDS = tuple(
     f.name for f in dataclasses.fields(ControllerTerms) if f.name not in ("time", "mode", "saturated")
 )
+assert set(_STATE_FIELDS) == set(
+    "reference_position reference_velocity reference_acceleration position velocity error error_dot "
+    "p_term i_term d_term velocity_feedforward inertia_feedforward friction_feedforward "
+    "friction_feedback command_unlimited command".split()
+), "ControllerTerms and ControllerStateEncoder disagree"
+_MSG_FLOATS = tuple(
+    k for k, t in ControllerState.get_fields_and_field_types().items() if t == "double"
+)  # friction_msgs/ControllerState float64 fields in message order (the order pack() expects)
+
+
+class ControllerStateEncoder:
+    """friction_msgs/ControllerState -> CDR bytes with one ``struct.pack`` (published as bytes).
+
+    The layout is fixed by the joint name and the mode string (XCDR1 little endian, alignment from
+    the end of the 4-byte encapsulation, zero padding): header stamp, empty frame_id, joint_name,
+    mode, 16 float64 in message order, saturated. Saves building a message object and rclpy's
+    conversion every period; subscribers see an ordinary ControllerState.
+    """
+
+    def __init__(self, joint: str):
+        self.joint = joint
+        self._by_mode: dict[str, tuple[struct.Struct, bytes]] = {}
+
+    def _layout(self, mode: str) -> tuple[struct.Struct, bytes]:
+        body = bytearray()
+        for text in ("", self.joint, mode):  # frame_id, joint_name, mode
+            body.extend(b"\0" * ((-(8 + len(body))) % 4))
+            raw = text.encode() + b"\0"
+            body.extend(struct.pack("<I", len(raw)) + raw)
+        body.extend(b"\0" * ((-(8 + len(body))) % 8))
+        st = struct.Struct(f"<4siI{len(body)}s{len(_MSG_FLOATS)}d?")
+        self._by_mode[mode] = (st, bytes(body))
+        return st, bytes(body)
+
+    def pack(self, sec: int, nanosec: int, mode: str, values, saturated: bool) -> bytes:
+        st, mid = self._by_mode.get(mode) or self._layout(mode)
+        return st.pack(b"\x00\x01\x00\x00", sec, nanosec, mid, *values, bool(saturated))
 
 
 class CompensatingControllerNode(Node):
@@ -148,7 +196,11 @@ class CompensatingControllerNode(Node):
         self.dt = self.values["control_period"]
         self.commands = CommandPublisher(self, self.joint)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self._state_encoder = ControllerStateEncoder(self.joint)
+        self._decoder = JointStateDecoder()
+        self._one_joint = (self.joint,)
+        # raw: joint states decoded by node_utils' JointState codec (no message object per period)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
         self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS)
         self.diag = DiagnosticsPublisher(self, "compensating_controller", self.joint)
@@ -169,6 +221,7 @@ class CompensatingControllerNode(Node):
             "rejected_estimates": 0,
         }
         self._compute_times: list[float] = []
+        set_realtime_priority(self.values["realtime_priority"], self.get_logger())
         self.get_logger().info(
             f"mode {self.controller.mode}, friction model "
             f"{self.controller.friction.model.name if self.controller.friction.model else 'none'}, "
@@ -221,8 +274,13 @@ class CompensatingControllerNode(Node):
             self.counts["rejected_estimates"] += 1
             self.get_logger().warning(f"estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0)
 
-    def _on_state(self, msg: JointState) -> None:
-        sel = select_joint(msg, self.joint)
+    def _on_state(self, data: bytes) -> None:
+        msg = self._decoder.decode(data)
+        if msg.name == self._one_joint and len(msg.position) == 1:  # the usual single-joint state
+            v = msg.velocity
+            sel = (msg.position[0], v[0] if v else None, None)
+        else:
+            sel = select_joint(msg, self.joint)
         if sel is None:
             self.counts["rejected_states"] += 1
             self.get_logger().warning(
@@ -231,7 +289,7 @@ class CompensatingControllerNode(Node):
             )
             return
         pos, vel, _effort = sel
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = msg.stamp_ns
         if self._last_ns is not None and t_ns <= self._last_ns:
             if t_ns == self._last_ns and self.commands.last is not None:
                 self.counts["duplicates"] += 1
@@ -243,7 +301,7 @@ class CompensatingControllerNode(Node):
                 f"joint state of {self.joint} is not finite: commanding zero torque",
                 throttle_duration_sec=1.0,
             )
-            self._publish_command(msg.header.stamp, 0.0)
+            self.commands.publish_stamp(msg.sec, msg.nanosec, 0.0)
             return
         if self._t0_ns is None:
             self._t0_ns = t_ns
@@ -255,17 +313,37 @@ class CompensatingControllerNode(Node):
         terms = self.controller.compute(t, ref, (pos, vel), self.dt)
         self._compute_times.append(time.perf_counter() - c0)
         self._last_ns = t_ns
-        self._publish_command(msg.header.stamp, terms.command)
+        self.commands.publish_stamp(msg.sec, msg.nanosec, terms.command)
         self.counts["cycles"] += 1
         self.counts["saturated"] += int(terms.saturated)
-        st = ControllerState()
-        st.header.stamp = msg.header.stamp
-        st.joint_name = self.joint
-        for k in _STATE_FIELDS:
-            setattr(st, k, float(getattr(terms, k)))
-        st.mode = terms.mode
-        st.saturated = bool(terms.saturated)
-        self.state_pub.publish(st)
+        if self.state_pub.get_subscription_count():  # 0.6 us; nobody listening: nothing to send
+            t = terms
+            self.state_pub.publish(
+                self._state_encoder.pack(
+                    msg.sec,
+                    msg.nanosec,
+                    t.mode,
+                    (
+                        t.reference_position,
+                        t.reference_velocity,
+                        t.reference_acceleration,
+                        t.position,
+                        t.velocity,
+                        t.error,
+                        t.error_dot,
+                        t.p_term,
+                        t.i_term,
+                        t.d_term,
+                        t.velocity_feedforward,
+                        t.inertia_feedforward,
+                        t.friction_feedforward,
+                        t.friction_feedback,
+                        t.command_unlimited,
+                        t.command,
+                    ),
+                    t.saturated,
+                )
+            )
 
     def _publish_command(self, stamp, torque: float) -> None:
         self.commands.publish(stamp, torque)

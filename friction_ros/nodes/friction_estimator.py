@@ -26,6 +26,7 @@ from friction_ros.nodes.node_utils import (
     STATE_QOS,
     WARN,
     DiagnosticsPublisher,
+    JointStateDecoder,
     Param,
     add_runtime_validation,
     declare,
@@ -33,7 +34,7 @@ from friction_ros.nodes.node_utils import (
     run_node,
     section_specs,
     select_joint,
-    stamp_to_ns,
+    set_realtime_priority,
     unflatten,
 )
 
@@ -56,6 +57,14 @@ NODE_PARAMS = [
         hi=100000,
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Param(
+        "realtime_priority",
+        0,
+        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
+        lo=0,
+        hi=99,
+        read_only=True,
+    ),
 ]
 DOCS = {
     "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
@@ -108,12 +117,17 @@ class FrictionEstimatorNode(Node):
         add_runtime_validation(self, specs, self._apply)
         self.joint = self.values["joint_name"]
         self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", STATE_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        self._decoder = JointStateDecoder()
+        self._one_joint = (self.joint,)
+        # raw: joint states decoded by node_utils' JointState codec (no message object per sample)
+        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.diag = DiagnosticsPublisher(self, "friction_estimator", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self._last_ns: int | None = None
         self._n = 0
         self.counts = {"samples": 0, "excited_samples": 0, "rejected_states": 0, "published": 0}
+        self._publish_every = self.values["publish_every"]
+        set_realtime_priority(self.values["realtime_priority"], self.get_logger())
 
     @staticmethod
     def _core_config(values: dict) -> dict:
@@ -124,18 +138,23 @@ class FrictionEstimatorNode(Node):
         values = unflatten({k: (list(v) if hasattr(v, "tolist") else v) for k, v in flat.items()})
         est = OnlineFrictionEstimator(self._core_config(values))  # raises -> change rejected
         self.estimator, self.values = est, values
+        self._publish_every = values["publish_every"]
         self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))} (estimator restarted)")
 
-    def _on_state(self, msg: JointState) -> None:
-        sel = select_joint(msg, self.joint)
-        if sel is None or sel[1] is None or sel[2] is None:
-            self.counts["rejected_states"] += 1
-            return
-        pos, vel, eff = sel
+    def _on_state(self, data: bytes) -> None:
+        msg = self._decoder.decode(data)
+        if msg.name == self._one_joint and len(msg.position) == len(msg.velocity) == len(msg.effort) == 1:
+            pos, vel, eff = msg.position[0], msg.velocity[0], msg.effort[0]  # the usual single joint
+        else:
+            sel = select_joint(msg, self.joint)
+            if sel is None or sel[1] is None or sel[2] is None:
+                self.counts["rejected_states"] += 1
+                return
+            pos, vel, eff = sel
         if not (math.isfinite(pos) and math.isfinite(vel) and math.isfinite(eff)):
             self.counts["rejected_states"] += 1
             return
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = msg.stamp_ns
         if self._last_ns is not None and t_ns < self._last_ns:
             self.estimator.reset()  # time went backwards (bag loop): start over
             self._last_ns = None
@@ -149,10 +168,10 @@ class FrictionEstimatorNode(Node):
         self.counts["samples"] += 1
         self.counts["excited_samples"] += int(e.excitation_ok)
         self._n += 1
-        if self._n % self.values["publish_every"]:
+        if self._n % self._publish_every:
             return
         out = FrictionEstimate()
-        out.header.stamp = msg.header.stamp
+        out.header.stamp = msg.stamp()
         out.joint_name = self.joint
         model, names, coefs = to_fields(self.estimator.model_config())
         out.model = model

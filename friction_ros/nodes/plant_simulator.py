@@ -24,8 +24,8 @@ import math
 import threading
 import time
 
+from builtin_interfaces.msg import Time
 from rclpy.node import Node
-from rclpy.time import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -39,6 +39,8 @@ from friction_ros.nodes.node_utils import (
     WARN,
     DeadlineLoop,
     DiagnosticsPublisher,
+    JointStateDecoder,
+    JointStateEncoder,
     LatencyHistogram,
     Param,
     add_runtime_validation,
@@ -46,7 +48,7 @@ from friction_ros.nodes.node_utils import (
     declare_section,
     run_node,
     select_effort,
-    stamp_to_ns,
+    set_realtime_priority,
 )
 
 PARAMS = [
@@ -112,6 +114,14 @@ PARAMS = [
         read_only=True,
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Param(
+        "realtime_priority",
+        0,
+        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
+        lo=0,
+        hi=99,
+        read_only=True,
+    ),
 ]
 
 
@@ -134,9 +144,15 @@ class PlantSimulator(Node):
         self.lockstep = self.p["mode"] == "lockstep"
         add_runtime_validation(self, PARAMS, self._apply)
 
+        # joint states and commands are (de)serialised by node_utils' JointState codec and sent as
+        # bytes: same wire type, no message objects in the 1 kHz path
+        self._encoder = JointStateEncoder([self.joint])
+        self._decoder = JointStateDecoder()
         self.state_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
-        self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS)
+        self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS, raw=True)
+        # realtime mode is the clock source: wall time without an rclpy Time object per cycle
+        self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         self.diag = DiagnosticsPublisher(self, "plant_simulator", self.preset.name)
 
         self._lock = threading.Lock()
@@ -154,7 +170,7 @@ class PlantSimulator(Node):
         self._missed = 0
         self._next_clock_ns = 0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
-        self._pending = self._state_msg(self.p["initial_position"], 0.0, 0.0)
+        self._pending = (self.p["initial_position"], 0.0, 0.0)
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
         if self.lockstep:
             self._last_publish = 0.0
@@ -162,8 +178,9 @@ class PlantSimulator(Node):
             self._publish_pending()
             self.loop = None
         else:
-            self._t0_ns = self.get_clock().now().nanoseconds
+            self._t0_ns = self._now_ns()
             self.loop = DeadlineLoop(self.dt, self._tick)  # driven by run_node's executor loop
+        set_realtime_priority(self.p["realtime_priority"], self.get_logger())
         self.get_logger().info(
             f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
             f"command scale {self.scale:.6g} (plant unit per N*m)"
@@ -175,18 +192,13 @@ class PlantSimulator(Node):
             self.p[k] = v
 
     # -- messages -------------------------------------------------------------------------------------
-    def _state_msg(self, position: float, velocity: float, effort: float) -> JointState:
-        msg = JointState()
-        msg.name = [self.joint]
-        msg.position = [position]
-        msg.velocity = [velocity]
-        msg.effort = [effort]
-        return msg
+    def _now_ns(self) -> int:
+        if self._sim_clock:
+            return self.get_clock().now().nanoseconds
+        return time.time_ns()  # = the ROS system clock
 
-    def _stamp(self, msg: JointState, t_ns: int) -> None:
-        msg.header.stamp = Time(nanoseconds=t_ns).to_msg()
-
-    def _on_command(self, msg: JointState) -> None:
+    def _on_command(self, data: bytes) -> None:
+        msg = self._decoder.decode(data)
         effort = select_effort(msg, self.joint)
         if effort is None:
             self._commands_ignored += 1
@@ -199,7 +211,7 @@ class PlantSimulator(Node):
             )
             effort = 0.0
         if self.lockstep:
-            if stamp_to_ns(msg.header.stamp) != self._t_ns:
+            if msg.stamp_ns != self._t_ns:
                 self._commands_ignored += 1  # duplicate or stale answer
                 return
             self._advance(effort)
@@ -209,27 +221,26 @@ class PlantSimulator(Node):
         with self._lock:
             self._command = effort
             self._command_wall = now
-        sent = stamp_to_ns(msg.header.stamp)
+        sent = msg.stamp_ns
         if sent:
             with self._lock:
                 self._answered_ns = sent
-            self._latency.add(self.get_clock().now().nanoseconds * 1e-9 - sent * 1e-9)
+            self._latency.add((self._now_ns() - sent) * 1e-9)
 
     # -- stepping -------------------------------------------------------------------------------------
     def _advance(self, torque: float) -> None:
         m = self.plant.step(torque * self.scale, self.dt)
         self._steps += 1
         self._t_ns += self.dt_ns
-        self._pending = self._state_msg(m.position, m.velocity, m.effort)
+        self._pending = (m.position, m.velocity, m.effort)
 
     def _publish_pending(self) -> None:
-        self._stamp(self._pending, self._t_ns)
+        sec, nanosec = divmod(self._t_ns, 1_000_000_000)
         if self.clock_pub is not None and self._t_ns >= self._next_clock_ns:
             self._next_clock_ns = self._t_ns + self._clock_ns
-            clock = Clock()
-            clock.clock = self._pending.header.stamp
-            self.clock_pub.publish(clock)
-        self.state_pub.publish(self._pending)
+            self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
+        p, v, e = self._pending
+        self.state_pub.publish(self._encoder.pack(sec, nanosec, p, v, e))
         self._last_publish = time.monotonic()
 
     def _resend(self) -> None:
@@ -243,7 +254,7 @@ class PlantSimulator(Node):
             if self._steps and self._answered_ns != self._t_ns:
                 self._missed += 1  # the command for the last published state did not arrive in time
         self._advance(torque)
-        self._t_ns = self.get_clock().now().nanoseconds
+        self._t_ns = self._now_ns()
         self._publish_pending()
 
     # -- health ---------------------------------------------------------------------------------------

@@ -107,20 +107,26 @@ class FrictionEstimateData:
 
 def regressor(model: str, v: float, vs: float = 0.05, delta: float = 2.0) -> np.ndarray:
     """phi(v) of the linear-in-parameter models (see the module docstring)."""
+    return np.array(_regressor(model, v, vs, delta))
+
+
+def _regressor(model: str, v: float, vs: float, delta: float) -> tuple[float, ...]:
+    """phi(v) as a tuple of floats (hot path of :meth:`OnlineFrictionEstimator.update`)."""
+    v = float(v)
     s = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
     if model == "viscous":
-        return np.array([v])
+        return (v,)
     if model == "coulomb_viscous":
-        return np.array([s, v])
+        return (s, v)
     if model == "asymmetric_coulomb_viscous":
         p, n = float(v > 0), float(v < 0)
-        return np.array([p, -n, p * v, n * v])
+        return (p, -n, p * v, n * v)
     E = math.exp(-(abs(v / vs) ** delta))
     if model == "stribeck":
-        return np.array([s * (1.0 - E), s * E, v])
+        return (s * (1.0 - E), s * E, v)
     if model == "asymmetric_stribeck":
         p, n = float(v > 0), float(v < 0)
-        return np.array([p * (1 - E), p * E, p * v, -n * (1 - E), -n * E, n * v])
+        return (p * (1 - E), p * E, p * v, -n * (1 - E), -n * E, n * v)
     raise ParameterError(f"estimator.model = {model!r} is not linear in its parameters")
 
 
@@ -192,29 +198,32 @@ class OnlineFrictionEstimator:
     @property
     def coefficients(self) -> dict[str, float]:
         if self.rls is not None:
-            return dict(zip(self.coefficient_names, (float(x) for x in self.rls.theta)))
+            return dict(zip(self.coefficient_names, self.rls.theta_list()))
         return dict(zip(self.coefficient_names, (float(x) for x in self.lugre.model.param_vector())))
 
     @property
     def coefficient_std(self) -> dict[str, float]:
         if self.rls is None:
             return {}
-        return dict(zip(self.coefficient_names, (float(x) for x in self.rls.std)))
+        return dict(zip(self.coefficient_names, self.rls.std_list()))
 
     @property
     def converged(self) -> bool:
         if self.rls is None:
             return True
+        return self._converged(self.rls.std_list())
+
+    def _converged(self, std: list[float]) -> bool:
         if self.excited_samples < self.min_samples:
             return False
-        th = np.abs(self.rls.theta)
-        return bool(np.all(self.rls.std <= np.maximum(self.convergence_tolerance * th, self.std_floor)))
+        tol, floor = self.convergence_tolerance, self.std_floor
+        return all(s <= max(tol * abs(t), floor) for s, t in zip(std, self.rls.theta_list()))
 
     def predict(self, v: float) -> float:
         """Model friction at velocity ``v`` with the current coefficients (static models)."""
         if self.rls is None:
             return float(self.lugre.model.steady_state(v))
-        return self.rls.predict(regressor(self.model_name, v, self.vs, self.delta))
+        return self.rls.predict(_regressor(self.model_name, v, self.vs, self.delta))
 
     def model_config(self) -> dict[str, Any]:
         """Current estimate as a friction-library model config (projected onto the valid range)."""
@@ -255,13 +264,15 @@ class OnlineFrictionEstimator:
         y, vf, _ = self.front.update(effort, velocity, dt)
         excited = abs(vf) >= self.min_velocity and abs(float(velocity)) >= self.min_velocity
         if self.rls is not None:
-            phi = regressor(self.model_name, vf, self.vs, self.delta)
+            phi = _regressor(self.model_name, vf, self.vs, self.delta)
             self.rls.update(phi, y, excited=excited)
             if excited:
                 self.excited_samples += 1
             model_torque = self.rls.predict(phi)
             state: list[float] = []
-            std = [float(x) for x in self.rls.std]
+            std = self.rls.std_list()
+            coefficients = list(self.rls.theta_list())
+            converged = self._converged(std)
         else:
             obs = self.lugre
             s0 = obs.model.coefficients["sigma0"]
@@ -273,6 +284,8 @@ class OnlineFrictionEstimator:
             )
             state = [obs.z]
             std = []
+            coefficients = list(self.coefficients.values())
+            converged = True
         self.estimate = FrictionEstimateData(
             time=float(t),
             model=self.model_name,
@@ -281,10 +294,10 @@ class OnlineFrictionEstimator:
             velocity=float(vf),
             state=state,
             coefficient_names=list(self.coefficient_names),
-            coefficients=list(self.coefficients.values()),
+            coefficients=coefficients,
             coefficient_std=std,
             excitation_ok=bool(excited),
-            converged=self.converged,
+            converged=converged,
         )
         return self.estimate
 

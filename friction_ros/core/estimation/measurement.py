@@ -27,12 +27,19 @@ from friction_ros.core.validation import check_real
 
 
 class _CriticalLowPass:
-    """Q(s) = w^2/(s+w)^2 in state form x = [y, y_dot]; exact ZOH discretisation cached per dt."""
+    """Q(s) = w^2/(s+w)^2 in state form x = [y, y_dot]; exact ZOH discretisation cached per dt.
+
+    Scalar arithmetic (two states): numpy's per-call overhead would dominate at 1 kHz.
+    """
 
     def __init__(self, w: float):
         self.w = w
         self._dt = None
-        self.x = None
+        self._x: tuple[float, float] | None = None
+
+    @property
+    def x(self) -> np.ndarray | None:
+        return None if self._x is None else np.array(self._x)
 
     def _matrices(self, dt: float):
         """Exact ZOH matrices in closed form (A = [[0, 1], [-w^2, -2w]] has a double pole at -w):
@@ -41,21 +48,22 @@ class _CriticalLowPass:
         if self._dt != dt:
             w, h = self.w, dt
             e = math.exp(-w * h)
-            self._Ad = np.array([[e * (1.0 + w * h), e * h], [-e * w * w * h, e * (1.0 - w * h)]])
-            self._Bd = np.array([1.0 - e * (1.0 + w * h), w * w * h * e])
+            self._Ad = ((e * (1.0 + w * h), e * h), (-e * w * w * h, e * (1.0 - w * h)))
+            self._Bd = (1.0 - e * (1.0 + w * h), w * w * h * e)
             self._dt = dt
         return self._Ad, self._Bd
 
     def reset(self, value: float | None = None) -> None:
-        self.x = None if value is None else np.array([value, 0.0])
+        self._x = None if value is None else (float(value), 0.0)
 
     def update(self, u: float, dt: float) -> tuple[float, float]:
-        if self.x is None:
-            self.x = np.array([u, 0.0])
+        if self._x is None:
+            self._x = (u, 0.0)
             return u, 0.0
-        Ad, Bd = self._matrices(dt)
-        self.x = Ad @ self.x + Bd * u
-        return float(self.x[0]), float(self.x[1])
+        ((a00, a01), (a10, a11)), (b0, b1) = self._matrices(dt)
+        x0, x1 = self._x
+        self._x = (a00 * x0 + a01 * x1 + b0 * u, a10 * x0 + a11 * x1 + b1 * u)
+        return self._x
 
 
 class TorqueBalanceEstimator:
