@@ -11,18 +11,34 @@ watchdog, torque/current/velocity limits, NaN/inf rejection, stale-telemetry and
 live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTERM and shutdown send
 zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
 bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
+
+Threads and wake-ups (issue 6: < 25 % of a core per axis at 1 kHz): the control period runs in
+the executor thread (:class:`~friction_ros.nodes.node_utils.DeadlineLoop`, driven by ``run_node``)
+and reads the bus itself: at each deadline it drains the frames received since the last period
+(``bus.recv(0)`` until empty), then supervises, sends the command and publishes. There is no
+python-can Notifier and no separate loop thread, so the node's Python code wakes up once per period
+plus once per ROS command, and never hands the GIL between its own threads. Frames are time-stamped
+with their receive time (``Message.timestamp``, the kernel's on SocketCAN) mapped onto the
+monotonic clock and clamped to [previous drain, now]: exact with sane timestamps, never off by more
+than one period whatever the interface reports, so stale-telemetry detection keeps its accuracy.
+``loop_spin`` > 0 (busy-wait for timing accuracy) runs the period on its own thread instead
+(:class:`~friction_ros.nodes.node_utils.FixedRateLoop`), with the same drain.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+import struct
 import threading
 import time
 
 import can
 from friction_msgs.msg import DriveState
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
@@ -46,6 +62,7 @@ from friction_ros.nodes.node_utils import (
     SENSOR_QOS,
     STATE_QOS,
     WARN,
+    DeadlineLoop,
     DiagnosticsPublisher,
     FixedRateLoop,
     Param,
@@ -61,6 +78,8 @@ def _level(x) -> int:
 
 
 CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
+RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 per ms)
+CMD_BATCH_MAX = 16  # joint_commands taken per period at most (keep-last 1: normally 0 or 1)
 INTERFACES = tuple(sorted(can.VALID_INTERFACES))
 
 PARAMS = [
@@ -213,25 +232,164 @@ def open_bus(interface: str, channel: str, bitrate: int, filters: list[dict]) ->
         ) from None
 
 
-class _Reader(can.Listener):
-    """Notifier callback: frames into the axis (reader thread), errors into the node's counters."""
+_U32 = struct.Struct("<I")
 
-    def __init__(self, node: DriveInterface):
-        self.node = node
 
-    def on_message_received(self, msg: can.Message) -> None:
-        node = self.node
-        if msg.is_error_frame:
-            node.error_frames += 1
-            if msg.arbitration_id & CAN_ERR_BUSOFF:
-                node.bus_dead("bus-off error frame received")
-            return
-        node.axis.on_frame(
-            msg.arbitration_id, msg.data, msg.is_remote_frame, msg.is_extended_id, False, time.monotonic()
-        )
+def parse_joint_command(buf: bytes) -> tuple[list[str], tuple[float, ...]] | None:
+    """``(name, effort)`` of a sensor_msgs/JointState serialised in plain little-endian CDR.
 
-    def on_error(self, exc: Exception) -> None:
-        self.node.bus_dead(f"CAN reader failed: {type(exc).__name__}: {exc}")
+    Returns None for anything else (another encoding, truncated or trailing data, bad strings):
+    the caller then falls back to rclpy's deserialiser, so this only has to be right, not complete.
+    Alignment is relative to the end of the 4-byte encapsulation header; an empty sequence carries
+    no element padding (checked against rclpy's serialiser by the tests).
+    """
+    n = len(buf)
+    if n < 24 or buf[0] != 0 or buf[1] != 1:
+        return None
+    u32 = _U32.unpack_from
+    try:
+        o = 12  # encapsulation header, stamp sec + nanosec
+        ln = u32(buf, o)[0]
+        o += 4 + ln  # frame_id (not used)
+        if ln == 0 or o > n:
+            return None
+        o += -(o - 4) % 4
+        count = u32(buf, o)[0]
+        o += 4
+        if count > n:
+            return None
+        names = []
+        for _ in range(count):
+            o += -(o - 4) % 4
+            ln = u32(buf, o)[0]
+            o += 4
+            if ln == 0 or o + ln > n or buf[o + ln - 1] != 0:
+                return None
+            names.append(buf[o : o + ln - 1].decode())
+            o += ln
+        values: tuple[float, ...] = ()
+        for _ in range(3):  # position, velocity, effort: the last one is kept
+            o += -(o - 4) % 4
+            count = u32(buf, o)[0]
+            o += 4
+            values = ()
+            if count:
+                o += -(o - 4) % 8
+                if o + 8 * count > n:
+                    return None
+                values = struct.unpack_from(f"<{count}d", buf, o)
+                o += 8 * count
+        if not 0 <= n - o <= 3:  # at most the RTPS padding to a multiple of 4
+            return None
+        return names, values
+    except (struct.error, UnicodeDecodeError):
+        return None
+
+
+# ---- pre-serialized state messages ------------------------------------------------------------------
+class _Cdr:
+    """Writer of little-endian plain CDR (XCDR1: what ROS 2 middlewares put on the wire), used to
+    build a message template once; alignment is relative to the end of the 4-byte encapsulation header."""
+
+    def __init__(self):
+        self.buf = bytearray(b"\x00\x01\x00\x00")  # CDR_LE
+
+    def align(self, n: int) -> None:
+        self.buf += bytes(-(len(self.buf) - 4) % n)
+
+    def put(self, fmt: str, *values) -> int:
+        """Pack values of one primitive type (aligned to its size); return their offset."""
+        st = struct.Struct("<" + fmt)
+        self.align(struct.calcsize("<" + fmt[-1]))
+        off = len(self.buf)
+        self.buf += st.pack(*values)
+        return off
+
+    def string(self, text: str) -> None:
+        raw = text.encode() + b"\x00"
+        self.put("I", len(raw))
+        self.buf += raw
+
+    def header(self) -> int:
+        off = self.put("iI", 0, 0)  # stamp sec, nanosec
+        self.string("")  # frame_id
+        return off
+
+
+class StatePackets:
+    """joint_states and drive_state as pre-serialized CDR templates patched in place each period.
+
+    Publishing bytes (rclpy ``publish_raw``) skips building and converting message objects and the
+    middleware's serialisation: the per-period Python work is a few ``struct.pack_into``. The
+    templates are checked once against rclpy's own deserialiser (:meth:`verify`); the node falls back
+    to publishing message objects if the check fails (another middleware's wire format).
+    """
+
+    _STAMP = struct.Struct("<iI")
+    _D = struct.Struct("<d")
+    _DS = struct.Struct(
+        "<6d3I?"
+    )  # motor_position .. bus_voltage, axis_state, axis_error, fault_flags, enabled
+
+    def __init__(self, joint: str, protocol: str):
+        self.joint, self.protocol = joint, protocol
+        w = _Cdr()
+        self.js_stamp = w.header()
+        w.put("I", 1)
+        w.string(joint)
+        self.js_fields = []
+        for _ in range(3):  # position, velocity, effort: one element each
+            w.put("I", 1)
+            self.js_fields.append(w.put("d", 0.0))
+        self.js = w.buf
+        w = _Cdr()
+        self.ds_stamp = w.header()
+        w.string(joint)
+        w.string(protocol)
+        self.ds_block = w.put("6d", *([0.0] * 6))
+        w.buf += bytes(self._DS.size - 48)
+        self.ds = w.buf
+
+    def set_joint(self, sec: int, nsec: int, position: float, velocity: float, effort: float) -> bytes:
+        buf, d = self.js, self._D
+        self._STAMP.pack_into(buf, self.js_stamp, sec, nsec)
+        p, v, e = self.js_fields
+        d.pack_into(buf, p, position)
+        d.pack_into(buf, v, velocity)
+        d.pack_into(buf, e, effort)
+        return bytes(buf)
+
+    def set_drive(self, sec: int, nsec: int, *values) -> bytes:
+        buf = self.ds
+        self._STAMP.pack_into(buf, self.ds_stamp, sec, nsec)
+        self._DS.pack_into(buf, self.ds_block, *values)
+        return bytes(buf)
+
+    def verify(self) -> str:
+        """Empty string when both templates deserialise to exactly the values packed, else why not."""
+        try:
+            js = deserialize_message(self.set_joint(12, 345, 1.5, -2.25, 3.125), JointState)
+            ok_js = (
+                (js.header.stamp.sec, js.header.stamp.nanosec, js.header.frame_id) == (12, 345, "")
+                and list(js.name) == [self.joint]
+                and (list(js.position), list(js.velocity), list(js.effort)) == ([1.5], [-2.25], [3.125])
+            )
+            vals = (0.5, -1.5, 2.5, -3.5, 4.5, 24.0, 8, 0xDEADBEEF, 33, True)
+            ds = deserialize_message(self.set_drive(-7, 999_999_999, *vals), DriveState)
+            got = (
+                ds.motor_position, ds.motor_velocity, ds.current_setpoint, ds.current_measured,
+                ds.torque_estimate, ds.bus_voltage, ds.axis_state, ds.axis_error, ds.fault_flags, ds.enabled,
+            )  # fmt: skip
+            ok_ds = (
+                (ds.header.stamp.sec, ds.header.stamp.nanosec, ds.header.frame_id) == (-7, 999_999_999, "")
+                and (ds.joint_name, ds.protocol) == (self.joint, self.protocol)
+                and got == vals
+            )
+        except Exception as exc:
+            return f"{type(exc).__name__}: {exc}"
+        self.set_joint(0, 0, 0.0, 0.0, 0.0)
+        self.set_drive(0, 0, *([0.0] * 6), 0, 0, 0, False)
+        return "" if ok_js and ok_ds else "round trip through rclpy's deserialiser differs"
 
 
 class DriveInterface(Node):
@@ -249,11 +407,18 @@ class DriveInterface(Node):
         self._bus_lock = threading.Lock()
         self._shutdown_done = False
         self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
-        self.notifier = can.Notifier(self.bus, [_Reader(self)], timeout=0.1)
+        self._rx_ok = True  # False after a read failure until the bus is reopened
+        self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
 
         self.pub_joint = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.pub_drive = self.create_publisher(DriveState, "drive_state", SENSOR_QOS)
-        self.sub_cmd = self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS)
+        # joint_commands is taken by the control period itself (see _take_commands), not by the
+        # executor: an rcl subscription that no executor waits on, so a command costs no wake-up.
+        check_is_valid_msg_type(JointState)
+        with self.handle:
+            self.sub_cmd = _rclpy.Subscription(
+                self.handle, JointState, "joint_commands", COMMAND_QOS.get_c_qos_profile()
+            )
         self.srv_enable = self.create_service(SetBool, "~/enable", self._on_enable)
         hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{v['node_id']}"
         self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
@@ -263,12 +428,24 @@ class DriveInterface(Node):
         self._diag_prev: tuple[float, int, int, int, int] | None = None
         self._js = JointState(name=[self.joint], position=[0.0], velocity=[0.0], effort=[0.0])
         self._ds = DriveState(joint_name=self.joint, protocol=v["protocol"])
+        self._clock = self.get_clock()
+        self._packets: StatePackets | None = StatePackets(self.joint, v["protocol"])
+        why = self._packets.verify()
+        if why:
+            self._packets = None
+            self.get_logger().warning(
+                f"publishing message objects (pre-serialised templates unusable: {why})"
+            )
         self._loop_error = ""
         if v["enable_on_start"]:
             self.axis.request_enable()
-        self.loop = FixedRateLoop(self.period, self._cycle, name="drive_interface_loop")
-        self.loop.SPIN_S = v["loop_spin"]  # node_utils default 0.2 ms = 20 % of a core at 1 kHz
-        self.loop.start()
+        if v["loop_spin"] > 0:  # busy-wait before each deadline: needs a thread of its own
+            self.loop = FixedRateLoop(
+                self.period, self._cycle, name="drive_interface_loop", spin=v["loop_spin"]
+            )
+            self.loop.start()
+        else:  # run_node drives it in the executor thread (see the module docstring)
+            self.loop = DeadlineLoop(self.period, self._cycle)
         self.get_logger().info(
             f"{v['protocol']} node {v['node_id']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "
             f"joint '{self.joint}', drive {'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
@@ -295,20 +472,47 @@ class DriveInterface(Node):
         self.get_logger().info(resp.message)
         return resp
 
-    def _on_command(self, msg: JointState) -> None:
-        now = time.monotonic()
-        if msg.name:
+    def _take_commands(self, now: float, lo: float, off: float) -> None:
+        """Apply the joint_commands received since the previous period, oldest first.
+
+        Taken as bytes and read by :func:`parse_joint_command` (no message object); anything it
+        does not recognise goes through rclpy's deserialiser. Receive time = the middleware's
+        reception stamp (system clock) on the monotonic clock, clamped to [previous period, now]
+        like the CAN frames.
+        """
+        take = self.sub_cmd.take_message
+        for _ in range(CMD_BATCH_MAX):
+            got = take(JointState, True)
+            if got is None:
+                return
+            t = got[1]["received_timestamp"] * 1e-9 + off
+            t = now if t > now else lo if t < lo else t
+            cmd = parse_joint_command(got[0])
+            if cmd is None:
+                try:
+                    msg = deserialize_message(got[0], JointState)
+                    cmd = (msg.name, msg.effort)
+                except Exception:  # undecodable: rejected like a NaN command (zero torque)
+                    cmd = ((), (math.nan,))
+            self._command(cmd[0], cmd[1], t)
+
+    def _on_command(self, msg: JointState, now: float | None = None) -> None:
+        """A joint_commands message object (the node itself takes bytes, see _take_commands)."""
+        self._command(msg.name, msg.effort, time.monotonic() if now is None else now)
+
+    def _command(self, names, efforts, now: float) -> None:
+        if names:
             try:
-                i = list(msg.name).index(self.joint)
+                i = list(names).index(self.joint)
             except ValueError:
                 self.commands_foreign += 1
                 return
-        elif len(msg.effort) == 1:
+        elif len(efforts) == 1:
             i = 0
         else:
             self.commands_foreign += 1
             return
-        value = msg.effort[i] if i < len(msg.effort) else math.nan  # a command without effort is rejected
+        value = efforts[i] if i < len(efforts) else math.nan  # a command without effort is rejected
         if not self.axis.set_command(value, now):
             self.get_logger().warning(
                 f"rejected joint command effort = {value} for '{self.joint}': must be a finite number [N*m]; "
@@ -350,11 +554,11 @@ class DriveInterface(Node):
             return
         v = self.v
         try:
-            self.notifier.stop(timeout=0.2)
             with self._bus_lock:
                 self.bus.shutdown()
                 self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
-            self.notifier = can.Notifier(self.bus, [_Reader(self)], timeout=0.1)
+            self._rx_ok = True
+            self._rx_prev = now
             self.bus_reopens += 1
             self._consecutive_send_errors = 0
             self._bus_dead_since = None
@@ -362,6 +566,38 @@ class DriveInterface(Node):
         except Exception as exc:
             self._bus_dead_since = now
             self.get_logger().error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)
+
+    def _drain(self, now: float, lo: float, off: float) -> None:
+        """Feed every frame received since the previous period to the axis (control thread).
+
+        Receive time = the frame's own timestamp (wall clock in python-can, the kernel's on
+        SocketCAN) on the monotonic clock (``+ off``), clamped to [``lo`` = previous period, now].
+        """
+        if not self._rx_ok:
+            return
+        bus, on_frame = self.bus, self.axis.on_frame
+        try:
+            for _ in range(RX_BATCH_MAX):
+                msg = bus.recv(0.0)
+                if msg is None:
+                    return
+                if msg.is_error_frame:
+                    self.error_frames += 1
+                    if msg.arbitration_id & CAN_ERR_BUSOFF:
+                        self.bus_dead("bus-off error frame received")
+                    continue
+                t = msg.timestamp + off
+                on_frame(
+                    msg.arbitration_id,
+                    msg.data,
+                    msg.is_remote_frame,
+                    msg.is_extended_id,
+                    False,
+                    now if t > now else lo if t < lo else t,
+                )
+        except Exception as exc:  # can.CanOperationError, OSError, closed bus ...
+            self._rx_ok = False
+            self.bus_dead(f"CAN reader failed: {type(exc).__name__}: {exc}")
 
     # ---- control period -------------------------------------------------------------------------------
     def _cycle(self) -> None:
@@ -383,38 +619,57 @@ class DriveInterface(Node):
         now = time.monotonic()
         if self._bus_dead_since is not None:
             self._recover_bus(now)
+        lo, self._rx_prev = self._rx_prev, now
+        off = now - time.time()  # wall clock -> monotonic, for receive stamps
+        self._drain(now, lo, off)
+        self._take_commands(now, lo, off)
         res = self.axis.cycle(now)
         flags = res.flags
         if res.frames and not self.send_frames(res.frames):
             flags |= FAULT_BUS
-        stamp = self.get_clock().now().to_msg()
-        tel = self.axis.telemetry
-        if res.sample is not None:
-            js = self._js
-            js.header.stamp = stamp
-            js.position[0], js.velocity[0], js.effort[0] = (
-                res.sample.position,
-                res.sample.velocity,
-                res.sample.effort,
-            )
-            self.pub_joint.publish(js)
-        ds = self._ds
-        ds.header.stamp = stamp
-        fresh = res.sample is not None
-        ds.motor_position = tel.motor_position if fresh else math.nan
-        ds.motor_velocity = tel.motor_velocity if fresh else math.nan
-        ds.current_setpoint = tel.current_setpoint
-        ds.current_measured = tel.current_measured
-        ds.torque_estimate = tel.torque_estimate
-        ds.bus_voltage = tel.bus_voltage
-        ds.axis_state = tel.axis_state & 0xFFFFFFFF
-        ds.axis_error = tel.axis_error & 0xFFFFFFFF
-        ds.fault_flags = flags
-        ds.enabled = self.axis.enabled
-        self.pub_drive.publish(ds)
+        clock = self._clock
+        sec, nsec = divmod(
+            clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns(), 1_000_000_000
+        )
+        tel, sample = self.axis.telemetry, res.sample
+        drive = (
+            tel.motor_position if sample is not None else math.nan,
+            tel.motor_velocity if sample is not None else math.nan,
+            tel.current_setpoint,
+            tel.current_measured,
+            tel.torque_estimate,
+            tel.bus_voltage,
+            tel.axis_state & 0xFFFFFFFF,
+            tel.axis_error & 0xFFFFFFFF,
+            flags,
+            self.axis.enabled,
+        )
+        packets = self._packets
+        if packets is not None:
+            if sample is not None:
+                self.pub_joint.publish(
+                    packets.set_joint(sec, nsec, sample.position, sample.velocity, sample.effort)
+                )
+            self.pub_drive.publish(packets.set_drive(sec, nsec, *drive))
+        else:
+            self._publish_objects(sec, nsec, sample, drive)
         if now >= self._diag_next:
             self._diag_next = now + self.v["diagnostics_period"]
             self._publish_diagnostics(now, flags)
+
+    def _publish_objects(self, sec: int, nsec: int, sample, drive: tuple) -> None:
+        """Fallback of the pre-serialised path: the same values through reused message objects."""
+        js, ds = self._js, self._ds
+        js.header.stamp.sec = ds.header.stamp.sec = sec
+        js.header.stamp.nanosec = ds.header.stamp.nanosec = nsec
+        if sample is not None:
+            js.position[0], js.velocity[0], js.effort[0] = sample.position, sample.velocity, sample.effort
+            self.pub_joint.publish(js)
+        (
+            ds.motor_position, ds.motor_velocity, ds.current_setpoint, ds.current_measured, ds.torque_estimate,
+            ds.bus_voltage, ds.axis_state, ds.axis_error, ds.fault_flags, ds.enabled,
+        ) = drive  # fmt: skip
+        self.pub_drive.publish(ds)
 
     def _publish_diagnostics(self, now: float, flags: int) -> None:
         c, st = self.axis.counters, self.axis.decode_stats
@@ -482,6 +737,7 @@ class DriveInterface(Node):
             return
         self._shutdown_done = True
         self.loop.stop()
+        self.sub_cmd.destroy_when_not_in_use()
         frames = self.axis.shutdown_frames()
         for _attempt in range(3):
             if self.send_frames(frames):
@@ -492,7 +748,6 @@ class DriveInterface(Node):
         time.sleep(0.005)  # let the frames leave the socket before closing it
         self.get_logger().info("drive left safe: zero torque, idle")
         try:
-            self.notifier.stop(timeout=0.2)
             self.bus.shutdown()
         except Exception as exc:
             self.get_logger().warning(f"closing the CAN bus: {exc}")

@@ -1,0 +1,94 @@
+"""drive_interface's wire shortcuts: pre-serialised state messages and the joint_commands reader.
+
+Both must agree exactly with rclpy's own (de)serialiser: StatePackets is checked against
+``deserialize_message``; ``parse_joint_command`` against messages that went through the middleware
+(an in-process publisher and a raw rcl subscription, as the node takes them).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import random
+import struct
+import time
+
+import pytest
+import rclpy
+from friction_msgs.msg import DriveState
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.qos import QoSProfile
+from rclpy.serialization import deserialize_message
+from rclpy.type_support import check_is_valid_msg_type
+from sensor_msgs.msg import JointState
+
+from friction_ros.nodes.drive_interface import StatePackets, parse_joint_command
+
+
+@pytest.mark.parametrize(
+    "joint,protocol", [("j1", "odrive_cansimple"), ("", "mit"), ("élbow_joint_3", "mit")]
+)
+def test_state_packets_round_trip(joint, protocol):
+    p = StatePackets(joint, protocol)
+    assert p.verify() == ""
+    js = deserialize_message(p.set_joint(1_700_000_000, 5, math.nan, -0.0, 1e300), JointState)
+    assert (js.header.stamp.sec, js.header.stamp.nanosec, list(js.name)) == (1_700_000_000, 5, [joint])
+    assert math.isnan(js.position[0]) and js.velocity[0] == 0.0 and js.effort[0] == 1e300
+    vals = (math.nan, math.inf, 1.0, 2.0, 3.0, 4.0, 0xFFFFFFFF, 0, 63, False)
+    ds = deserialize_message(p.set_drive(3, 999_999_999, *vals), DriveState)
+    assert (ds.joint_name, ds.protocol, ds.header.stamp.nanosec) == (joint, protocol, 999_999_999)
+    assert math.isnan(ds.motor_position) and ds.motor_velocity == math.inf
+    assert (ds.axis_state, ds.axis_error, ds.fault_flags, ds.enabled) == (0xFFFFFFFF, 0, 63, False)
+
+
+def test_parse_joint_command_rejects_what_it_does_not_know():
+    good = bytearray(b"\x00\x01\x00\x00" + bytes(8) + struct.pack("<I", 1) + b"\x00\x00\x00\x00")
+    good += struct.pack("<I", 0) * 4  # no names, three empty sequences
+    assert parse_joint_command(bytes(good)) == ([], ())
+    assert parse_joint_command(b"\x01\x00" + bytes(good[2:])) is None  # big-endian CDR
+    assert parse_joint_command(bytes(good[:-4])) is None  # truncated
+    assert parse_joint_command(bytes(good) + bytes(8)) is None  # trailing data: not this layout
+    assert parse_joint_command(b"") is None
+    bad_count = bytes(good[:20]) + struct.pack("<I", 10**9) + bytes(good[24:])
+    assert parse_joint_command(bad_count) is None
+
+
+@pytest.mark.ros
+def test_parse_joint_command_matches_the_middleware():
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    try:
+        a = rclpy.create_node("wire_sub", context=ctx)
+        b = rclpy.create_node("wire_pub", context=ctx)
+        topic = f"wire_test_{os.getpid()}"
+        qos = QoSProfile(depth=10)
+        check_is_valid_msg_type(JointState)
+        with a.handle:
+            sub = _rclpy.Subscription(a.handle, JointState, topic, qos.get_c_qos_profile())
+        pub = b.create_publisher(JointState, topic, qos)
+        rng = random.Random(6)
+        end = time.time() + 10
+        while sub.get_publisher_count() == 0 and time.time() < end:
+            time.sleep(0.01)
+        for _ in range(120):
+            m = JointState()
+            m.header.frame_id = "f" * rng.randint(0, 5)
+            m.name = ["n" * rng.randint(0, 6) for _ in range(rng.randint(0, 3))]
+            m.position = [rng.uniform(-9, 9) for _ in range(rng.randint(0, 3))]
+            m.velocity = [rng.uniform(-9, 9) for _ in range(rng.randint(0, 3))]
+            m.effort = [rng.uniform(-9, 9) for _ in range(rng.randint(0, 3))]
+            pub.publish(m)
+            got = None
+            for _ in range(500):
+                got = sub.take_message(JointState, True)
+                if got is not None:
+                    break
+                time.sleep(0.002)
+            assert got is not None, "message not received"
+            assert parse_joint_command(got[0]) == (list(m.name), tuple(m.effort))
+            ref = deserialize_message(got[0], JointState)
+            assert list(ref.effort) == list(m.effort)
+        sub.destroy_when_not_in_use()
+    finally:
+        rclpy.shutdown(context=ctx)
