@@ -325,3 +325,30 @@ def test_lockstep_can_path_matches_direct_plant_path(protocol):
     else:  # + one period of delay: an MIT reply carries the state at the command, before the step
         assert err < 5e-2, err
         assert 0.5 * rms(direct) < rms(can_path) < 1.5 * rms(direct)
+
+
+def test_fast_telemetry_path_matches_the_decoder():
+    """DriveAxis' fast path for encoder/Iq frames: same telemetry, counters and decode stats."""
+    import struct
+
+    frames = [
+        od.encode_encoder_estimates(1, 1.0, -2.0),
+        od.encode_iq(1, 1.5, 2.5),
+        od.Frame((1 << 5) | od.Cmd.GET_ENCODER_ESTIMATES, struct.pack("<ff", math.nan, 1.0)),
+        od.Frame((1 << 5) | od.Cmd.GET_IQ, struct.pack("<ff", 1.0, -math.inf)),
+        od.Frame((1 << 5) | od.Cmd.GET_IQ, b"1234567"),
+        od.encode_encoder_estimates(2, 1.0, 2.0),
+    ]
+    axes = []
+    for fast in (True, False):
+        axis = DriveAxis(AxisConfig(node_id=1, conversion=JointConversion(9.0, 0.49)))
+        if not fast:
+            axis._fast = {}
+        for i, f in enumerate(frames):
+            axis.on_frame(f.arbitration_id, bytearray(f.data), False, False, False, float(i))
+        axis.on_frame(frames[0].arbitration_id, b"", True, False, False, 9.0)  # RTR: general path
+        axes.append(axis)
+    a, b = axes
+    assert repr(a.telemetry) == repr(b.telemetry)
+    assert a.counters == b.counters and a.decoder.stats == b.decoder.stats
+    assert a.decoder.stats.decoded == 2 and a.decoder.stats.rejected == 3

@@ -1,8 +1,8 @@
 """drive_interface's wire shortcuts: pre-serialised state messages and the joint_commands reader.
 
 Both must agree exactly with rclpy's own (de)serialiser: StatePackets is checked against
-``deserialize_message``; ``parse_joint_command`` against messages that went through the middleware
-(an in-process publisher and a raw rcl subscription, as the node takes them).
+``deserialize_message``; the command path (a raw rcl subscription read by node_utils'
+JointStateDecoder, as the node takes it) against messages that went through the middleware.
 """
 
 from __future__ import annotations
@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import os
 import random
-import struct
 import time
 
 import pytest
@@ -22,7 +21,8 @@ from rclpy.serialization import deserialize_message
 from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 
-from friction_ros.nodes.drive_interface import StatePackets, parse_joint_command
+from friction_ros.nodes.drive_interface import StatePackets
+from friction_ros.nodes.node_utils import JointStateDecoder
 
 
 @pytest.mark.parametrize(
@@ -41,20 +41,8 @@ def test_state_packets_round_trip(joint, protocol):
     assert (ds.axis_state, ds.axis_error, ds.fault_flags, ds.enabled) == (0xFFFFFFFF, 0, 63, False)
 
 
-def test_parse_joint_command_rejects_what_it_does_not_know():
-    good = bytearray(b"\x00\x01\x00\x00" + bytes(8) + struct.pack("<I", 1) + b"\x00\x00\x00\x00")
-    good += struct.pack("<I", 0) * 4  # no names, three empty sequences
-    assert parse_joint_command(bytes(good)) == ([], ())
-    assert parse_joint_command(b"\x01\x00" + bytes(good[2:])) is None  # big-endian CDR
-    assert parse_joint_command(bytes(good[:-4])) is None  # truncated
-    assert parse_joint_command(bytes(good) + bytes(8)) is None  # trailing data: not this layout
-    assert parse_joint_command(b"") is None
-    bad_count = bytes(good[:20]) + struct.pack("<I", 10**9) + bytes(good[24:])
-    assert parse_joint_command(bad_count) is None
-
-
 @pytest.mark.ros
-def test_parse_joint_command_matches_the_middleware():
+def test_raw_commands_decode_like_the_middleware():
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     ctx = rclpy.Context()
     rclpy.init(context=ctx)
@@ -68,6 +56,7 @@ def test_parse_joint_command_matches_the_middleware():
             sub = _rclpy.Subscription(a.handle, JointState, topic, qos.get_c_qos_profile())
         pub = b.create_publisher(JointState, topic, qos)
         rng = random.Random(6)
+        dec = JointStateDecoder()
         end = time.time() + 10
         while sub.get_publisher_count() == 0 and time.time() < end:
             time.sleep(0.01)
@@ -86,7 +75,8 @@ def test_parse_joint_command_matches_the_middleware():
                     break
                 time.sleep(0.002)
             assert got is not None, "message not received"
-            assert parse_joint_command(got[0]) == (list(m.name), tuple(m.effort))
+            cmd = dec.decode(got[0])
+            assert (list(cmd.name), tuple(cmd.effort)) == (list(m.name), tuple(m.effort))
             ref = deserialize_message(got[0], JointState)
             assert list(ref.effort) == list(m.effort)
         sub.destroy_when_not_in_use()

@@ -65,6 +65,8 @@ from friction_ros.nodes.node_utils import (
     DeadlineLoop,
     DiagnosticsPublisher,
     FixedRateLoop,
+    JointStateDecoder,
+    JointStateEncoder,
     Param,
     add_runtime_validation,
     declare,
@@ -232,60 +234,6 @@ def open_bus(interface: str, channel: str, bitrate: int, filters: list[dict]) ->
         ) from None
 
 
-_U32 = struct.Struct("<I")
-
-
-def parse_joint_command(buf: bytes) -> tuple[list[str], tuple[float, ...]] | None:
-    """``(name, effort)`` of a sensor_msgs/JointState serialised in plain little-endian CDR.
-
-    Returns None for anything else (another encoding, truncated or trailing data, bad strings):
-    the caller then falls back to rclpy's deserialiser, so this only has to be right, not complete.
-    Alignment is relative to the end of the 4-byte encapsulation header; an empty sequence carries
-    no element padding (checked against rclpy's serialiser by the tests).
-    """
-    n = len(buf)
-    if n < 24 or buf[0] != 0 or buf[1] != 1:
-        return None
-    u32 = _U32.unpack_from
-    try:
-        o = 12  # encapsulation header, stamp sec + nanosec
-        ln = u32(buf, o)[0]
-        o += 4 + ln  # frame_id (not used)
-        if ln == 0 or o > n:
-            return None
-        o += -(o - 4) % 4
-        count = u32(buf, o)[0]
-        o += 4
-        if count > n:
-            return None
-        names = []
-        for _ in range(count):
-            o += -(o - 4) % 4
-            ln = u32(buf, o)[0]
-            o += 4
-            if ln == 0 or o + ln > n or buf[o + ln - 1] != 0:
-                return None
-            names.append(buf[o : o + ln - 1].decode())
-            o += ln
-        values: tuple[float, ...] = ()
-        for _ in range(3):  # position, velocity, effort: the last one is kept
-            o += -(o - 4) % 4
-            count = u32(buf, o)[0]
-            o += 4
-            values = ()
-            if count:
-                o += -(o - 4) % 8
-                if o + 8 * count > n:
-                    return None
-                values = struct.unpack_from(f"<{count}d", buf, o)
-                o += 8 * count
-        if not 0 <= n - o <= 3:  # at most the RTPS padding to a multiple of 4
-            return None
-        return names, values
-    except (struct.error, UnicodeDecodeError):
-        return None
-
-
 # ---- pre-serialized state messages ------------------------------------------------------------------
 class _Cdr:
     """Writer of little-endian plain CDR (XCDR1: what ROS 2 middlewares put on the wire), used to
@@ -317,31 +265,22 @@ class _Cdr:
 
 
 class StatePackets:
-    """joint_states and drive_state as pre-serialized CDR templates patched in place each period.
+    """joint_states and drive_state as CDR bytes (rclpy ``publish_raw``; same wire types).
 
-    Publishing bytes (rclpy ``publish_raw``) skips building and converting message objects and the
-    middleware's serialisation: the per-period Python work is a few ``struct.pack_into``. The
-    templates are checked once against rclpy's own deserialiser (:meth:`verify`); the node falls back
-    to publishing message objects if the check fails (another middleware's wire format).
+    joint_states: node_utils' :class:`JointStateEncoder`; drive_state: a template serialised once and
+    patched in place (two ``struct.pack_into``). No message objects, no rclpy conversion, no
+    middleware serialisation per period. Both are checked once against rclpy's own deserialiser
+    (:meth:`verify`); the node falls back to publishing message objects if the check fails.
     """
 
     _STAMP = struct.Struct("<iI")
-    _D = struct.Struct("<d")
     _DS = struct.Struct(
         "<6d3I?"
     )  # motor_position .. bus_voltage, axis_state, axis_error, fault_flags, enabled
 
     def __init__(self, joint: str, protocol: str):
         self.joint, self.protocol = joint, protocol
-        w = _Cdr()
-        self.js_stamp = w.header()
-        w.put("I", 1)
-        w.string(joint)
-        self.js_fields = []
-        for _ in range(3):  # position, velocity, effort: one element each
-            w.put("I", 1)
-            self.js_fields.append(w.put("d", 0.0))
-        self.js = w.buf
+        self.set_joint = JointStateEncoder([joint]).pack  # (sec, nanosec, position, velocity, effort)
         w = _Cdr()
         self.ds_stamp = w.header()
         w.string(joint)
@@ -349,15 +288,6 @@ class StatePackets:
         self.ds_block = w.put("6d", *([0.0] * 6))
         w.buf += bytes(self._DS.size - 48)
         self.ds = w.buf
-
-    def set_joint(self, sec: int, nsec: int, position: float, velocity: float, effort: float) -> bytes:
-        buf, d = self.js, self._D
-        self._STAMP.pack_into(buf, self.js_stamp, sec, nsec)
-        p, v, e = self.js_fields
-        d.pack_into(buf, p, position)
-        d.pack_into(buf, v, velocity)
-        d.pack_into(buf, e, effort)
-        return bytes(buf)
 
     def set_drive(self, sec: int, nsec: int, *values) -> bytes:
         buf = self.ds
@@ -387,7 +317,6 @@ class StatePackets:
             )
         except Exception as exc:
             return f"{type(exc).__name__}: {exc}"
-        self.set_joint(0, 0, 0.0, 0.0, 0.0)
         self.set_drive(0, 0, *([0.0] * 6), 0, 0, 0, False)
         return "" if ok_js and ok_ds else "round trip through rclpy's deserialiser differs"
 
@@ -415,6 +344,7 @@ class DriveInterface(Node):
         # joint_commands is taken by the control period itself (see _take_commands), not by the
         # executor: an rcl subscription that no executor waits on, so a command costs no wake-up.
         check_is_valid_msg_type(JointState)
+        self._cmd_decoder = JointStateDecoder()
         with self.handle:
             self.sub_cmd = _rclpy.Subscription(
                 self.handle, JointState, "joint_commands", COMMAND_QOS.get_c_qos_profile()
@@ -475,26 +405,24 @@ class DriveInterface(Node):
     def _take_commands(self, now: float, lo: float, off: float) -> None:
         """Apply the joint_commands received since the previous period, oldest first.
 
-        Taken as bytes and read by :func:`parse_joint_command` (no message object); anything it
-        does not recognise goes through rclpy's deserialiser. Receive time = the middleware's
+        Taken as bytes and read by node_utils' :class:`JointStateDecoder` (no message object;
+        anything unusual goes through rclpy's deserialiser). Receive time = the middleware's
         reception stamp (system clock) on the monotonic clock, clamped to [previous period, now]
         like the CAN frames.
         """
-        take = self.sub_cmd.take_message
+        take, decode = self.sub_cmd.take_message, self._cmd_decoder.decode
         for _ in range(CMD_BATCH_MAX):
             got = take(JointState, True)
             if got is None:
                 return
             t = got[1]["received_timestamp"] * 1e-9 + off
             t = now if t > now else lo if t < lo else t
-            cmd = parse_joint_command(got[0])
-            if cmd is None:
-                try:
-                    msg = deserialize_message(got[0], JointState)
-                    cmd = (msg.name, msg.effort)
-                except Exception:  # undecodable: rejected like a NaN command (zero torque)
-                    cmd = ((), (math.nan,))
-            self._command(cmd[0], cmd[1], t)
+            try:
+                cmd = decode(got[0])
+            except Exception:  # undecodable: rejected like a NaN command (zero torque)
+                self._command((), (math.nan,), t)
+                continue
+            self._command(cmd.name, cmd.effort, t)
 
     def _on_command(self, msg: JointState, now: float | None = None) -> None:
         """A joint_commands message object (the node itself takes bytes, see _take_commands)."""
