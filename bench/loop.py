@@ -29,6 +29,11 @@ from _common import print_table, write_results  # noqa: E402
 
 from friction_ros.cli.bringup import Bringup, NodeSpec  # noqa: E402
 
+# a graph of its own: other ROS processes on this machine (tests, other benchmarks) must not share
+# the topics or the discovery traffic
+os.environ.setdefault("ROS_DOMAIN_ID", str(180 + os.getpid() % 50))
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
 CONTROLLER = {
     "mode": "pid",
     "pid": {"p": 30.0, "i": 60.0, "d": 0.3},
@@ -58,7 +63,26 @@ def cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_every: float = 0.0) -> dict:
+#: Scheduling configurations of the benchmark. "pinned_fifo": plant and controller (the latency
+#: chain) share core 0 with SCHED_FIFO 80, the estimator runs on core 1 with normal scheduling.
+SCHEDULING = {
+    "default": ({}, {}, {}),
+    "pinned_fifo": (
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"cpu_affinity": 1},
+    ),
+}
+
+
+def run_graph(
+    tmp: Path,
+    mode: str,
+    seconds: float,
+    warmup: float = 5.0,
+    sample_every: float = 0.0,
+    scheduling: str = "default",
+) -> dict:
     params = tmp / "params.yaml"
     params.write_text(
         yaml.safe_dump(
@@ -69,14 +93,14 @@ def run_graph(tmp: Path, mode: str, seconds: float, warmup: float = 5.0, sample_
         )
     )
     stats = tmp / f"stats_{mode}.json"
+    plant_s, ctrl_s, est_s = SCHEDULING[scheduling]
+    sim = {"use_sim_time": True} if mode == "lockstep" else {}
+    # statistics start 2 s after the first command (the graph is connected and warm by then)
+    plant = {"preset": "abb_m19s", "mode": mode, "stats_file": str(stats), "stats_delay": 2.0, **plant_s}
     specs = [
-        NodeSpec("plant_simulator", "", [], {"preset": "abb_m19s", "mode": mode, "stats_file": str(stats)}),
-        NodeSpec(
-            "compensating_controller", "", [str(params)], {"use_sim_time": True} if mode == "lockstep" else {}
-        ),
-        NodeSpec(
-            "friction_estimator", "", [str(params)], {"use_sim_time": True} if mode == "lockstep" else {}
-        ),
+        NodeSpec("plant_simulator", "", [], plant),
+        NodeSpec("compensating_controller", "", [str(params)], {**sim, **ctrl_s}),
+        NodeSpec("friction_estimator", "", [str(params)], {**sim, **est_s}),
     ]
     bring = Bringup(specs, quiet=True)
     bring.start()
@@ -122,31 +146,33 @@ def main() -> int:
     args = parser.parse_args()
     if args.quick:
         args.realtime_seconds, args.lockstep_seconds, args.soak_seconds = 15.0, 10.0, 0.0
-    figures: dict = {}
+    figures: dict = {"realtime": {}, "lockstep": {}}
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        rt = run_graph(tmp, "realtime", args.realtime_seconds)
-        cycles = max(rt["cycles"], 1)
-        figures["realtime"] = {
-            "seconds": args.realtime_seconds,
-            "rate_hz": rt["rate_hz"],
-            "latency_p50_ms": rt["latency_p50_s"] * 1e3,
-            "latency_p99_ms": rt["latency_p99_s"] * 1e3,
-            "latency_max_ms": rt["latency_max_s"] * 1e3,
-            "missed_cycles": rt["missed_commands"],
-            "missed_percent": 100.0 * rt["missed_commands"] / cycles,
-            "overruns": rt["overruns"],
-            "cycles": rt["cycles"],
-            "cpu_percent": rt["cpu_percent"],
-        }
-        ls = run_graph(tmp, "lockstep", args.lockstep_seconds, warmup=3.0)
-        figures["lockstep"] = {
-            "wall_seconds": args.lockstep_seconds,
-            "sim_seconds_per_wall_second": ls["sim_time"] / (args.lockstep_seconds + 3.0),
-            "sim_seconds_per_wall_second_total": ls["sim_seconds_per_wall_second"],
-            "steps": ls["steps"],
-            "cpu_percent": ls["cpu_percent"],
-        }
+        for sched in SCHEDULING:
+            rt = run_graph(tmp, "realtime", args.realtime_seconds, scheduling=sched)
+            cycles = max(rt["cycles"], 1)
+            figures["realtime"][sched] = {
+                "seconds": args.realtime_seconds,
+                "window_seconds": rt["window_wall_time"],
+                "rate_hz": rt["rate_hz"],
+                "latency_p50_ms": rt["latency_p50_s"] * 1e3,
+                "latency_p99_ms": rt["latency_p99_s"] * 1e3,
+                "latency_max_ms": rt["latency_max_s"] * 1e3,
+                "missed_cycles": rt["missed_commands"],
+                "missed_percent": 100.0 * rt["missed_commands"] / cycles,
+                "overruns": rt["overruns"],
+                "cycles": rt["cycles"],
+                "cpu_percent": rt["cpu_percent"],
+            }
+            ls = run_graph(tmp, "lockstep", args.lockstep_seconds, warmup=3.0, scheduling=sched)
+            figures["lockstep"][sched] = {
+                "wall_seconds": args.lockstep_seconds,
+                "sim_seconds_per_wall_second": ls["sim_seconds_per_wall_second"],
+                "sim_seconds_per_wall_second_total": ls["sim_seconds_per_wall_second_total"],
+                "steps": ls["steps"],
+                "cpu_percent": ls["cpu_percent"],
+            }
         if args.soak_seconds > 0:
             soak = run_graph(tmp, "realtime", args.soak_seconds, warmup=30.0, sample_every=10.0)
             figures["soak"] = {
@@ -158,12 +184,22 @@ def main() -> int:
                 "latency_p99_ms": soak["latency_p99_s"] * 1e3,
                 "rate_hz": soak["rate_hz"],
             }
-    r = figures["realtime"]
+    rts, lks = figures["realtime"], figures["lockstep"]
     print_table(
         f"Real-time closed loop, 1 kHz, {args.realtime_seconds:g} s, 3 processes (goal: p99 < 1 ms, missed < 0.1 %)",
-        ["rate Hz", "latency p50 ms", "latency p99 ms", "max ms", "missed cycles", "missed %", "overruns"],
+        [
+            "scheduling",
+            "rate Hz",
+            "latency p50 ms",
+            "latency p99 ms",
+            "max ms",
+            "missed cycles",
+            "missed %",
+            "overruns",
+        ],
         [
             [
+                k,
                 r["rate_hz"],
                 r["latency_p50_ms"],
                 r["latency_p99_ms"],
@@ -172,28 +208,36 @@ def main() -> int:
                 r["missed_percent"],
                 r["overruns"],
             ]
-        ],
-    )
-    lk = figures["lockstep"]
-    steps_per_s = 1000.0 * lk["sim_seconds_per_wall_second"]
-    print_table(
-        "CPU per node process (% of one core; us per cycle = CPU time / control cycles)",
-        ["node", "real time %", "real time us/cycle", "lockstep %", "lockstep us/step"],
-        [
-            [
-                k,
-                r["cpu_percent"][k],
-                10.0 * r["cpu_percent"][k] * 1000.0 / max(r["rate_hz"], 1.0),
-                lk["cpu_percent"][k],
-                10_000.0 * lk["cpu_percent"][k] / max(steps_per_s, 1.0),
-            ]
-            for k in r["cpu_percent"]
+            for k, r in rts.items()
         ],
     )
     print_table(
         "Lockstep, 3-node graph, 1 kHz control period (goal: >= 3x real time)",
-        ["sim s / wall s", "steps"],
-        [[lk["sim_seconds_per_wall_second"], lk["steps"]]],
+        ["scheduling", "sim s / wall s", "incl. start-up", "steps"],
+        [
+            [k, lk["sim_seconds_per_wall_second"], lk["sim_seconds_per_wall_second_total"], lk["steps"]]
+            for k, lk in lks.items()
+        ],
+    )
+    rows = []
+    for k in rts:
+        r, lk = rts[k], lks[k]
+        steps_per_s = 1000.0 * lk["sim_seconds_per_wall_second"]
+        for node in r["cpu_percent"]:
+            rows.append(
+                [
+                    k,
+                    node,
+                    r["cpu_percent"][node],
+                    1e4 * r["cpu_percent"][node] / max(r["rate_hz"], 1.0),
+                    lk["cpu_percent"][node],
+                    1e4 * lk["cpu_percent"][node] / max(steps_per_s, 1.0),
+                ]
+            )
+    print_table(
+        "CPU per node process (% of one core; us per cycle = CPU time / control cycles)",
+        ["scheduling", "node", "real time %", "real time us/cycle", "lockstep %", "lockstep us/step"],
+        rows,
     )
     if "soak" in figures:
         s = figures["soak"]

@@ -41,6 +41,7 @@ from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.node_utils import (
     OK,
+    SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
     CommandPublisher,
@@ -48,12 +49,12 @@ from friction_ros.nodes.node_utils import (
     JointStateDecoder,
     Param,
     add_runtime_validation,
+    apply_scheduling,
     declare,
     override_values,
     run_node,
     section_specs,
     select_joint,
-    set_realtime_priority,
     stamp_to_ns,
     unflatten,
 )
@@ -79,14 +80,7 @@ NODE_PARAMS = [
         unit="s",
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    Param(
-        "realtime_priority",
-        0,
-        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
-        lo=0,
-        hi=99,
-        read_only=True,
-    ),
+    *SCHEDULING_PARAMS,
 ]
 # Core controller keys that are plain values (not sections).
 TOP_KEYS = [k for k, v in CONTROLLER_DEFAULTS.items() if not isinstance(v, dict)]
@@ -221,7 +215,7 @@ class CompensatingControllerNode(Node):
             "rejected_estimates": 0,
         }
         self._compute_times: list[float] = []
-        set_realtime_priority(self.values["realtime_priority"], self.get_logger())
+        apply_scheduling(self, self.values)
         self.get_logger().info(
             f"mode {self.controller.mode}, friction model "
             f"{self.controller.friction.model.name if self.controller.friction.model else 'none'}, "

@@ -23,18 +23,19 @@ from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.nodes.node_utils import (
     OK,
+    SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
     DiagnosticsPublisher,
     JointStateDecoder,
     Param,
     add_runtime_validation,
+    apply_scheduling,
     declare,
     override_values,
     run_node,
     section_specs,
     select_joint,
-    set_realtime_priority,
     unflatten,
 )
 
@@ -57,14 +58,7 @@ NODE_PARAMS = [
         hi=100000,
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    Param(
-        "realtime_priority",
-        0,
-        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
-        lo=0,
-        hi=99,
-        read_only=True,
-    ),
+    *SCHEDULING_PARAMS,
 ]
 DOCS = {
     "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
@@ -127,7 +121,7 @@ class FrictionEstimatorNode(Node):
         self._n = 0
         self.counts = {"samples": 0, "excited_samples": 0, "rejected_states": 0, "published": 0}
         self._publish_every = self.values["publish_every"]
-        set_realtime_priority(self.values["realtime_priority"], self.get_logger())
+        apply_scheduling(self, self.values)
 
     @staticmethod
     def _core_config(values: dict) -> dict:

@@ -244,6 +244,7 @@ class LoopStats:
     cycles: int = 0
     overruns: int = 0
     max_lateness: float = 0.0
+    total_lateness: float = 0.0
     last_exec: float = 0.0
     exec_times: list[float] = field(default_factory=list)
 
@@ -334,6 +335,7 @@ class DeadlineLoop:
         start = time.monotonic()
         lateness = start - self._next
         self.stats.max_lateness = max(self.stats.max_lateness, lateness)
+        self.stats.total_lateness += lateness
         if lateness > self.period:
             self.stats.overruns += 1
             self._next = start
@@ -434,6 +436,52 @@ def set_realtime_priority(priority: int, logger=None) -> bool:
             )
         return False
     return True
+
+
+def set_cpu_affinity(cpu: int, logger=None) -> bool:
+    """Pin every thread of this process to CPU ``cpu`` (-1: leave the affinity as it is).
+
+    On a small VM a wake-up across cores (DDS delivery to a process on the other core) costs an
+    inter-processor interrupt and VM exits: a JointState round trip between two rclpy processes
+    measured ~130 us across cores and ~60 us on one core (bench/loop.py docstring). Pinning plant
+    and controller to one core and the estimator to the other keeps the latency chain on one core.
+    """
+    import os
+
+    if cpu < 0:
+        return False
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), {cpu})
+            except ProcessLookupError:
+                pass
+    except OSError as exc:
+        if logger is not None:
+            logger.warning(f"cpu_affinity {cpu} not applied ({exc})")
+        return False
+    return True
+
+
+SCHEDULING_PARAMS = [
+    Param(
+        "realtime_priority",
+        0,
+        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
+        lo=0,
+        hi=99,
+        read_only=True,
+    ),
+    Param(
+        "cpu_affinity", -1, "pin the node's threads to this CPU (-1: any CPU)", lo=-1, hi=4095, read_only=True
+    ),
+]
+
+
+def apply_scheduling(node: Node, values: dict[str, Any]) -> None:
+    """Apply the ``realtime_priority`` / ``cpu_affinity`` parameters (:data:`SCHEDULING_PARAMS`)."""
+    set_cpu_affinity(values.get("cpu_affinity", -1), node.get_logger())
+    set_realtime_priority(values.get("realtime_priority", 0), node.get_logger())
 
 
 def make_executor():

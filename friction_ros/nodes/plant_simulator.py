@@ -35,6 +35,7 @@ from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
     OK,
+    SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
     DeadlineLoop,
@@ -42,13 +43,14 @@ from friction_ros.nodes.node_utils import (
     JointStateDecoder,
     JointStateEncoder,
     LatencyHistogram,
+    LoopStats,
     Param,
     add_runtime_validation,
+    apply_scheduling,
     declare,
     declare_section,
     run_node,
     select_effort,
-    set_realtime_priority,
 )
 
 PARAMS = [
@@ -115,13 +117,15 @@ PARAMS = [
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
     Param(
-        "realtime_priority",
-        0,
-        "SCHED_FIFO priority of the node's threads (0: normal scheduling; needs CAP_SYS_NICE)",
-        lo=0,
-        hi=99,
+        "stats_delay",
+        0.0,
+        "loop/latency statistics start this long (wall) after the first command (benchmarks skip start-up)",
+        lo=0.0,
+        hi=3600.0,
+        unit="s",
         read_only=True,
     ),
+    *SCHEDULING_PARAMS,
 ]
 
 
@@ -168,6 +172,11 @@ class PlantSimulator(Node):
         self._start_wall = time.monotonic()
         self._answered_ns = -1
         self._missed = 0
+        # statistics window: from the first command (+ stats_delay); before it no controller answers
+        self._stats_reset_at: float | None = None
+        self._stats_wall0 = self._start_wall
+        self._stats_steps0 = 0
+        self._stats_sim0 = 0.0
         self._next_clock_ns = 0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
         self._pending = (self.p["initial_position"], 0.0, 0.0)
@@ -179,8 +188,9 @@ class PlantSimulator(Node):
             self.loop = None
         else:
             self._t0_ns = self._now_ns()
-            self.loop = DeadlineLoop(self.dt, self._tick)  # driven by run_node's executor loop
-        set_realtime_priority(self.p["realtime_priority"], self.get_logger())
+            # driven by run_node's executor loop
+            self.loop = DeadlineLoop(self.dt, self._tick)
+        apply_scheduling(self, self.p)
         self.get_logger().info(
             f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
             f"command scale {self.scale:.6g} (plant unit per N*m)"
@@ -197,8 +207,22 @@ class PlantSimulator(Node):
             return self.get_clock().now().nanoseconds
         return time.time_ns()  # = the ROS system clock
 
+    def _reset_statistics(self) -> None:
+        self._stats_reset_at = math.inf  # once
+        self._missed = 0
+        self._latency = LatencyHistogram()
+        if self.loop is not None:
+            self.loop.stats = LoopStats()
+        self._stats_wall0 = time.monotonic()
+        self._stats_steps0 = self._steps
+        self._stats_sim0 = self.plant.time
+
     def _on_command(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
+        if self._stats_reset_at is None:
+            self._stats_reset_at = time.monotonic() + self.p["stats_delay"]
+        if self._stats_reset_at <= time.monotonic():
+            self._reset_statistics()
         effort = select_effort(msg, self.joint)
         if effort is None:
             self._commands_ignored += 1
@@ -288,14 +312,23 @@ class PlantSimulator(Node):
         self.diag.publish(level if level != ERROR else ERROR, text, values)
 
     def loop_statistics(self) -> dict:
-        """Loop rate, overruns, missed commands and state-to-command latency percentiles."""
-        wall = time.monotonic() - self._start_wall
+        """Loop rate, overruns, missed commands and state-to-command latency percentiles.
+
+        Rates and counts cover the statistics window (from the first command + ``stats_delay``);
+        ``*_total`` figures cover the whole run including start-up.
+        """
+        now = time.monotonic()
+        total = now - self._start_wall
+        wall = now - self._stats_wall0
         out = {
             "mode": self.p["mode"],
             "steps": self._steps,
             "sim_time": self.plant.time,
-            "wall_time": wall,
-            "sim_seconds_per_wall_second": self.plant.time / wall if wall > 0 else 0.0,
+            "wall_time_total": total,
+            "sim_seconds_per_wall_second_total": self.plant.time / total if total > 0 else 0.0,
+            "window_wall_time": wall,
+            "window_steps": self._steps - self._stats_steps0,
+            "sim_seconds_per_wall_second": (self.plant.time - self._stats_sim0) / wall if wall > 0 else 0.0,
             "commands_rejected": self._commands_rejected,
         }
         if self.loop is not None:
@@ -306,6 +339,7 @@ class PlantSimulator(Node):
                 missed_commands=self._missed,
                 rate_hz=s.cycles / wall if wall > 0 else 0.0,
                 max_lateness_s=s.max_lateness,
+                mean_lateness_s=s.total_lateness / s.cycles if s.cycles else 0.0,
             )
             if self._latency.n:
                 out.update(
