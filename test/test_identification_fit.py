@@ -18,9 +18,14 @@ NOISY = {"current_noise_std": 0.005}  # 2.5 mN*m torque noise on top of the 1.05
 
 @pytest.fixture(scope="module")
 def gms_fit(tmp_path_factory):
-    """Seed 003 excitation on the ABB M19-S preset (GMS-4 truth): 10 s train + 6 s validation."""
+    """Seed 003 excitation on the ABB M19-S preset (GMS-4 truth): 10 s train + 6 s validation.
+
+    Envelope high level 5 rad/s (peaks ~12 rad/s; the paper gives no amplitude): the identification
+    must cover the velocities of the round-trip benchmark (its large stroke reaches 10-15 rad/s).
+    With the default 1 rad/s (peaks 2.6 rad/s) the viscous coefficient was extrapolated ~6x and
+    alone cost the large-stroke round trip a factor 2-4."""
     d = tmp_path_factory.mktemp("gms")
-    rec = synthetic.seed003_experiment(16.0, low=0.05, overrides=NOISY)
+    rec = synthetic.seed003_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
     bag = synthetic.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
@@ -83,7 +88,13 @@ def test_outputs_json_yaml_report(gms_fit):
         assert (out / "plots" / f"{png}.png").stat().st_size > 5000
 
 
+REFERENCE_SEEDS = (1, 2, 3, 4, 5)
+
+
 def _round_trip(out):
+    """Seed 003 Table 2/3 analogue (PD Kp = 200, Kd = 0.15, 1 kHz, ABB M19-S, GMS-4 truth): RMS
+    tracking error of 4 s band-limited random references (small and large stroke) with the true,
+    the fitted (from the parameter file) and no friction feed-forward, per reference seed."""
     from friction_ros.core.harness import make_plant, run_closed_loop
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
@@ -94,16 +105,20 @@ def _round_trip(out):
     pd = {"p": 200.0, "d": 0.15}
     results = {}
     for amp, dur in ((0.005, 4.0), (math.pi, 4.0)):
-        ref = {"type": "band_limited_random", "amplitude": amp, "duration": dur, "seed": 1}
-        rms = {}
-        for label, ctrl in (
-            ("truth", {"mode": "pid", "pid": pd, "inertia": 0.0012, "friction": {"model": truth}}),
-            ("fitted", {"mode": "pid", "pid": pd, **fitted}),
-            ("none", {"mode": "pid", "pid": pd, "inertia": 0.0012}),
-        ):
-            plant = make_plant("abb_m19s", current_time_constant=1e-4)
-            rms[label] = run_closed_loop(plant, ctrl, ref, dur).metrics["rms_error"]
-        results[amp] = rms
+        per_seed = {}
+        for seed in REFERENCE_SEEDS:
+            ref = {"type": "band_limited_random", "amplitude": amp, "duration": dur, "seed": seed}
+            rms = {}
+            for label, ctrl in (
+                ("truth", {"mode": "pid", "pid": pd, "inertia": 0.0012, "friction": {"model": truth}}),
+                ("fitted", {"mode": "pid", "pid": pd, **fitted}),
+                ("none", {"mode": "pid", "pid": pd, "inertia": 0.0012}),
+            ):
+                plant = make_plant("abb_m19s", current_time_constant=1e-4)
+                rms[label] = run_closed_loop(plant, ctrl, ref, dur).metrics["rms_error"]
+            per_seed[seed] = rms
+        mean = {k: float(np.mean([r[k] for r in per_seed.values()])) for k in ("truth", "fitted", "none")}
+        results[amp] = {"seed1": per_seed[1], "mean": mean, "per_seed": per_seed}
     return results
 
 
@@ -115,19 +130,34 @@ def round_trip(gms_fit):
 def test_round_trip_parameter_file_drives_the_controller(round_trip):
     """fit -> parameter file -> controller loads it -> seed 003 Table 2/3 analogue: the fitted
     feed-forward clearly beats no compensation at low and high stroke."""
-    low, high = round_trip[0.005], round_trip[math.pi]
+    low, high = round_trip[0.005]["mean"], round_trip[math.pi]["mean"]
     assert low["truth"] < low["none"] and high["truth"] < high["none"]
-    assert high["fitted"] < 0.8 * high["none"], high  # large stroke: clear improvement
+    assert low["fitted"] < 0.7 * low["none"], low
+    assert high["fitted"] < 0.1 * high["none"], high
 
 
 @pytest.mark.xfail(
-    reason="issue 8 goal not met (also at low stroke the fitted feed-forward is no better than none): fitted GMS-4 feed-forward is ~2x the true-coefficient RMS "
-    "(the truth cancels friction almost exactly, so small coefficient errors dominate)",
+    reason="issue 8 goal on one reference: at small stroke a single 4 s reference is chaotic (stick-slip in "
+    "the presliding zone): this fit (fs +1 %, k within 7 %) gives ratios 0.78-1.27 over reference seeds 1-5, "
+    "1.27 on seed 1; large stroke and the 5-reference mean meet 10 % (test below)",
     strict=False,
 )
 def test_round_trip_within_10_percent_of_truth(round_trip):
-    for amp, rms in round_trip.items():
+    """Issue 8 goal: the fitted feed-forward's RMS error within 10 % of the true-coefficient one,
+    on the reference of the original benchmark (seed 1) at both strokes."""
+    for amp, r in round_trip.items():
+        rms = r["seed1"]
         assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, (amp, rms)
+
+
+def test_round_trip_within_10_percent_of_truth_over_references(round_trip):
+    """The same on the mean RMS over five reference seeds. At small stroke one 4 s reference is
+    ill-conditioned: the joint stick-slips inside the presliding zone and 1 % random coefficient
+    errors move its RMS ratio anywhere in 0.9-1.5 (seed 1) or 0.5-1.0 (seed 3); the mean over five
+    references varies by < 7 % for the same errors, so it measures the fit, not the luck."""
+    for amp, r in round_trip.items():
+        rms = r["mean"]
+        assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, (amp, rms, r["per_seed"])
 
 
 def test_static_recovery_on_plateaus():

