@@ -114,12 +114,25 @@ def main() -> None:
     t0 = time.perf_counter()
     fit_time_domain(spec_for("stribeck"), tr)
     timings["stribeck (time domain)"] = {"seconds": time.perf_counter() - t0}
-    prec = synthetic.plateau_experiment(np.geomspace(0.005, 2.0, 12), hold=1.0)
+    # plateau experiment as in test_static_recovery_on_plateaus (descending speeds, PD position loop)
+    prec = synthetic.plateau_experiment(
+        np.geomspace(0.005, 2.0, 24), hold=1.0, overrides={"current_noise_std": 0.005}
+    )
     pd = prepare(prec.t, prec.position, prec.velocity, prec.effort, events=prec.events)
     pl = find_plateaus(pd)
     t0 = time.perf_counter()
-    fit_plateaus(pl, "stribeck")
+    sf = fit_plateaus(pl, "stribeck")
     timings["stribeck (plateaus)"] = {"seconds": time.perf_counter() - t0, "plateaus": len(pl)}
+    truth = {"fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0, "fv": 0.01}  # GMS-4 steady state
+    figures["static_recovery_percent"] = {
+        d: {k: 100 * (sf.per_direction[d][k] / v - 1) for k, v in truth.items()}
+        for d in ("positive", "negative")
+    }
+    print_table(
+        f"Static recovery on plateaus ({len(pl)} kept of 48; error % of the GMS-4 steady state)",
+        ["direction", *truth],
+        [[d, *(f"{e:+.2f}" for e in r.values())] for d, r in figures["static_recovery_percent"].items()],
+    )
     figures["timings"] = timings
     goals = {"lugre": 10.0, "gms4": 60.0, "stribeck (time domain)": 1.0, "stribeck (plateaus)": 1.0}
     print_table(

@@ -162,19 +162,31 @@ def test_round_trip_within_10_percent_of_truth_over_references(round_trip):
 
 def test_static_recovery_on_plateaus():
     """Plateaus on the ABB preset (GMS-4 truth: steady state = Stribeck fc 0.8, fs 0.95, vs 0.05,
-    delta 2, fv 0.01). fc, fs, fv within 3 %; vs, delta within 10 % (the Stribeck knee has few
-    usable plateaus: below ~0.01 rad/s the joint stick-slips and those plateaus are discarded)."""
+    delta 2, fv 0.01), fitted per direction. Experiment: descending speeds (each slow plateau entered
+    from steady sliding, not through a break-away) under a PD position loop on the ramp with
+    stiffness 150 N*m/rad (stable sliding on the Stribeck slope through the friction lag), see
+    ``synthetic.plateau_experiment``; 24 speeds 0.005-2 rad/s, 1 s each.
+
+    fc, fs, vs, fv within 3 % in both directions. delta only within 12 %: below ~0.025 rad/s the
+    joint still stick-slips on the 1.05e-4 rad encoder (rejected plateaus), and in the knee the
+    quantisation-driven velocity jitter of the loop (~0.015 rad/s RMS) biases the plateau means by
+    0.5 F'' sigma^2 (+6 mN*m at 0.08 rad/s), flattening the knee (delta -10 %). Without encoder
+    quantisation all five come out within 0.6 % (see the report of issue 8)."""
     truth = {"fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0, "fv": 0.01}
-    rec = synthetic.plateau_experiment(np.geomspace(0.004, 2.0, 12), hold=0.8, overrides=NOISY)
+    rec = synthetic.plateau_experiment(np.geomspace(0.005, 2.0, 24), hold=1.0, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort, events=rec.events)
     pl = find_plateaus(d)
-    assert 10 <= len(pl) <= 24 and all(p.source == "events" for p in pl)
+    assert 30 <= len(pl) <= 48 and all(p.source == "events" for p in pl)
+    # plateaus kept in the Stribeck knee (0.02-0.1 rad/s), per direction
+    for sgn in (1, -1):
+        assert sum(0.02 < sgn * p.velocity < 0.1 for p in pl) >= 5
     res = fit_records(d, ["stribeck"], train_seconds=1000.0, identifiability_check=False)
     m = res.models["stribeck"]
     assert m.method == "plateaus" and m.seconds < 1.0
-    c = m.identifiability["per_direction"]["positive"]
-    for k, tol in (("fc", 0.03), ("fs", 0.03), ("fv", 0.03), ("vs", 0.10), ("delta", 0.10)):
-        assert abs(c[k] / truth[k] - 1) < tol, (k, c[k], truth[k])
+    for direction in ("positive", "negative"):
+        c = m.identifiability["per_direction"][direction]
+        for k, tol in (("fc", 0.03), ("fs", 0.03), ("vs", 0.03), ("fv", 0.03), ("delta", 0.12)):
+            assert abs(c[k] / truth[k] - 1) < tol, (direction, k, c[k], truth[k])
 
 
 def test_lugre_sigma_recovery_within_15_percent():

@@ -23,6 +23,7 @@ import numpy as np
 from scipy import signal
 
 from friction_ros.core.identification.data import END, START, Event
+from friction_ros.core.validation import check_choice
 
 
 @dataclass
@@ -80,9 +81,14 @@ def run_velocity_loop(
     kp: float | None = None,
     ki: float | None = None,
     events: list[Event] | None = None,
+    position_feedback: bool = False,
 ) -> Record:
     """Track ``v_ref`` with a PI velocity loop (K_v = 400 J, integral gain = a position gain of
-    200 K_v, so plateaus break away quickly) plus inertia feed-forward; record the sensors."""
+    200 K_v, so plateaus break away quickly) plus inertia feed-forward; record the sensors.
+
+    ``position_feedback``: the integral term acts on the encoder position against the integrated
+    reference, ``ki (p_ref - p_meas)`` (a PD position loop on a ramp), instead of on the integral
+    of the filtered velocity error: the same stiffness without the velocity filter's lag."""
     plant, params = _make_plant(preset, friction, overrides)
     J = params.reflected_inertia
     kt_out = params.torque_constant * params.ratio * params.gear_efficiency
@@ -93,13 +99,20 @@ def run_velocity_loop(
     out = {k: np.empty(n) for k in ("t", "p", "v", "e", "i", "tv", "tf")}
     integ = 0.0
     v_meas = 0.0
+    p_meas = 0.0
+    p_ref = 0.0
     for k in range(n):
         err = v_ref[k] - v_meas
-        integ += err * dt
+        if position_feedback:
+            integ = p_ref - p_meas
+            p_ref += v_ref[k] * dt
+        else:
+            integ += err * dt
         tau = kp * err + ki * integ + J * a_ref[k]
         cmd = tau / kt_out if params.actuation == "current" else tau
         m = plant.step(cmd, dt)
         v_meas = m.velocity
+        p_meas = m.position
         out["t"][k] = m.time
         out["p"][k] = m.position
         out["v"][k] = m.velocity
@@ -149,11 +162,39 @@ def plateau_experiment(
     preset: str = "abb_m19s",
     friction=None,
     overrides: dict | None = None,
+    order: str = "descending",
+    kp: float | None = None,
+    ki: float | None = 150.0,
+    position_feedback: bool = True,
 ) -> Record:
-    """Constant-velocity plateaus at ``speeds`` in both directions with ExperimentEvent markers."""
+    """Constant-velocity plateaus at ``speeds`` in both directions with ExperimentEvent markers.
+
+    Experiment design for the Stribeck knee (where the steady friction falls with speed, slope
+    down to -2.6 N*m*s/rad on the ABB preset; the velocity loop's damping is only K_v = 400 J =
+    0.48 N*m*s/rad, and cannot be raised: 1 kHz sampling, the velocity filter and the current lag
+    put its limit near 0.5):
+
+    * ``order="descending"``: each direction starts at the fastest plateau and slows down
+      plateau by plateau without stopping, so a slow plateau is entered from steady sliding, never
+      through a break-away (the fs - fc torque released at break-away throws a slow plateau into
+      stick-slip even where steady sliding would be stable); ``"ascending"`` = the old order.
+    * ``position_feedback`` with position gain ``ki`` (PD position loop on the ramp): steady sliding
+      at speed v is linearly stable when K_v + K_p s(v)/C > -F'(v), the friction's lag
+      (GMS attraction C = 50 N*m/s, s ~ 0.9 N*m: 18 ms) letting the position stiffness K_p damp the
+      negative slope: K_p > 125 N*m/rad here; 150 is used, since much stiffer loops hunt on the
+      stuck presliding mode (element stiffness 617 N*m/rad) excited by the encoder's quantisation.
+
+    With it the ABB preset slides steadily down to ~0.025 rad/s (the default 16 speeds put five
+    plateaus in the knee); slower plateaus still stick-slip on the 1.05e-4 rad encoder (without
+    quantisation all plateaus down to 0.003 rad/s are steady) and are rejected by
+    :func:`~friction_ros.core.identification.data.find_plateaus` from their torque oscillation.
+    """
+    check_choice("order", order, ["descending", "ascending"])
     if speeds is None:
-        speeds = np.geomspace(0.005, 2.0, 12)
-    segs = []
+        speeds = np.geomspace(0.005, 2.0, 16)
+    speeds = np.sort(np.abs(np.asarray(speeds, dtype=float)))
+    if order == "descending":
+        speeds = speeds[::-1]
     t = 0.0
     v_parts = []
     events = []
@@ -164,16 +205,32 @@ def plateau_experiment(
             nr = int(round(ramp / dt))
             nh = int(round(hold / dt))
             prev = v_parts[-1][-1] if v_parts else 0.0
+            if order == "descending" and prev * target < 0:
+                # through rest into the other direction: stop, then start at the fastest plateau
+                v_parts.append(np.linspace(prev, 0.0, nr))
+                t += nr * dt
+                prev = 0.0
             v_parts.append(np.linspace(prev, target, nr))
             t += nr * dt
             events.append(Event(t, "plateaus", f"plateau{target:+.4g}", idx, START, target))
             v_parts.append(np.full(nh, target))
             t += nh * dt
             events.append(Event(t, "plateaus", f"plateau{target:+.4g}", idx, END, target))
-            segs.append(target)
             idx += 1
-    v = np.concatenate(v_parts + [np.linspace(v_parts[-1][-1], 0.0, int(round(ramp / dt)))])
-    return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=events)
+    # ramp to rest and stay there 0.5 s (closes the last plateau for automatic detection)
+    stop = [np.linspace(v_parts[-1][-1], 0.0, int(round(ramp / dt))), np.zeros(int(round(0.5 / dt)))]
+    v = np.concatenate(v_parts + stop)
+    return run_velocity_loop(
+        v,
+        dt,
+        preset=preset,
+        friction=friction,
+        overrides=overrides,
+        events=events,
+        kp=kp,
+        ki=ki,
+        position_feedback=position_feedback,
+    )
 
 
 def write_bag(
