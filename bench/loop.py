@@ -161,6 +161,52 @@ def run_graph(
     return out
 
 
+TIMER_FLOOR_PROBE = """
+import os, sys, time
+fifo, seconds = sys.argv[1] == "1", float(sys.argv[2])
+os.sched_setaffinity(0, {0})
+if fifo:
+    os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(80))
+nxt = time.monotonic()
+end, n, late1, late5, worst = nxt + seconds, 0, 0, 0, 0.0
+while nxt < end:
+    nxt += 0.001
+    d = nxt - time.monotonic()
+    if d > 0:
+        time.sleep(d)
+    lateness = time.monotonic() - nxt
+    n += 1
+    late1 += lateness > 0.001
+    late5 += lateness > 0.005
+    worst = max(worst, lateness)
+print(n, late1, late5, worst)
+"""
+
+
+def timer_floor(seconds: float) -> dict:
+    """The machine's own floor: a bare Python loop that sleeps to 1 kHz deadlines (no ROS, no work),
+    pinned to core 0, with and without SCHED_FIFO 80. Cycles woken more than 1 ms late are cycles
+    the closed loop cannot make whatever the nodes do."""
+    import subprocess
+
+    out = {}
+    for name, fifo in (("default", "0"), ("pinned_fifo", "1")):
+        res = subprocess.run(
+            [sys.executable, "-c", TIMER_FLOOR_PROBE, fifo, str(seconds)], capture_output=True, text=True
+        )
+        if res.returncode != 0:
+            out[name] = {"error": res.stderr.strip().splitlines()[-1] if res.stderr.strip() else "failed"}
+            continue
+        n, late1, late5, worst = res.stdout.split()
+        out[name] = {
+            "cycles": int(n),
+            "late_1ms_percent": 100.0 * int(late1) / int(n),
+            "late_5ms": int(late5),
+            "max_late_ms": 1e3 * float(worst),
+        }
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--realtime-seconds", type=float, default=60.0)
@@ -175,6 +221,7 @@ def main() -> int:
     if args.quick:
         args.realtime_seconds, args.lockstep_seconds, args.soak_seconds = 15.0, 10.0, 0.0
     figures: dict = {"realtime": {}, "lockstep": {}}
+    figures["timer_floor"] = timer_floor(args.realtime_seconds / 2)
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         for sched in SCHEDULING:
@@ -237,6 +284,21 @@ def main() -> int:
                 r["overruns"],
             ]
             for k, r in rts.items()
+        ],
+    )
+    print_table(
+        "Timer floor of this machine: bare 1 kHz sleep loop on core 0, no ROS "
+        f"({args.realtime_seconds / 2:g} s)",
+        ["scheduling", "cycles", "woken > 1 ms late %", "> 5 ms late", "max late ms"],
+        [
+            [
+                k,
+                f.get("cycles", "-"),
+                f.get("late_1ms_percent", "-"),
+                f.get("late_5ms", "-"),
+                f.get("max_late_ms", f.get("error")),
+            ]
+            for k, f in figures["timer_floor"].items()
         ],
     )
     print_table(
