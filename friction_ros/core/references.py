@@ -388,26 +388,17 @@ class Chirp(Reference):
         self.omega_end = check_real(f"{n}.omega_end", omega_end, 0.0, unit="rad/s")
         self.sweep_time = check_real(f"{n}.sweep_time", sweep_time, 0.0, lo_open=True, unit="s")
 
-    def _eval(self, tau):
+    def _eval(self, tau, sin=np.sin, cos=np.cos):
         w0, k = self.omega_start, (self.omega_end - self.omega_start) / self.sweep_time
         ph = w0 * tau + 0.5 * k * tau * tau
         dph = w0 + k * tau
         A = self.amplitude - self.amplitude_decay * tau
         dA = -self.amplitude_decay
-        s, c = np.sin(ph), np.cos(ph)
-        pos = A * s
-        vel = dA * s + A * c * dph
-        acc = 2.0 * dA * c * dph - A * s * dph * dph + A * c * k
-        return pos, vel, acc
+        s, c = sin(ph), cos(ph)
+        return A * s, dA * s + A * c * dph, 2.0 * dA * c * dph - A * s * dph * dph + A * c * k
 
     def _scalar(self, tau):
-        w0, k = self.omega_start, (self.omega_end - self.omega_start) / self.sweep_time
-        ph = w0 * tau + 0.5 * k * tau * tau
-        dph = w0 + k * tau
-        A = self.amplitude - self.amplitude_decay * tau
-        dA = -self.amplitude_decay
-        s, c = math.sin(ph), math.cos(ph)
-        return A * s, dA * s + A * c * dph, 2.0 * dA * c * dph - A * s * dph * dph + A * c * k
+        return self._eval(tau, math.sin, math.cos)
 
     def _config(self):
         return {
