@@ -105,3 +105,43 @@ def test_decoded_joint_sample_works_with_the_select_helpers():
     s = JointStateDecoder().decode(serialize_message(msg))
     assert select_effort(s, "joint1") == 1.5 and select_effort(s, "other") is None
     assert select_joint(s, "joint1") == (0.2, 2.0, 1.5) and select_joint(s, "b") is None
+
+
+def test_scheduling_parameters_pin_and_raise_every_thread_of_a_node(tmp_path):
+    """drive_interface started with cpu_affinity / realtime_priority: all its threads (executor and
+    the middleware's) end up on that CPU, with SCHED_FIFO where the machine permits it."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    cpu = max(os.sched_getaffinity(0))
+    cmd = [sys.executable, "-m", "friction_ros.nodes.drive_interface", "--ros-args", "-p", "interface:=virtual",
+           "-p", "channel:=sched_test", "-p", f"cpu_affinity:={cpu}", "-p", "realtime_priority:=5"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            tids = os.listdir(f"/proc/{proc.pid}/task")
+            if len(tids) > 3:  # rclpy and Fast DDS threads are up
+                time.sleep(0.5)
+                break
+        assert proc.poll() is None, proc.stdout.read()
+        tids = os.listdir(f"/proc/{proc.pid}/task")
+        assert all(os.sched_getaffinity(int(t)) == {cpu} for t in tids)
+        fifo = [os.sched_getscheduler(int(t)) == os.SCHED_FIFO for t in tids]
+        try:  # does this machine permit SCHED_FIFO at all?
+            os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            permitted = True
+        except PermissionError:
+            permitted = False
+        assert all(fifo) if permitted else not any(fifo)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, _ = proc.communicate(timeout=20)
+    assert proc.returncode == 0, out
+    assert "drive left safe" in out
+    if not permitted:
+        assert "SCHED_FIFO not permitted" in out

@@ -59,6 +59,7 @@ from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
     OK,
+    SCHEDULING_PARAMS,
     SENSOR_QOS,
     STATE_QOS,
     WARN,
@@ -69,6 +70,7 @@ from friction_ros.nodes.node_utils import (
     JointStateEncoder,
     Param,
     add_runtime_validation,
+    apply_scheduling,
     declare,
     run_node,
 )
@@ -187,6 +189,7 @@ PARAMS = [
     Param("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
     Param("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
     Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
+    *SCHEDULING_PARAMS,
 ]
 RUNTIME = ("torque_limit", "current_limit", "velocity_limit", "command_timeout", "telemetry_timeout")
 
@@ -325,6 +328,7 @@ class DriveInterface(Node):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.v = v = declare(self, PARAMS)
+        apply_scheduling(self, v)
         self.axis = DriveAxis(axis_config(v))
         self.joint = v["joint_name"]
         self.period = 1.0 / v["control_rate_hz"]
