@@ -120,16 +120,18 @@ def test_scheduling_parameters_pin_and_raise_every_thread_of_a_node(tmp_path):
            "-p", "channel:=sched_test", "-p", f"cpu_affinity:={cpu}", "-p", "realtime_priority:=5"]  # fmt: skip
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 30.0
-        while time.monotonic() < deadline and proc.poll() is None:
-            time.sleep(0.2)
+
+        def pinned() -> bool:
             tids = os.listdir(f"/proc/{proc.pid}/task")
-            if len(tids) > 3:  # rclpy and Fast DDS threads are up
-                time.sleep(0.5)
-                break
+            return len(tids) > 3 and all(os.sched_getaffinity(int(t)) == {cpu} for t in tids)
+
+        deadline = time.monotonic() + 30.0
+        while time.monotonic() < deadline and proc.poll() is None and not pinned():
+            time.sleep(0.2)
         assert proc.poll() is None, proc.stdout.read()
+        assert pinned()  # every thread (rclpy, Fast DDS) on the requested CPU
+        time.sleep(0.3)
         tids = os.listdir(f"/proc/{proc.pid}/task")
-        assert all(os.sched_getaffinity(int(t)) == {cpu} for t in tids)
         fifo = [os.sched_getscheduler(int(t)) == os.SCHED_FIFO for t in tids]
         try:  # does this machine permit SCHED_FIFO at all?
             os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
