@@ -34,3 +34,21 @@ def test_cartesian_bringup_file_starts_three_namespaced_joints():
         assert f"__ns:=/{s.namespace}" in cmd
         assert any(c.endswith("controller_seed002_xyz.yaml") for c in cmd)
     assert specs[0].overrides == {"preset": "seed002_x", "joint_name": "x_joint"}
+
+
+def test_pin_latency_chain_puts_plant_and_controller_on_one_cpu():
+    from friction_ros.cli.bringup import NodeSpec, pin_latency_chain
+
+    specs = [NodeSpec(n) for n in ("plant_simulator", "compensating_controller", "friction_estimator")]
+    specs.append(NodeSpec("bag_recorder"))
+    assert pin_latency_chain(specs, cpus=[2, 5])
+    assert [s.overrides.get("cpu_affinity") for s in specs] == [2, 2, 5, None]
+    assert "cpu_affinity:=2" in " ".join(specs[0].command())
+    kept = [NodeSpec("plant_simulator", overrides={"cpu_affinity": 7}), NodeSpec("compensating_controller")]
+    assert pin_latency_chain(kept, cpus=[0, 1]) and kept[0].overrides["cpu_affinity"] == 7
+    one_cpu = [NodeSpec("plant_simulator")]
+    assert not pin_latency_chain(one_cpu, cpus=[0]) and one_cpu[0].overrides == {}
+    # several joints: no single chain to pin
+    multi = specs_from_config(str(PARAMS / "bringup_cartesian_xyz.yaml"))
+    assert not pin_latency_chain(multi, cpus=[0, 1])
+    assert all("cpu_affinity" not in s.overrides for s in multi)

