@@ -11,11 +11,12 @@
 3. Soak: ``--soak-seconds`` (default 600) at 1 kHz real time; resident memory growth per node
    between the end of warm-up and the end, overruns in the worst 10 s window.
 
-Both 1 and 2 run in two scheduling configurations: ``default`` (no pinning, normal scheduler) and
+Both 1 and 2 run in three scheduling configurations: ``default`` (no pinning, normal scheduler),
+``pinned`` (plant and controller on core 0, estimator on core 1: ``friction-bringup --pin``) and
 ``pinned_fifo`` (plant and controller share core 0 with SCHED_FIFO 80 via their ``realtime_priority``
 and ``cpu_affinity`` parameters, the estimator runs on core 1 with normal scheduling).
 
-    .venv/bin/python bench/loop.py                       # full (about 14 minutes)
+    .venv/bin/python bench/loop.py                       # full (about 17 minutes)
     .venv/bin/python bench/loop.py --quick               # iterate: 15 s + 10 s per configuration, no soak
 
 Measured floor on the 2-core development VM (rclpy 7.1.5 / Jazzy, Fast DDS shared memory,
@@ -95,6 +96,8 @@ def cpu_s(pid: int) -> float:
 #: chain) share core 0 with SCHED_FIFO 80, the estimator runs on core 1 with normal scheduling.
 SCHEDULING = {
     "default": ({}, {}, {}),
+    # friction-bringup --mode lockstep's default (--pin auto): no root needed
+    "pinned": ({"cpu_affinity": 0}, {"cpu_affinity": 0}, {"cpu_affinity": 1}),
     "pinned_fifo": (
         {"realtime_priority": 80, "cpu_affinity": 0},
         {"realtime_priority": 80, "cpu_affinity": 0},
