@@ -215,3 +215,45 @@ def test_fit_kernels_match_the_friction_library():
     th = np.array([lg["fc"] / lg["fs"], lg["vs"], lg["delta"], lg["sigma0"] / lg["fs"]])
     ours = kernels.lugre_features(th, v, dt) @ np.array([lg["fs"], lg["sigma1"]])
     assert np.max(np.abs(ours - lib)) < 1e-9
+
+
+def test_damped_gms_fit_kernel_matches_the_library_and_exports_sigma1():
+    """gms<N>d: regressors G_i + s dG_i/dt (s = sigma1 / sum k) reproduce the library GMS with
+    presliding damping sigma1; the Gram kernel agrees with the features; the exported config
+    carries sigma1 = s sum k; gms<N> (undamped) is unchanged."""
+    from friction_ros.core.friction import make_model
+    from friction_ros.core.identification import kernels
+    from friction_ros.core.identification.export import library_config
+    from friction_ros.core.identification.models import spec_for
+
+    rng = np.random.default_rng(0)
+    v = np.repeat(rng.normal(0, 0.05, 400), 5) + 0.02 * np.sin(np.arange(2000) * 0.01)
+    dt = 1e-3
+    g = dict(fc=0.8, fs=0.95, vs=0.05, delta=2.0, attraction=50.0, fv=0.0, k=[190.0, 95.0], alpha=[0.4, 0.6])
+    sigma1 = 0.86
+    lib = make_model("gms", **g, sigma1=sigma1).simulate(v, dt)
+    x = np.array(g["alpha"]) * g["fs"] / np.array(g["k"])
+    s = sigma1 / sum(g["k"])
+    theta = np.array([g["fc"] / g["fs"], g["vs"], g["delta"], g["attraction"] / g["fs"], *x, s])
+    beta = np.array(g["alpha"]) * g["fs"]
+    ours = kernels.gms_features(theta, v, dt, True) @ beta
+    assert np.max(np.abs(ours - lib)) < 1e-9
+    spec = spec_for("gms2d")
+    assert spec.name == "gms2d" and spec.damped and spec.nonlinear[-1] == "s_damp"
+    assert not spec_for("gms2").damped and spec_for("gms_4_d").name == "gms4d"
+    spec.mid_velocity = False
+    a = np.gradient(v, dt)
+    X = spec.design(theta, v, a, dt)
+    tau = X @ np.array([*beta, 0.01, 0.0012])
+    gram = spec.grams(theta[None, :], v, a, tau, dt)[0]
+    Xt = np.column_stack([X, tau])
+    assert np.allclose(gram, Xt.T @ Xt, rtol=1e-10, atol=1e-12)
+    c = spec.coefficients(theta, np.array([*beta, 0.01, 0.0012]))
+    assert c["k"] == pytest.approx(sorted(g["k"], reverse=True)) and c["sigma1"] == pytest.approx(sigma1)
+    cfg = library_config(spec.name, c)
+    assert cfg["sigma1"] == pytest.approx(sigma1)
+    assert make_model("gms", **{k: w for k, w in cfg.items() if k != "model"})["sigma1"] == pytest.approx(
+        sigma1
+    )
+    undamped = spec_for("gms2").coefficients(theta[:-1], np.array([*beta, 0.01, 0.0012]))
+    assert "sigma1" not in undamped and "sigma1" not in library_config("gms2", undamped)

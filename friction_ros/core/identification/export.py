@@ -6,7 +6,7 @@ Library configs (``model.to_config()`` form, validated with ``model_from_config`
   ``eps`` -> ``stribeck_eps`` (seed 003 A.2.2; Coulomb as fs = fc); from plateaus -> the plain
   library model (``asymmetric`` wrapper when the directions differ);
 * ``dahl`` -> ``dahl`` (alpha = 1), ``lugre`` -> ``lugre`` (sigma2 -> fv), ``gms<N>`` -> ``gms``
-  (C -> attraction);
+  (C -> attraction), ``gms<N>d`` -> ``gms`` with ``sigma1``;
 * ``anfis``/``nusvr`` have no library model: no config (JSON summary only).
 
 Parameter file (``node_name: ros__parameters:``):
@@ -58,7 +58,7 @@ def library_config(
     if name.startswith("gms"):
         alpha = [float(a) for a in c["alpha"]]
         alpha[-1] = 1.0 - sum(alpha[:-1])  # exact sum 1 after rounding
-        return {
+        out = {
             "model": "gms",
             "fc": c["fc"],
             "fs": max(c["fs"], c["fc"]),
@@ -69,6 +69,9 @@ def library_config(
             "k": [float(k) for k in c["k"]],
             "alpha": alpha,
         }
+        if "sigma1" in c:  # gms<N>d: presliding micro-damping
+            out["sigma1"] = float(c["sigma1"])
+        return out
     return None
 
 

@@ -22,7 +22,9 @@ Normalised model forms (derivations from the standard equations, see models.py):
   displacement), slip ``dG_i/dt = C~ (sgn v - G_i / s~(v))`` with ``C~ = C / F_S`` (exact
   exponential update), stick -> slip when ``|G_i| >= s~`` in the direction of motion, slip ->
   stick on a velocity reversal or v = 0. ``F = sum_i beta_i G_i + sigma2 v`` with
-  ``beta_i = F_S alpha_i``.
+  ``beta_i = F_S alpha_i``. Optional presliding damping (library GMS ``sigma1``, stiffness-
+  proportional): ``F = sum_i beta_i (G_i + s dG_i/dt) + sigma2 v`` with one more nonlinear
+  coefficient, the time constant ``s = sigma1 / sum_j k_j``.
 
 All kernels use ``prange`` over the population (both cores) and ``cache=True``.
 """
@@ -209,36 +211,51 @@ def _gms_step(G, stuck, vk, s, ct, xs, dt):
 
 
 @njit(cache=True)
-def gms_features(theta, v, dt):
-    """Regressor columns [G_1..G_N] of normalised GMS-N; theta = [r, vs, delta, C~, x_1..x_N]."""
+def gms_features(theta, v, dt, damped=False):
+    """Regressor columns of normalised GMS-N; theta = [r, vs, delta, C~, x_1..x_N] (+ [s] if
+    ``damped``): G_i, or G_i + s dG_i/dt with presliding damping (see :func:`gms_gram`)."""
     n = v.shape[0]
-    ne = theta.shape[0] - 4
+    ne = theta.shape[0] - 4 - (1 if damped else 0)
     out = np.empty((n, ne))
     r, vs, delta, ct = theta[0], theta[1], theta[2], theta[3]
-    xs = theta[4:].copy()
+    xs = theta[4 : 4 + ne].copy()
+    sd = theta[4 + ne] / dt if damped else 0.0
     G = np.zeros(ne)
+    Gp = np.zeros(ne)
     stuck = np.ones(ne, dtype=np.bool_)
     for k in range(n):
         vk = v[k]
         s = _shape(vk, r, vs, delta)
         _gms_step(G, stuck, vk, s, ct, xs, dt)
         for i in range(ne):
-            out[k, i] = G[i]
+            if damped:
+                out[k, i] = G[i] + sd * (G[i] - Gp[i])
+                Gp[i] = G[i]
+            else:
+                out[k, i] = G[i]
     return out
 
 
 @njit(cache=True, parallel=True)
-def gms_gram(P, vm, v, a, tau, dt, sos):
-    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`)."""
+def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
+    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`).
+
+    ``damped``: the last column of P is the presliding damping time constant
+    ``s = sigma1 / sum_j k_j`` [s] and each regressor is ``G_i + s dG_i/dt``, with dG_i/dt the
+    backward difference over the sample as in the library GMS (F_damp = (sigma1 / sum_j k_j)
+    sum_i dF_i/dt, dF_i/dt = (F_i(t) - F_i(t - h)) / h): since F_i = beta_i G_i and k_i = beta_i /
+    x_i, the damping force is ``sum_i beta_i s dG_i/dt`` and the element weights stay linear."""
     npop = P.shape[0]
     n = v.shape[0]
-    ne = P.shape[1] - 4
+    ne = P.shape[1] - 4 - (1 if damped else 0)
     m = ne + 3
     grams = np.zeros((npop, m, m))
     for p in prange(npop):
         r, vs, delta, ct = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
-        xs = P[p, 4:].copy()
+        xs = P[p, 4 : 4 + ne].copy()
+        sd = P[p, 4 + ne] / dt if damped else 0.0
         G = np.zeros(ne)
+        Gp = np.zeros(ne)
         stuck = np.ones(ne, dtype=np.bool_)
         feats = np.empty(m)
         gram = np.zeros((m, m))
@@ -248,7 +265,11 @@ def gms_gram(P, vm, v, a, tau, dt, sos):
             s = _shape(vk, r, vs, delta)
             _gms_step(G, stuck, vk, s, ct, xs, dt)
             for i in range(ne):
-                feats[i] = G[i]
+                if damped:
+                    feats[i] = G[i] + sd * (G[i] - Gp[i])
+                    Gp[i] = G[i]
+                else:
+                    feats[i] = G[i]
             _filter_feats(feats, ne, sos, zf)
             feats[ne] = v[k]
             feats[ne + 1] = a[k]

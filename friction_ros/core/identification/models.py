@@ -59,6 +59,7 @@ class FitSpec:
     viscous: bool = True
     dynamic: bool = False
     n_elements: int = 0
+    damped: bool = False  # GMS: presliding damping time constant s = sigma1 / sum k (last of theta)
     eps: float = DEFAULT_EPS
     mid_velocity: bool = True  # drive the states with the interval-mean velocity
     extra: dict = field(default_factory=dict)
@@ -102,7 +103,7 @@ class FitSpec:
         if f == "lugre":
             return kernels.lugre_features(theta, self.state_velocity(v), dt)
         if f == "gms":
-            return kernels.gms_features(theta, self.state_velocity(v), dt)
+            return kernels.gms_features(theta, self.state_velocity(v), dt, self.damped)
         raise ParameterError(f"model family {f!r} has no regressors")
 
     def state_velocity(self, v: np.ndarray) -> np.ndarray:
@@ -143,8 +144,10 @@ class FitSpec:
         else:
             vf, af, tf = v, a, tau
         f = self.family
-        if f in ("dahl", "lugre", "gms"):
-            kern = {"dahl": kernels.dahl_gram, "lugre": kernels.lugre_gram, "gms": kernels.gms_gram}[f]
+        if f == "gms":
+            g = kernels.gms_gram(P, self.state_velocity(v), vf, af, tf, dt, sos, self.damped)
+        elif f in ("dahl", "lugre"):
+            kern = {"dahl": kernels.dahl_gram, "lugre": kernels.lugre_gram}[f]
             g = kern(P, self.state_velocity(v), vf, af, tf, dt, sos)
         else:
             out = []
@@ -198,7 +201,7 @@ class FitSpec:
             }
         elif f == "gms":
             r, vs, delta, ct = theta[:4]
-            xs = theta[4:]
+            xs = theta[4 : 4 + self.n_elements]
             betas = np.array([lin[f"beta{i + 1}"] for i in range(self.n_elements)])
             fs = float(betas.sum())
             alpha = betas / fs if fs > 0 else np.full(self.n_elements, 1.0 / self.n_elements)
@@ -214,6 +217,8 @@ class FitSpec:
                 "k": k[order].tolist(),
                 "alpha": alpha[order].tolist(),
             }
+            if self.damped:  # sigma1 = s sum_j k_j (stiffness-proportional presliding damping)
+                c["sigma1"] = float(theta[4 + self.n_elements] * k.sum())
         else:  # pragma: no cover
             raise ParameterError(f"unknown family {f!r}")
         return {**c, "J": J}
@@ -233,13 +238,22 @@ class FitSpec:
         return np.clip(theta, self.lower, self.upper)
 
 
-_MODEL_HELP = "coulomb, coulomb_viscous, stribeck, dahl, lugre, gms<N> (e.g. gms4), anfis, nusvr"
+_MODEL_HELP = (
+    "coulomb, coulomb_viscous, stribeck, dahl, lugre, gms<N> (e.g. gms4), gms<N>d (with presliding "
+    "damping, e.g. gms4d), anfis, nusvr"
+)
 PARAMETRIC = ("coulomb", "coulomb_viscous", "stribeck", "dahl", "lugre")
 LEARNED = ("anfis", "nusvr")
 
 
 def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
-    """The FitSpec for a model name; ``gms<N>`` for a GMS with N elements (1..20).
+    """The FitSpec for a model name; ``gms<N>`` for a GMS with N elements (1..20), ``gms<N>d`` for
+    the same with presliding micro-damping (the library GMS's ``sigma1``, stiffness-proportional).
+
+    The damped GMS has one more nonlinear coefficient, last in theta: the damping time constant
+    ``s = sigma1 / sum_j k_j`` [s], searched in log space over [1e-6, 0.1] s (1e-6 s is no damping
+    for any practical purpose); each element regressor becomes ``G_i + s dG_i/dt``, so the element
+    weights still enter linearly (see :mod:`kernels`).
 
     Bounds of the dynamic models: F_C/F_S in [0.5, 1] (a static level at most twice the Coulomb
     level) and v_S >= 1e-3 rad/s; without them the sparsely visited low-speed sliding region lets
@@ -279,25 +293,29 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
             eps=eps,
         )
     if name.startswith("gms"):
+        body = name[3:].lstrip("_-")
+        damped = body.endswith("d")
+        body = body[:-1].rstrip("_-") if damped else body
         try:
-            ne = int(name[3:].lstrip("_-") or "4")
+            ne = int(body or "4")
         except ValueError:
             raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}") from None
         if not 1 <= ne <= 20:
             raise ParameterError(f"model = {name!r}: GMS element count {ne} is out of range: must be 1..20")
-        lo = [0.5, 1e-3, 0.3, 1.0] + [1e-6] * ne
-        hi = [1.0, 2.0, 4.0, 1e5] + [0.1] * ne
-        lg = [False, True, False, True] + [True] * ne
+        lo = [0.5, 1e-3, 0.3, 1.0] + [1e-6] * ne + [1e-6] * damped
+        hi = [1.0, 2.0, 4.0, 1e5] + [0.1] * ne + [0.1] * damped
+        lg = [False, True, False, True] + [True] * ne + [True] * damped
         return FitSpec(
-            f"gms{ne}",
+            f"gms{ne}{'d' if damped else ''}",
             "gms",
-            ["r", "vs", "delta", "c_n"] + [f"x{i + 1}" for i in range(ne)],
+            ["r", "vs", "delta", "c_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
             arr(lo),
             arr(hi),
             arr(lg),
             [f"beta{i + 1}" for i in range(ne)],
             dynamic=True,
             n_elements=ne,
+            damped=damped,
             eps=eps,
         )
     raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}")

@@ -284,8 +284,14 @@ def fit_records(
             if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
                 smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
                 if smaller:
-                    th = np.asarray(smaller[-1].extra["theta"])
-                    x0 = np.concatenate([th[:4], np.resize(th[4:], spec.n_elements)])
+                    prev = smaller[-1]
+                    th = np.asarray(prev.extra["theta"])
+                    sp = spec_for(prev.name, eps)
+                    xs = np.resize(th[4 : 4 + sp.n_elements], spec.n_elements)
+                    x0 = np.concatenate([th[:4], xs])
+                    if spec.damped:  # the smaller fit's damping, else the middle of its range
+                        sd = th[-1] if sp.damped else np.sqrt(spec.lower[-1] * spec.upper[-1])
+                        x0 = np.append(x0, sd)
             mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
             fit = fit_time_domain(
                 spec,
