@@ -41,5 +41,9 @@ setup(
     maintainer_email="maintainers@friction-ros.org",
     description="Friction identification and compensation for geared servo joints (ROS 2 Jazzy).",
     license="Apache-2.0",
-    entry_points={"console_scripts": ENTRY_POINTS},
+    entry_points={
+        "console_scripts": ENTRY_POINTS,
+        # python-can interface "friction_local": a CAN bus between processes without SocketCAN
+        "can.interface": ["friction_local = friction_ros.core.can.local_bus:LocalBus"],
+    },
 )

@@ -1,0 +1,185 @@
+"""LocalBus: a python-can bus shared by the processes of one machine, over Unix datagram sockets.
+
+For machines without SocketCAN or ``vcan`` (containers, CI runners, this project's test VM):
+python-can's ``virtual`` bus only connects buses of one process, so a drive emulator and the
+``drive_interface`` node could not run as separate processes the way a drive and its node do on a
+robot. With this bus they can::
+
+    drive_emulator --interface friction_local --channel joint1
+    drive_interface --ros-args -p interface:=friction_local -p channel:=joint1 ...
+
+Semantics are those of a CAN bus: every frame one member sends is received by every other member
+(not by the sender), in order. Each member binds a datagram socket
+``<dir>/<channel>/<pid>-<n>`` (``<dir>`` = ``$FRICTION_CAN_DIR`` or ``/tmp/friction_can``); a send
+is one non-blocking ``sendto`` per peer, a receive one ``recv``, and frames travel as SocketCAN's
+16-byte classic ``struct can_frame`` (``can_id`` with the EFF/RTR/ERR flags, ``len``, 8 data bytes),
+so the per-frame cost is close to a SocketCAN raw socket's. Peers are found by listing the channel
+folder at most every ``refresh_period`` (a new member is heard within 0.2 s); a dead member's
+socket is removed on the first refused send. A peer whose receive queue is full drops the frame
+(``frames_dropped``), as a SocketCAN receiver does. CAN FD, bit timing and bus errors are not
+emulated; ``bitrate`` is accepted and ignored. Registered with python-can as ``friction_local``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import itertools
+import os
+import select
+import socket
+import struct
+import time
+from pathlib import Path
+
+import can
+
+CAN_EFF_FLAG = 0x80000000
+CAN_RTR_FLAG = 0x40000000
+CAN_ERR_FLAG = 0x20000000
+CAN_EFF_MASK = 0x1FFFFFFF
+_FRAME = struct.Struct("=IB3x8s")  # struct can_frame (classic CAN, 16 bytes)
+_ids = itertools.count()
+
+
+def default_dir() -> Path:
+    return Path(os.environ.get("FRICTION_CAN_DIR", "/tmp/friction_can"))
+
+
+def pack_frame(msg: can.Message) -> bytes:
+    """python-can Message -> SocketCAN ``struct can_frame`` bytes."""
+    cid = msg.arbitration_id & (CAN_EFF_MASK if msg.is_extended_id else 0x7FF)
+    if msg.is_extended_id:
+        cid |= CAN_EFF_FLAG
+    if msg.is_remote_frame:
+        cid |= CAN_RTR_FLAG
+    if msg.is_error_frame:
+        cid |= CAN_ERR_FLAG
+    return _FRAME.pack(cid, msg.dlc, bytes(msg.data))
+
+
+def unpack_frame(raw: bytes, timestamp: float, channel: str) -> can.Message | None:
+    """``struct can_frame`` bytes -> Message, or None for a datagram that is not one."""
+    if len(raw) != _FRAME.size:
+        return None
+    cid, dlc, data = _FRAME.unpack(raw)
+    if dlc > 8:
+        return None
+    ext = bool(cid & CAN_EFF_FLAG)
+    rtr = bool(cid & CAN_RTR_FLAG)
+    return can.Message(
+        timestamp=timestamp,
+        arbitration_id=cid & (CAN_EFF_MASK if ext else 0x7FF),
+        is_extended_id=ext,
+        is_remote_frame=rtr,
+        is_error_frame=bool(cid & CAN_ERR_FLAG),
+        dlc=dlc,
+        data=None if rtr else data[:dlc],
+        channel=channel,
+    )
+
+
+class LocalBus(can.BusABC):
+    """A CAN bus between processes of one machine (see the module docstring)."""
+
+    def __init__(
+        self,
+        channel: str = "can0",
+        can_filters=None,
+        directory: str | os.PathLike | None = None,
+        refresh_period: float = 0.2,
+        receive_own_messages: bool = False,
+        **kwargs,
+    ):
+        name = str(channel)
+        if not name or "/" in name or name in (".", ".."):
+            raise ValueError(f"friction_local channel must be a plain name (no '/'), got {channel!r}")
+        if receive_own_messages:
+            raise ValueError(
+                "friction_local: receive_own_messages is not supported (a CAN node does not hear itself)"
+            )
+        self.channel = name
+        self.channel_info = f"friction_local channel {name}"
+        self._dir = Path(directory) if directory is not None else default_dir() / name
+        self._dir.mkdir(parents=True, exist_ok=True)
+        self._path = str(self._dir / f"{os.getpid()}-{next(_ids)}")
+        if len(self._path.encode()) > 107:
+            raise ValueError(f"friction_local socket path too long for AF_UNIX (max 107 bytes): {self._path}")
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self._path)
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self._sock.bind(self._path)
+        self._sock.setblocking(False)
+        self._refresh_period = refresh_period
+        self._peers: list[str] = []
+        self._refreshed = -1e9
+        self.frames_dropped = 0
+        self._closed = False
+        super().__init__(channel=name, can_filters=can_filters, **kwargs)
+
+    # ---- peers ------------------------------------------------------------------------------------
+    def _refresh(self, now: float) -> None:
+        self._refreshed = now
+        try:
+            names = os.listdir(self._dir)
+        except FileNotFoundError:
+            names = []
+        self._peers = [str(self._dir / n) for n in names if str(self._dir / n) != self._path]
+
+    def _forget(self, peer: str) -> None:
+        with contextlib.suppress(ValueError):
+            self._peers.remove(peer)
+        with contextlib.suppress(OSError):
+            os.unlink(peer)  # nobody bound to it: a member that died without shutdown()
+
+    # ---- BusABC -----------------------------------------------------------------------------------
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if self._closed:
+            raise can.CanOperationError("friction_local bus is shut down")
+        now = time.monotonic()
+        if now - self._refreshed > self._refresh_period:
+            self._refresh(now)
+        raw = pack_frame(msg)
+        sendto = self._sock.sendto
+        for peer in tuple(self._peers):
+            try:
+                sendto(raw, peer)
+            except (ConnectionRefusedError, FileNotFoundError):
+                self._forget(peer)
+            except BlockingIOError:
+                self.frames_dropped += 1  # the peer's queue is full: it loses the frame
+            except OSError as exc:
+                if exc.errno in (errno.ENOBUFS, errno.EAGAIN):
+                    self.frames_dropped += 1
+                else:
+                    raise can.CanOperationError(f"friction_local send failed: {exc}", exc.errno) from exc
+
+    def _recv_internal(self, timeout: float | None):
+        if self._closed:
+            raise can.CanOperationError("friction_local bus is shut down")
+        sock = self._sock
+        try:
+            raw = sock.recv(64)
+        except BlockingIOError:
+            if timeout == 0:
+                return None, False
+            ready, _, _ = select.select([sock], [], [], timeout)
+            if not ready:
+                return None, False
+            try:
+                raw = sock.recv(64)
+            except BlockingIOError:
+                return None, False
+        return unpack_frame(raw, time.time(), self.channel), False
+
+    def fileno(self) -> int:
+        return self._sock.fileno()
+
+    def shutdown(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        super().shutdown()
+        self._sock.close()
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(self._path)
