@@ -178,6 +178,88 @@ def test_round_trip_within_10_percent_of_truth_over_references(round_trip):
         assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, (amp, rms, r["per_seed"])
 
 
+def _benchmark_truth003() -> dict:
+    """The seed 003 truth of the compensation benchmark (bench/compensation.py TRUTH003): the
+    preset's GMS-4 with presliding micro-damping sigma1 = 0.86 N*m*s/rad."""
+    from friction_ros.core.presets import load_preset
+
+    return dict(load_preset("abb_m19s").friction.to_config(), sigma1=0.86)
+
+
+def _round_trip_damped(out, seed: int = 1, duration: float = 40.0) -> dict:
+    """bench/compensation.py Tables 2/3 exactly: the damped truth plant (TRUTH003, 0.1 ms current
+    loop), PD Kp = 200, Kd = 0.15, 1 kHz, 40 s band-limited random reference seed 1; RMS error with
+    the true (J = 0.0012, TRUTH003) and the fitted (parameter file) feed-forward."""
+    from friction_ros.core.control.controller import config_from_ros_parameters
+    from friction_ros.core.harness import make_plant, run_closed_loop
+
+    doc = yaml.safe_load((out / "friction_params.yaml").read_text())
+    fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
+    truth = _benchmark_truth003()
+    pd = {"p": 200.0, "d": 0.15}
+    results = {}
+    for amp in (0.005, math.pi):
+        ref = {"type": "band_limited_random", "amplitude": amp, "duration": duration, "seed": seed}
+        rms = {}
+        for label, ctrl in (
+            ("truth", {"mode": "pid", "pid": pd, "inertia": 0.0012, "friction": {"model": truth}}),
+            ("fitted", {"mode": "pid", "pid": pd, **fitted}),
+        ):
+            plant = make_plant("abb_m19s", friction_motor=truth, current_time_constant=1e-4)
+            rms[label] = run_closed_loop(plant, ctrl, ref, duration).metrics["rms_error"]
+        results[amp] = rms
+    return results
+
+
+@pytest.fixture(scope="module")
+def damped_fit(tmp_path_factory):
+    """As ``gms_fit`` (16 s, 10 s train) but recorded from the benchmark's damped truth and fitted
+    with the damped GMS-4 (``gms4d``); the parameter file carries sigma1."""
+    d = tmp_path_factory.mktemp("gms_damped")
+    truth = _benchmark_truth003()
+    rec = synthetic.seed003_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
+    bag = synthetic.write_bag(d / "bag", rec)
+    res = fit_bag(bag, "/joint_states", "joint1", ["gms4d"], d / "out", plots=False, plant_preset="abb_m19s")
+    return res, d / "out", _round_trip_damped(d / "out")
+
+
+def test_damped_gms_fit_recovers_presliding_damping(damped_fit):
+    """gms4d on the damped truth: sigma1 (= s sum k) and the presliding stiffness recovered, the
+    parameter file carries sigma1 and the controller's GMS loads it."""
+    res, out, _ = damped_fit
+    c = res.models["gms4d"].coefficients
+    truth = _benchmark_truth003()
+    assert abs(c["sigma1"] / truth["sigma1"] - 1) < 0.25, c
+    assert abs(sum(c["k"]) / sum(truth["k"]) - 1) < 0.15, c
+    assert abs(c["J"] / 0.0012 - 1) < 0.05, c
+    doc = yaml.safe_load((out / "friction_params.yaml").read_text())
+    cfg = doc["compensating_controller"]["ros__parameters"]["friction"]
+    assert cfg["sigma1"] == pytest.approx(c["sigma1"])
+    from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
+
+    ctrl_cfg, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
+    assert CompensatingController(ctrl_cfg).friction.model["sigma1"] == pytest.approx(c["sigma1"])
+
+
+def test_round_trip_damped_truth_large_stroke_within_10_percent(damped_fit):
+    """Issue 8 round trip against the compensation benchmark's own truth (damped GMS-4, Table 3:
+    pi rad stroke): fitted feed-forward RMS within 10 % of the true-coefficient one."""
+    rms = damped_fit[2][math.pi]
+    assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, rms
+
+
+@pytest.mark.xfail(strict=False, reason="small stroke ill-conditioned at the encoder floor (see docstring)")
+def test_round_trip_damped_truth_small_stroke_within_10_percent(damped_fit):
+    """The same at the 0.005 rad stroke (Table 2). Not met: with the damped truth the
+    true-coefficient RMS is 0.075 mrad (below one 0.105 mrad encoder count), and the RMS is set by
+    the feed-forward's static error over Kp = 200: fs alone off by +-0.5 % moves the ratio to
+    0.88/0.99, by +-1 % to 0.75/1.38, k by -5 % to 1.6. The 10 s training record identifies sigma1,
+    k and alpha to 5-15 % and fc to 0.3 %, but fs, vs and delta only to a few % (fs +3.5 %, delta at
+    its bound 4), which gives ratios 2-3 (0.8 with a 7 ms instead of 5 ms velocity window)."""
+    rms = damped_fit[2][0.005]
+    assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, rms
+
+
 def test_static_recovery_on_plateaus():
     """Plateaus on the ABB preset (GMS-4 truth: steady state = Stribeck fc 0.8, fs 0.95, vs 0.05,
     delta 2, fv 0.01), fitted per direction. Experiment: descending speeds (each slow plateau entered
