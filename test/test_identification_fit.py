@@ -229,8 +229,8 @@ def test_damped_gms_fit_recovers_presliding_damping(damped_fit):
     res, out, _ = damped_fit
     c = res.models["gms4d"].coefficients
     truth = _benchmark_truth003()
-    assert abs(c["sigma1"] / truth["sigma1"] - 1) < 0.25, c
-    assert abs(sum(c["k"]) / sum(truth["k"]) - 1) < 0.15, c
+    assert abs(c["sigma1"] / truth["sigma1"] - 1) < 0.20, c  # measured -13 %
+    assert abs(sum(c["k"]) / sum(truth["k"]) - 1) < 0.10, c  # measured -3 %
     assert abs(c["J"] / 0.0012 - 1) < 0.05, c
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     cfg = doc["compensating_controller"]["ros__parameters"]["friction"]
@@ -252,10 +252,12 @@ def test_round_trip_damped_truth_large_stroke_within_10_percent(damped_fit):
 def test_round_trip_damped_truth_small_stroke_within_10_percent(damped_fit):
     """The same at the 0.005 rad stroke (Table 2). Not met: with the damped truth the
     true-coefficient RMS is 0.075 mrad (below one 0.105 mrad encoder count), and the RMS is set by
-    the feed-forward's static error over Kp = 200: fs alone off by +-0.5 % moves the ratio to
-    0.88/0.99, by +-1 % to 0.75/1.38, k by -5 % to 1.6. The 10 s training record identifies sigma1,
-    k and alpha to 5-15 % and fc to 0.3 %, but fs, vs and delta only to a few % (fs +3.5 %, delta at
-    its bound 4), which gives ratios 2-3 (0.8 with a 7 ms instead of 5 ms velocity window)."""
+    the feed-forward's static error over Kp = 200: the truth with fs off by +-0.5 % gives ratios
+    0.88/0.99, by +-1 % 0.75/1.38, with k -5 % 1.6; the truth's Stribeck curve with the fitted k and
+    alpha still 1.75. This 10 s training record identifies fc to 0.3 %, sum k to 3 % and sigma1 to
+    -13 %, but fs only to +10 % (vs, delta traded against it; +3.5 % when gms4d starts from a gms4
+    fit, bench/fitting.py): ratio 4.0 here, 2.9 in bench/fitting.py, 0.67 even when fitted with the
+    true (noise-free) velocity (fs -2 %)."""
     rms = damped_fit[2][0.005]
     assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, rms
 

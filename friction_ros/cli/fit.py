@@ -29,7 +29,10 @@ def build_parser() -> argparse.ArgumentParser:
         "--models",
         nargs="+",
         default=["coulomb", "stribeck", "lugre", "gms4"],
-        help="models: coulomb coulomb_viscous stribeck dahl lugre gms<N> anfis nusvr (default: coulomb stribeck lugre gms4)",
+        help=(
+            "models: coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
+            "damping sigma1) anfis nusvr (default: coulomb stribeck lugre gms4)"
+        ),
     )
     p.add_argument("--out", default="friction_fit", help="output directory (default friction_fit)")
     p.add_argument("--params", default=None, help="parameter YAML path (default <out>/friction_params.yaml)")
