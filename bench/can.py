@@ -251,6 +251,50 @@ def sustained(r: dict) -> bool:
     )
 
 
+def node_work_per_cycle(n: int = 20_000) -> float:
+    """The node's own computation in one 1 kHz cycle, hot, no I/O [us]: two telemetry frames
+    decoded into the axis, one raw joint_commands message decoded and applied, the axis cycle
+    (safety checks, torque command frame), the python-can Message built, JointState serialised."""
+    import can
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState
+
+    from friction_ros.core.can import odrive as od
+    from friction_ros.core.can.axis import DriveAxis
+    from friction_ros.nodes.drive_interface import PARAMS, StatePackets, axis_config
+    from friction_ros.nodes.node_utils import JointStateDecoder
+
+    v = {p.name: p.default for p in PARAMS}
+    v.update(node_id=1, enable_on_start=True, torque_constant=0.49)
+    axis = DriveAxis(axis_config(v))
+    axis.request_enable()
+    packets, decoder = StatePackets("j1", "odrive_cansimple"), JointStateDecoder()
+    raw = serialize_message(JointState(name=["j1"], effort=[0.1]))
+    enc, iq = od.encode_encoder_estimates(1, 1.0, 2.0), od.encode_iq(1, 1.0, 2.0)
+    clock = [time.monotonic()]
+    frames_out = [0]
+
+    def one():
+        clock[0] += 0.001
+        now = clock[0]
+        axis.on_frame(enc.arbitration_id, enc.data, False, False, False, now)
+        axis.on_frame(iq.arbitration_id, iq.data, False, False, False, now)
+        axis.set_command(decoder.decode(raw).effort[0], now)
+        r = axis.cycle(now)
+        for f in r.frames:
+            can.Message(
+                arbitration_id=f.arbitration_id, data=f.data, is_extended_id=f.is_extended,
+                is_remote_frame=f.is_remote, dlc=f.length,
+            )  # fmt: skip
+            frames_out[0] += 1
+        if r.sample is not None:
+            packets.set_joint(1, 2, r.sample.position, r.sample.velocity, r.sample.effort)
+
+    one()
+    assert axis.enabled and frames_out[0] >= 1, "axis not running: the measurement would be empty"
+    return min(timeit.repeat(one, number=n, repeat=3)) / n * 1e6
+
+
 def platform_probe(n: int = 5000) -> dict:
     """What a wake-up costs on this machine, without ROS or CAN.
 
@@ -320,8 +364,9 @@ def main() -> None:
     codec = codec_costs()
     print_table("codec cost per frame", ["operation", "us/frame"], codec)
     platform = platform_probe()
+    platform["node_python_work_us_per_cycle"] = node_work_per_cycle()
     print_table(
-        "this machine: cost of a wake-up (no ROS, no CAN)",
+        "this machine: cost of a wake-up (no ROS, no CAN), and the node's own work per cycle",
         ["probe", "value"],
         [[k.replace("_", " "), v] for k, v in platform.items()],
     )
