@@ -136,15 +136,20 @@ def test_round_trip_parameter_file_drives_the_controller(round_trip):
     assert high["fitted"] < 0.1 * high["none"], high
 
 
-def _round_trip_benchmark_length(out, seed: int = 1, duration: float = 40.0) -> dict:
+def _round_trip_benchmark_length(
+    out, truth: dict | None = None, seed: int = 1, duration: float = 40.0
+) -> dict:
     """As :func:`_round_trip` on one reference of the benchmark's length (bench/compensation.py
-    Tables 2/3: 40 s, seed 1) instead of five 4 s ones."""
+    Tables 2/3: 40 s, seed 1) instead of five 4 s ones: RMS error with the true (J = 0.0012,
+    ``truth``) and the fitted (parameter file) feed-forward, on the plant with friction ``truth``
+    (default: the preset's) and a 0.1 ms current loop."""
     from friction_ros.core.control.controller import config_from_ros_parameters
     from friction_ros.core.harness import make_plant, run_closed_loop
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
-    truth = make_plant("abb_m19s").params.friction_motor.to_config()
+    if truth is None:
+        truth = make_plant("abb_m19s").params.friction_motor.to_config()
     pd = {"p": 200.0, "d": 0.15}
     results = {}
     for amp in (0.005, math.pi):
@@ -154,7 +159,7 @@ def _round_trip_benchmark_length(out, seed: int = 1, duration: float = 40.0) -> 
             ("truth", {"mode": "pid", "pid": pd, "inertia": 0.0012, "friction": {"model": truth}}),
             ("fitted", {"mode": "pid", "pid": pd, **fitted}),
         ):
-            plant = make_plant("abb_m19s", current_time_constant=1e-4)
+            plant = make_plant("abb_m19s", friction_motor=truth, current_time_constant=1e-4)
             rms[label] = run_closed_loop(plant, ctrl, ref, duration).metrics["rms_error"]
         results[amp] = rms
     return results
@@ -186,29 +191,10 @@ def _benchmark_truth003() -> dict:
     return dict(load_preset("abb_m19s").friction.to_config(), sigma1=0.86)
 
 
-def _round_trip_damped(out, seed: int = 1, duration: float = 40.0) -> dict:
+def _round_trip_damped(out) -> dict:
     """bench/compensation.py Tables 2/3 exactly: the damped truth plant (TRUTH003, 0.1 ms current
-    loop), PD Kp = 200, Kd = 0.15, 1 kHz, 40 s band-limited random reference seed 1; RMS error with
-    the true (J = 0.0012, TRUTH003) and the fitted (parameter file) feed-forward."""
-    from friction_ros.core.control.controller import config_from_ros_parameters
-    from friction_ros.core.harness import make_plant, run_closed_loop
-
-    doc = yaml.safe_load((out / "friction_params.yaml").read_text())
-    fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
-    truth = _benchmark_truth003()
-    pd = {"p": 200.0, "d": 0.15}
-    results = {}
-    for amp in (0.005, math.pi):
-        ref = {"type": "band_limited_random", "amplitude": amp, "duration": duration, "seed": seed}
-        rms = {}
-        for label, ctrl in (
-            ("truth", {"mode": "pid", "pid": pd, "inertia": 0.0012, "friction": {"model": truth}}),
-            ("fitted", {"mode": "pid", "pid": pd, **fitted}),
-        ):
-            plant = make_plant("abb_m19s", friction_motor=truth, current_time_constant=1e-4)
-            rms[label] = run_closed_loop(plant, ctrl, ref, duration).metrics["rms_error"]
-        results[amp] = rms
-    return results
+    loop), PD Kp = 200, Kd = 0.15, 1 kHz, 40 s band-limited random reference seed 1."""
+    return _round_trip_benchmark_length(out, _benchmark_truth003())
 
 
 @pytest.fixture(scope="module")
