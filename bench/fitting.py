@@ -5,7 +5,8 @@ plus the seed 003 Table 1 analogue (validation NMSE high/low velocity, 10 s trai
 next to the paper's figures, and the fit -> controller round trip against the compensation
 benchmark's own truth (bench/compensation.py TRUTH003: GMS-4 with presliding damping sigma1 = 0.86):
 16 s record of that truth (envelope 0.05-5 rad/s, as test_identification_fit.py), fitted with the
-undamped (gms4) and the damped (gms4d) GMS-4, RMS of Tables 2/3 (seed 1, 40 s) relative to the
+undamped (gms4) and the damped (gms4d) GMS-4, and two-stage (a plateau run of the same truth added:
+Stribeck curve from its plateaus, then gms4d), RMS of Tables 2/3 (seed 1, 40 s) relative to the
 true-coefficient feed-forward.
 
     .venv/bin/python bench/fitting.py            # full: 50 s record
@@ -59,18 +60,26 @@ def round_trip_damped() -> dict:
     )
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(d, ["gms4", "gms4d"], identifiability_check=False)
+    # two-stage: a plateau run of the same truth added, the Stribeck curve taken from its plateaus
+    rp = synthetic.plateau_experiment(
+        np.geomspace(0.005, 2.0, 24), hold=1.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
+    )
+    dp = prepare(rp.t, rp.position, rp.velocity, rp.effort, events=rp.events)
+    two = fit_records([dp, d], ["stribeck", "gms4d"], identifiability_check=False)
+    models = {**res.models, "gms4d two-stage": two.models["gms4d"]}
     amps = {"small (0.005 rad)": 0.005, "large (pi rad)": np.pi}
     truth = {k: _table23_rms(TRUTH003, J003, a) for k, a in amps.items()}
     out = {"truth_rms": truth, "truth_sigma1": TRUTH003["sigma1"]}
     s_true = TRUTH003["sigma1"] / sum(TRUTH003["k"])
     out["truth_s"] = s_true
-    for n, m in res.models.items():
+    for n, m in models.items():
         c = m.coefficients
         rms = {k: _table23_rms(m.config, c["J"], a) for k, a in amps.items()}
         out[n] = {
             "fit_s": m.seconds,
             "sigma1": c.get("sigma1", 0.0),
             "fs": c["fs"],
+            "delta": c["delta"],
             "sum_k": float(sum(c["k"])),
             "rms": rms,
             "ratio": {k: rms[k] / truth[k] for k in amps},
@@ -179,19 +188,20 @@ def main() -> None:
     figures["round_trip_damped_truth"] = rt
     print_table(
         "Round trip against the compensation benchmark's damped truth (sigma1 = 0.86, s = "
-        f"{rt['truth_s'] * 1e3:.3f} ms; fs 0.95, sum k 617.5): fitted / true-coefficient RMS, "
+        f"{rt['truth_s'] * 1e3:.3f} ms; fs 0.95, delta 2, sum k 617.5): fitted / true-coefficient RMS, "
         "Tables 2/3 (seed 1, 40 s); goal within 10 %",
-        ["fit", "fit [s]", "sigma1", "fs", "sum k", "small stroke", "large stroke"],
+        ["fit", "fit [s]", "sigma1", "fs", "delta", "sum k", "small stroke", "large stroke"],
         [
             [
                 n,
                 rt[n]["fit_s"],
                 f"{rt[n]['sigma1']:.3f}",
                 f"{rt[n]['fs']:.4f}",
+                f"{rt[n]['delta']:.2f}",
                 f"{rt[n]['sum_k']:.1f}",
                 *(f"{r:.3f}" for r in rt[n]["ratio"].values()),
             ]
-            for n in ("gms4", "gms4d")
+            for n in ("gms4", "gms4d", "gms4d two-stage")
         ],
     )
     goals = {
