@@ -202,3 +202,194 @@ def test_emulator_and_node_in_separate_processes(channel):
     idles = [t for t, arb, d in rows if arb == (1 << 5) | od.Cmd.SET_AXIS_STATE and d[:4] == idle]
     assert any(t >= t_int for t in idles), "no IDLE frame on the bus after SIGINT"
     assert "drive left safe" in out
+
+
+# ---- several drives on one bus, one node ----------------------------------------------------------------
+def _node_cmd(channel: str, *params: str) -> list[str]:
+    ros = ["-p", "interface:=friction_local", "-p", f"channel:={channel}", "-p", "enable_on_start:=true"]
+    for p in params:
+        ros += ["-p", p]
+    return [sys.executable, "-m", "friction_ros.nodes.drive_interface", "--ros-args", *ros]
+
+
+@pytest.mark.ros
+@pytest.mark.parametrize(
+    "params, words",
+    [
+        (
+            ["joints:=[a, b]", "a.node_id:=1", "b.node_id:=1"],
+            ["node ids must differ", "a.node_id = 1", "b.node_id = 1"],
+        ),
+        (["joints:=[a, 2b]", "a.node_id:=1"], ["joints[1]", "'2b'", "letter"]),
+        (["joints:=[a, a]"], ["appears twice"]),
+        (["joints:=[a, mit]"], ["clashes"]),
+        (["c.node_id:=3"], ["unknown parameter", "c.node_id"]),
+    ],
+)
+def test_several_drives_bad_parameters_refuse_to_start_with_one_line(channel, params, words):
+    p = subprocess.run(
+        _node_cmd(channel, *params), env=os.environ.copy(), capture_output=True, text=True, timeout=60
+    )
+    out = p.stdout + p.stderr
+    assert p.returncode == 2, out
+    assert all(w in out for w in words) and "Traceback" not in out, out
+
+
+@pytest.mark.ros
+@pytest.mark.flaky(reruns=2)
+def test_two_drives_on_one_bus_one_node(channel):
+    """drive_interface with joints [shoulder, elbow] (node ids 1, 2; different gear ratios) and one
+    emulator process with two drives: one joint_states message with both joints, both hold their own
+    set-points from one joint_commands message, a command naming only one joint leaves the other to
+    its watchdog (zero torque), SIGINT idles both drives on the wire."""
+    import rclpy
+    from friction_msgs.msg import DriveState
+    from rclpy.executors import SingleThreadedExecutor
+    from sensor_msgs.msg import JointState
+    from test_can_e2e import KT
+
+    from friction_ros.nodes.node_utils import COMMAND_QOS, SENSOR_QOS, STATE_QOS
+
+    sniffer = LocalBus(channel)
+    rows: list[tuple[float, int, bytes]] = []
+    stop_sniff = threading.Event()
+
+    def sniff():
+        while not stop_sniff.is_set():
+            m = sniffer.recv(0.05)
+            if m is not None:
+                rows.append((time.time(), m.arbitration_id, bytes(m.data)))
+
+    th = threading.Thread(target=sniff, daemon=True)
+    th.start()
+    env = os.environ.copy()
+    emu = subprocess.Popen(
+        [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", "friction_local",
+         "--channel", channel, "--node-id", "1", "2", "--preset", "abb_m19s", "--status-period", "60"],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    node = subprocess.Popen(
+        _node_cmd(channel, "joints:=[shoulder, elbow]", "shoulder.node_id:=1", "elbow.node_id:=2",
+                  f"torque_constant:={KT}", "torque_limit:=4.0", "command_timeout:=0.1",
+                  "elbow.gear_ratio:=2.0", "elbow.torque_limit:=3.0"),
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    ros = rclpy.create_node("two_drive_test", context=ctx)
+    target = {"shoulder": 0.3, "elbow": -0.2}
+    names = {"both": ["shoulder", "elbow"], "shoulder only": ["shoulder"]}
+    mode = ["both"]
+    states: list[tuple[float, list[str], list[float]]] = []
+    drive_states: list[DriveState] = []
+    pub = ros.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+
+    def on_state(msg: JointState):
+        states.append((time.time(), list(msg.name), list(msg.position)))
+        q = dict(zip(msg.name, msg.position))
+        dq = dict(zip(msg.name, msg.velocity))
+        send = names[mode[0]]
+        if all(n in q for n in send):
+            u = [30.0 * (target[n] - q[n]) - 0.3 * dq[n] for n in send]
+            pub.publish(JointState(name=send, effort=u))
+
+    ros.create_subscription(JointState, "joint_states", on_state, STATE_QOS)
+    ros.create_subscription(DriveState, "drive_state", drive_states.append, SENSOR_QOS)
+    ex = SingleThreadedExecutor(context=ctx)
+    ex.add_node(ros)
+    try:
+        deadline = time.time() + 30
+        while time.time() < deadline and len(states) < 3000:
+            ex.spin_once(timeout_sec=0.05)
+        t_hold = time.time()
+        mode[0] = "shoulder only"
+        end = time.time() + 0.5
+        while time.time() < end:
+            ex.spin_once(timeout_sec=0.05)
+        t_int = time.time()
+        node.send_signal(signal.SIGINT)
+        out, _ = node.communicate(timeout=15)
+        time.sleep(0.1)
+    finally:
+        ros.destroy_node()
+        rclpy.shutdown(context=ctx)
+        for p in (node, emu):
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+                try:
+                    p.communicate(timeout=10)
+                except subprocess.TimeoutExpired:
+                    p.kill()
+        stop_sniff.set()
+        th.join(2)
+        sniffer.shutdown()
+    assert node.returncode == 0, out
+    assert len(states) >= 3000, f"{len(states)} joint_states in 30 s"
+    assert all(n == ["shoulder", "elbow"] for _, n, _ in states), "one message with both joints"
+    hold = [q for t, _, q in states if t_hold - 0.5 < t <= t_hold]
+    assert abs(hold[-1][0] - 0.3) < 0.05 and abs(hold[-1][1] + 0.2) < 0.05, hold[-1]
+    # elbow (node 2) left out of the commands: its watchdog zeroes its torque; shoulder keeps holding
+    by_joint = {j: [s for s in drive_states if s.joint_name == j] for j in target}
+    late = {
+        j: [s for s in v if s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec > t_hold + 0.3]
+        for j, v in by_joint.items()
+    }
+    assert late["elbow"] and all(s.fault_flags & DriveState.FAULT_COMMAND_WATCHDOG for s in late["elbow"])
+    assert late["shoulder"] and not any(
+        s.fault_flags & DriveState.FAULT_COMMAND_WATCHDOG for s in late["shoulder"]
+    )
+    torque2 = [
+        od._F1.unpack_from(d)[0]
+        for t, arb, d in rows
+        if arb == (2 << 5) | od.Cmd.SET_INPUT_TORQUE and t_hold + 0.3 < t < t_int
+    ]
+    assert torque2 and all(v == 0.0 for v in torque2)
+    idle = bytes([1, 0, 0, 0])
+    for nid in (1, 2):
+        idles = [t for t, arb, d in rows if arb == (nid << 5) | od.Cmd.SET_AXIS_STATE and d[:4] == idle]
+        assert any(t >= t_int for t in idles), f"no IDLE frame for node {nid} after SIGINT"
+    assert "drives left safe" in out
+
+
+@pytest.mark.ros
+def test_several_drives_parameters_per_joint_and_at_run_time(channel):
+    """Per-joint values override the node's; run-time limits change per joint (all or nothing); a
+    node-level limit is refused with the per-joint name to use; ids are read-only."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from friction_ros.nodes.drive_interface import DriveInterface
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    overrides = [
+        Parameter("interface", value="friction_local"),
+        Parameter("channel", value=channel),
+        Parameter("joints", value=["a", "b"]),
+        Parameter("a.node_id", value=1),
+        Parameter("b.node_id", value=2),
+        Parameter("torque_limit", value=2.0),
+        Parameter("b.gear_ratio", value=9.0),
+        Parameter("b.direction", value=-1),
+    ]
+    node = DriveInterface(context=ctx, parameter_overrides=overrides)
+    try:
+        a, b = node.axes
+        assert node.joints == ["a", "b"] and (a.cfg.node_id, b.cfg.node_id) == (1, 2)
+        assert (a.cfg.torque_limit, b.cfg.torque_limit) == (2.0, 2.0)
+        assert (a.conv.gear_ratio, b.conv.gear_ratio, b.conv.direction) == (1.0, 9.0, -1)
+        assert [f["can_id"] for f in node._filters()] == [1 << 5, 2 << 5]
+        r = node.set_parameters([Parameter("b.torque_limit", value=2.5)])[0]
+        assert r.successful and (a.cfg.torque_limit, node.axes[1].cfg.torque_limit) == (2.0, 2.5)
+        r = node.set_parameters([Parameter("b.torque_limit", value=-1.0)])[0]
+        assert not r.successful and "b.torque_limit" in r.reason and node.axes[1].cfg.torque_limit == 2.5
+        r = node.set_parameters([Parameter("torque_limit", value=3.0)])[0]
+        assert not r.successful and "<joint>.torque_limit" in r.reason, r.reason
+        r = node.set_parameters([Parameter("command_timeout", value=0.05)])[0]  # shared by all drives
+        assert r.successful and all(x.cfg.command_timeout == 0.05 for x in node.axes)
+        r = node.set_parameters([Parameter("a.node_id", value=5)])[0]
+        assert not r.successful and node.axes[0].cfg.node_id == 1
+    finally:
+        node.on_shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=ctx)

@@ -31,7 +31,14 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--channel", default="vcan0", help="CAN channel (default vcan0)")
     ap.add_argument("--bitrate", type=int, default=1_000_000)
     ap.add_argument("--protocol", default="odrive_cansimple", choices=("odrive_cansimple", "mit"))
-    ap.add_argument("--node-id", type=int, default=0, help="ODrive node id / MIT motor id")
+    ap.add_argument(
+        "--node-id",
+        type=int,
+        nargs="+",
+        default=[0],
+        help="ODrive node id / MIT motor id; several ids emulate several drives on the bus, each "
+        "with its own plant (e.g. --node-id 1 2 3 for a drive_interface with three joints)",
+    )
     ap.add_argument("--mit-master-id", type=int, default=0)
     ap.add_argument("--preset", default="abb_m19s", help="plant preset name or YAML path")
     ap.add_argument("--direction", type=int, default=1, choices=(1, -1))
@@ -55,63 +62,73 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     a = build_parser().parse_args(argv)
+    ids = list(a.node_id)
     try:
         import can
 
-        plant, conv = plant_from_preset(a.preset)
-        conv = JointConversion(conv.gear_ratio, conv.torque_constant, a.direction, a.zero_offset)
-        cfg = EmulatorConfig(
-            protocol=a.protocol,
-            node_id=a.node_id,
-            mit_master_id=a.mit_master_id,
-            conversion=conv,
-            physics_rate_hz=a.physics_rate,
-            encoder_rate_hz=a.encoder_rate,
-            iq_rate_hz=a.iq_rate,
-            torques_rate_hz=a.torques_rate,
-            heartbeat_rate_hz=a.heartbeat_rate,
-            bus_voltage_rate_hz=a.bus_voltage_rate,
-            latency=a.latency,
-            loss_probability=a.loss,
-        )
-        try:
-            bus = can.Bus(interface=a.interface, channel=a.channel, bitrate=a.bitrate)
-        except Exception as exc:
-            raise ParameterError(
-                f"cannot open CAN bus interface={a.interface} channel={a.channel}: {exc}"
-            ) from None
+        if len(set(ids)) != len(ids):
+            raise ParameterError(f"--node-id {' '.join(map(str, ids))}: ids must differ")
+        drives = []
+        for node_id in ids:
+            plant, conv = plant_from_preset(a.preset)
+            conv = JointConversion(conv.gear_ratio, conv.torque_constant, a.direction, a.zero_offset)
+            cfg = EmulatorConfig(
+                protocol=a.protocol,
+                node_id=node_id,
+                mit_master_id=a.mit_master_id,
+                conversion=conv,
+                physics_rate_hz=a.physics_rate,
+                encoder_rate_hz=a.encoder_rate,
+                iq_rate_hz=a.iq_rate,
+                torques_rate_hz=a.torques_rate,
+                heartbeat_rate_hz=a.heartbeat_rate,
+                bus_voltage_rate_hz=a.bus_voltage_rate,
+                latency=a.latency,
+                loss_probability=a.loss,
+            )
+            try:  # one bus handle per drive: each is its own node on the bus
+                bus = can.Bus(interface=a.interface, channel=a.channel, bitrate=a.bitrate)
+            except Exception as exc:
+                raise ParameterError(
+                    f"cannot open CAN bus interface={a.interface} channel={a.channel}: {exc}"
+                ) from None
+            drives.append((DriveEmulator(bus, plant, cfg), bus))
     except (ParameterError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    emu = DriveEmulator(bus, plant, cfg)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    for after, action in ((a.silent_after, emu.set_silent), (a.error_after, emu.inject_axis_error)):
-        if after is not None:
-            t = threading.Timer(after, action)
-            t.daemon = True
-            t.start()
+    for emu, _bus in drives:
+        for after, action in ((a.silent_after, emu.set_silent), (a.error_after, emu.inject_axis_error)):
+            if after is not None:
+                t = threading.Timer(after, action)
+                t.daemon = True
+                t.start()
     print(
-        f"drive_emulator: {a.protocol} node {a.node_id} on {a.interface}:{a.channel}, plant preset {a.preset} "
+        f"drive_emulator: {a.protocol} node{'s' if len(ids) > 1 else ''} {', '.join(map(str, ids))} on "
+        f"{a.interface}:{a.channel}, plant preset {a.preset} "
         f"(gear_ratio {conv.gear_ratio:g}, torque_constant {conv.torque_constant:g})",
         flush=True,
     )
-    emu.start()
+    for emu, _bus in drives:
+        emu.start()
     t0 = time.monotonic()
     try:
         while not stop.wait(a.status_period):
-            s = emu.stats
-            print(
-                f"t={time.monotonic() - t0:.0f}s armed={emu.armed} q={emu.meas.position:+.4f} rad "
-                f"rx={s.frames_rx} tx={s.frames_tx} lost={s.frames_lost} cmds={s.commands}",
-                flush=True,
-            )
+            for node_id, (emu, _bus) in zip(ids, drives):
+                s = emu.stats
+                print(
+                    f"t={time.monotonic() - t0:.0f}s node {node_id} armed={emu.armed} q={emu.meas.position:+.4f} rad "
+                    f"rx={s.frames_rx} tx={s.frames_tx} lost={s.frames_lost} cmds={s.commands}",
+                    flush=True,
+                )
             if a.duration is not None and time.monotonic() - t0 >= a.duration:
                 break
     finally:
-        emu.stop()
-        bus.shutdown()
+        for emu, bus in drives:
+            emu.stop()
+            bus.shutdown()
     return 0
 
 

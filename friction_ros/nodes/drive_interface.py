@@ -1,4 +1,12 @@
-"""drive_interface: one servo-drive axis on CAN (ODrive CANSimple or MIT) as ROS joint topics.
+"""drive_interface: servo drives on one CAN bus (ODrive CANSimple or MIT) as ROS joint topics.
+
+One drive by default (``joint_name``, ``node_id``). Several drives on the bus (a manipulator's
+joints): ``joints: [shoulder, elbow, ...]`` with ``<joint>.node_id`` for each and optionally
+``<joint>.gear_ratio``, ``torque_constant``, ``direction``, ``zero_offset``, ``torque_limit``,
+``current_limit``, ``velocity_limit`` (``mit.master_id``); the node-level values are their
+defaults. Then ``joint_states`` carries all joints in one message, ``joint_commands`` may name any
+subset (a drive left out is zeroed by its own watchdog), ``drive_state`` comes once per drive, and
+every drive has its own safety state; ``~/enable``, faults of the bus, Ctrl-C and shutdown act on all.
 
 Publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort = joint
 torque N*m) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
@@ -29,14 +37,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 import struct
 import threading
 import time
 
 import can
+import rclpy
 from friction_msgs.msg import DriveState
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
 from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
@@ -191,6 +203,19 @@ PARAMS = [
     *SCHEDULING_PARAMS,
 ]
 RUNTIME = ("torque_limit", "current_limit", "velocity_limit", "command_timeout", "telemetry_timeout")
+# per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
+AXIS_KEYS = (
+    "node_id",
+    "mit.master_id",
+    "gear_ratio",
+    "torque_constant",
+    "direction",
+    "zero_offset",
+    "torque_limit",
+    "current_limit",
+    "velocity_limit",
+)
+_JOINT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
 
 def axis_config(v: dict) -> AxisConfig:
@@ -323,13 +348,114 @@ class StatePackets:
         return "" if ok_js and ok_ds else "round trip through rclpy's deserialiser differs"
 
 
+def declare_joints(node: Node) -> list[str]:
+    """Declare and validate ``joints`` (several axes on one bus); [] = one axis (``joint_name``)."""
+    desc = ParameterDescriptor(
+        name="joints",
+        type=ParameterType.PARAMETER_STRING_ARRAY,
+        description=(
+            "several drives on this bus: their joint names, each with its own <joint>.node_id (and "
+            "optionally <joint>.gear_ratio, torque_constant, direction, zero_offset, limits); "
+            "unset = one drive (joint_name, node_id)"
+        ),
+        read_only=True,
+    )
+    try:
+        joints = node.declare_parameter("joints", Parameter.Type.STRING_ARRAY, desc).value
+    except (
+        rclpy.exceptions.InvalidParameterTypeException,
+        rclpy.exceptions.InvalidParameterValueException,
+    ):
+        raise ParameterError(
+            "joints must be a list of joint names, e.g. joints: [shoulder, elbow] (leave it out for one drive)"
+        ) from None
+    joints = list(joints or [])
+    check_joint_names(joints)
+    return joints
+
+
+def check_joint_names(joints: list[str]) -> None:
+    top = {p.name.split(".")[0] for p in PARAMS}
+    for i, j in enumerate(joints):
+        if not _JOINT_NAME.match(j):
+            raise ParameterError(
+                f"joints[{i}] = {j!r} is not allowed: must start with a letter and hold only letters, "
+                "digits and '_' (it prefixes the per-joint parameters, e.g. <joint>.node_id)"
+            )
+        if j in top:
+            raise ParameterError(f"joints[{i}] = {j!r} clashes with the parameter '{j}': rename the joint")
+        if j in joints[:i]:
+            raise ParameterError(f"joints[{i}] = {j!r} appears twice: joint names must differ")
+
+
+def axis_param_specs(joints: list[str], v: dict) -> list[Param]:
+    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
+    by = {p.name: p for p in PARAMS}
+    return [
+        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], description=f"{j}: {by[k].description}")
+        for j in joints
+        for k in AXIS_KEYS
+    ]
+
+
+def axis_values(joints: list[str], v: dict, per_joint: dict) -> list[dict]:
+    """Parameter values of every axis: the node's, with the joint's own ``<joint>.<key>`` on top."""
+    if not joints:
+        return [dict(v)]
+    return [{**v, "joint_name": j, **{k: per_joint[f"{j}.{k}"] for k in AXIS_KEYS}} for j in joints]
+
+
+def check_distinct_ids(joints: list[str], configs: list[AxisConfig]) -> None:
+    ids = [c.node_id for c in configs]
+    if len(set(ids)) != len(ids):
+        given = ", ".join(f"{j}.node_id = {c.node_id}" for j, c in zip(joints, configs))
+        raise ParameterError(f"node ids must differ between the joints on one bus: {given}")
+
+
+class AxisPort:
+    """One drive of the node: its joint, the core :class:`DriveAxis`, its parameter values and its
+    pre-serialised drive_state template."""
+
+    def __init__(self, values: dict):
+        self.values = values
+        self.joint = values["joint_name"]
+        self.axis = DriveAxis(axis_config(values))
+        self.packets = StatePackets(self.joint, values["protocol"])
+        self.ds = DriveState(joint_name=self.joint, protocol=values["protocol"])
+        self.flags = 0
+        self.diag_prev: tuple[float, int, int, int, int] | None = None
+
+    def drive_values(self, sample, flags: int) -> tuple:
+        tel = self.axis.telemetry
+        return (
+            tel.motor_position if sample is not None else math.nan,
+            tel.motor_velocity if sample is not None else math.nan,
+            tel.current_setpoint,
+            tel.current_measured,
+            tel.torque_estimate,
+            tel.bus_voltage,
+            tel.axis_state & 0xFFFFFFFF,
+            tel.axis_error & 0xFFFFFFFF,
+            flags,
+            self.axis.enabled,
+        )
+
+
 class DriveInterface(Node):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
-        self.v = v = declare(self, PARAMS)
+        self.joints_param = joints = declare_joints(self)
+        self.v = v = declare(self, PARAMS, check_unknown=not joints)
+        self.axis_specs = axis_param_specs(joints, v)
+        per_joint = declare(self, self.axis_specs) if joints else {}
         apply_scheduling(self, v)
-        self.axis = DriveAxis(axis_config(v))
-        self.joint = v["joint_name"]
+        self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint)]
+        self.axes = [p.axis for p in self.ports]
+        self.axis = self.axes[0]  # the (first) drive: single-axis code and tools read this one
+        self.joints = [p.joint for p in self.ports]
+        self.joint = self.joints[0]
+        check_distinct_ids(self.joints, [a.cfg for a in self.axes])
+        self._route = self._router()
         self.period = 1.0 / v["control_rate_hz"]
         self.error_frames = 0
         self.send_errors = 0
@@ -338,7 +464,7 @@ class DriveInterface(Node):
         self._bus_dead_since: float | None = None
         self._bus_lock = threading.Lock()
         self._shutdown_done = False
-        self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
+        self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], self._filters())
         self._rx_ok = True  # False after a read failure until the bus is reopened
         self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
 
@@ -353,25 +479,30 @@ class DriveInterface(Node):
                 self.handle, JointState, "joint_commands", COMMAND_QOS.get_c_qos_profile()
             )
         self.srv_enable = self.create_service(SetBool, "~/enable", self._on_enable)
-        hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{v['node_id']}"
+        ids = ",".join(str(a.cfg.node_id) for a in self.axes)
+        hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{ids}"
         self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
-        add_runtime_validation(self, PARAMS, self._apply)
+        add_runtime_validation(self, [*PARAMS, *self.axis_specs], self._apply)
         self.commands_foreign = 0
         self._diag_next = time.monotonic()
-        self._diag_prev: tuple[float, int, int, int, int] | None = None
-        self._js = JointState(name=[self.joint], position=[0.0], velocity=[0.0], effort=[0.0])
-        self._ds = DriveState(joint_name=self.joint, protocol=v["protocol"])
+        n = len(self.joints)
+        self._js = JointState(
+            name=list(self.joints), position=[0.0] * n, velocity=[0.0] * n, effort=[0.0] * n
+        )
         self._clock = self.get_clock()
-        self._packets: StatePackets | None = StatePackets(self.joint, v["protocol"])
-        why = self._packets.verify()
+        self._pack_joints = JointStateEncoder(
+            self.joints
+        ).pack  # (sec, nsec, *positions, *velocities, *efforts)
+        why = self.ports[0].packets.verify() or self._verify_joint_packer()
+        self._raw = not why
         if why:
-            self._packets = None
             self.get_logger().warning(
                 f"publishing message objects (pre-serialised templates unusable: {why})"
             )
         self._loop_error = ""
         if v["enable_on_start"]:
-            self.axis.request_enable()
+            for a in self.axes:
+                a.request_enable()
         if v["loop_spin"] > 0:  # busy-wait before each deadline: needs a thread of its own
             self.loop = FixedRateLoop(
                 self.period, self._cycle, name="drive_interface_loop", spin=v["loop_spin"]
@@ -379,28 +510,78 @@ class DriveInterface(Node):
             self.loop.start()
         else:  # run_node drives it in the executor thread (see the module docstring)
             self.loop = DeadlineLoop(self.period, self._cycle)
+        drives = ", ".join(f"'{p.joint}' (id {p.axis.cfg.node_id})" for p in self.ports)
         self.get_logger().info(
-            f"{v['protocol']} node {v['node_id']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "
-            f"joint '{self.joint}', drive {'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
+            f"{v['protocol']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "
+            f"joint{'s' if n > 1 else ''} {drives}, drive{'s' if n > 1 else ''} "
+            f"{'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
         )
+
+    def _verify_joint_packer(self) -> str:
+        n = len(self.joints)
+        vals = [0.5 + i for i in range(3 * n)]
+        try:
+            js = deserialize_message(self._pack_joints(3, 4, *vals), JointState)
+        except Exception as exc:
+            return f"{type(exc).__name__}: {exc}"
+        got = [*js.position, *js.velocity, *js.effort]
+        return "" if list(js.name) == self.joints and got == vals else "joint_states template differs"
+
+    def _filters(self) -> list[dict]:
+        out: list[dict] = []
+        for a in self.axes:
+            out += [f for f in can_filters(a.cfg) if f not in out]
+        return out
+
+    def _router(self):
+        """Received frame -> the axis it belongs to (ODrive: node id = id >> 5; MIT: first data byte
+        of a reply). With one drive, or for a frame of no configured drive, the first axis: its
+        decoder counts the frame as ignored or rejected, as the single-drive node always did."""
+        first = self.axes[0]
+        if len(self.axes) == 1:
+            return lambda arb_id, data: first
+        if self.axes[0].cfg.protocol == "odrive_cansimple":
+            by_id = {a.cfg.node_id: a for a in self.axes}
+            return lambda arb_id, data: by_id.get(arb_id >> 5, first)
+        by_motor = {a.cfg.node_id & 0xFF: a for a in self.axes}
+        return lambda arb_id, data: by_motor.get(data[0], first) if data else first
 
     # ---- parameters / service / commands ------------------------------------------------------------
     def _apply(self, changes: dict) -> None:
-        merged = {**self.v, **changes}
-        new = axis_config(merged)  # raises ParameterError -> change rejected
-        with self.axis._lock:
-            self.axis.cfg = new
-        self.v = merged
+        """Run-time change: rebuild every affected axis config first (all or nothing), then swap."""
+        multi = bool(self.joints_param)
+        shared = {k: v for k, v in changes.items() if "." not in k or k.split(".", 1)[0] not in self.joints}
+        if multi:
+            per_axis = [k for k in shared if k in AXIS_KEYS]
+            if per_axis:
+                raise ParameterError(
+                    f"{per_axis[0]} applies per joint with several drives: set <joint>.{per_axis[0]} "
+                    f"(joints: {', '.join(self.joints)})"
+                )
+        new_values = []
+        for port in self.ports:
+            vals = {**port.values, **shared}
+            for k, val in changes.items():
+                if k.startswith(port.joint + ".") and multi:
+                    vals[k[len(port.joint) + 1 :]] = val
+            new_values.append(vals)
+        configs = [axis_config(vals) for vals in new_values]  # raises ParameterError -> rejected
+        for port, vals, cfg in zip(self.ports, new_values, configs):
+            with port.axis._lock:
+                port.axis.cfg = cfg
+            port.values = vals
+        self.v = {**self.v, **shared}
 
     def _on_enable(self, req, resp):
         if req.data:
-            self.axis.request_enable()
+            for a in self.axes:
+                a.request_enable()
             resp.success, resp.message = (
                 True,
                 "enable requested: the drive enables as soon as telemetry is fresh",
             )
         else:
-            self.send_frames(self.axis.request_disable())
+            self.send_frames([f for a in self.axes for f in a.request_disable()])
             resp.success, resp.message = True, "drive disabled (zero torque, idle)"
         self.get_logger().info(resp.message)
         return resp
@@ -423,8 +604,8 @@ class DriveInterface(Node):
         t = now if t > now else lo if t < lo else t
         try:
             cmd = self._cmd_decoder.decode(got[0])
-        except Exception:  # undecodable: rejected like a NaN command (zero torque)
-            self._command((), (math.nan,), t)
+        except Exception:  # undecodable: rejected like a NaN command (zero torque) on every drive
+            self._command((), (math.nan,) * len(self.ports), t)
             return
         self._command(cmd.name, cmd.effort, t)
 
@@ -433,21 +614,32 @@ class DriveInterface(Node):
         self._command(msg.name, msg.effort, time.monotonic() if now is None else now)
 
     def _command(self, names, efforts, now: float) -> None:
+        """Efforts by joint name (a message may carry any subset of the joints; a drive left out
+        gets no command, so its watchdog zeroes it), or by position when the message has no names
+        and exactly one effort per drive."""
+        ports = self.ports
         if names:
-            try:
-                i = list(names).index(self.joint)
-            except ValueError:
+            names = list(names)
+            hit = False
+            for port in ports:
+                try:
+                    i = names.index(port.joint)
+                except ValueError:
+                    continue
+                hit = True
+                self._set_command(port, efforts[i] if i < len(efforts) else math.nan, now)
+            if not hit:
                 self.commands_foreign += 1
-                return
-        elif len(efforts) == 1:
-            i = 0
+        elif len(efforts) == len(ports):
+            for port, value in zip(ports, efforts):
+                self._set_command(port, value, now)
         else:
             self.commands_foreign += 1
-            return
-        value = efforts[i] if i < len(efforts) else math.nan  # a command without effort is rejected
-        if not self.axis.set_command(value, now):
+
+    def _set_command(self, port: AxisPort, value, now: float) -> None:
+        if not port.axis.set_command(value, now):  # a command without effort is rejected too
             self.get_logger().warning(
-                f"rejected joint command effort = {value} for '{self.joint}': must be a finite number [N*m]; "
+                f"rejected joint command effort = {value} for '{port.joint}': must be a finite number [N*m]; "
                 "torque set to zero",
                 throttle_duration_sec=1.0,
             )
@@ -479,7 +671,8 @@ class DriveInterface(Node):
         if self._bus_dead_since is None:
             self._bus_dead_since = time.monotonic()
             self.get_logger().error(f"CAN bus fault: {reason}; drive disabled, reopening the bus")
-        self.axis.report_bus_fault(reason)
+        for a in self.axes:
+            a.report_bus_fault(reason)
 
     def _recover_bus(self, now: float) -> None:
         if now - self._bus_dead_since < self.v["bus_recovery_period"]:
@@ -488,7 +681,7 @@ class DriveInterface(Node):
         try:
             with self._bus_lock:
                 self.bus.shutdown()
-                self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], can_filters(self.axis.cfg))
+                self.bus = open_bus(v["interface"], v["channel"], v["bitrate"], self._filters())
             self._rx_ok = True
             self._rx_prev = now
             self.bus_reopens += 1
@@ -500,14 +693,14 @@ class DriveInterface(Node):
             self.get_logger().error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)
 
     def _drain(self, now: float, lo: float, off: float) -> None:
-        """Feed every frame received since the previous period to the axis (control thread).
+        """Feed every frame received since the previous period to its axis (control thread).
 
         Receive time = the frame's own timestamp (wall clock in python-can, the kernel's on
         SocketCAN) on the monotonic clock (``+ off``), clamped to [``lo`` = previous period, now].
         """
         if not self._rx_ok:
             return
-        bus, on_frame = self.bus, self.axis.on_frame
+        bus, route = self.bus, self._route
         try:
             for _ in range(RX_BATCH_MAX):
                 msg = bus.recv(0.0)
@@ -519,9 +712,10 @@ class DriveInterface(Node):
                         self.bus_dead("bus-off error frame received")
                     continue
                 t = msg.timestamp + off
-                on_frame(
-                    msg.arbitration_id,
-                    msg.data,
+                arb, data = msg.arbitration_id, msg.data
+                route(arb, data).on_frame(
+                    arb,
+                    data,
                     msg.is_remote_frame,
                     msg.is_extended_id,
                     False,
@@ -541,9 +735,10 @@ class DriveInterface(Node):
                 self.get_logger().error(
                     f"drive_interface cycle failed: {self._loop_error}; disabling the drive"
                 )
-            self.axis.report_bus_fault(f"internal error: {self._loop_error}")
+            for a in self.axes:
+                a.report_bus_fault(f"internal error: {self._loop_error}")
             try:
-                self.send_frames(self.axis.shutdown_frames())
+                self.send_frames([f for a in self.axes for f in a.shutdown_frames()])
             except Exception:
                 pass
 
@@ -555,114 +750,135 @@ class DriveInterface(Node):
         off = now - time.time()  # wall clock -> monotonic, for receive stamps
         self._drain(now, lo, off)
         self._take_commands(now, lo, off)
-        res = self.axis.cycle(now)
-        flags = res.flags
-        if res.frames and not self.send_frames(res.frames):
-            flags |= FAULT_BUS
+        ports = self.ports
+        frames: list[Frame] = []
+        samples = []
+        for port in ports:
+            res = port.axis.cycle(now)
+            port.flags = res.flags
+            frames += res.frames
+            samples.append(res.sample)
+        if frames and not self.send_frames(frames):
+            for port in ports:
+                port.flags |= FAULT_BUS
         clock = self._clock
         sec, nsec = divmod(
             clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns(), 1_000_000_000
         )
-        tel, sample = self.axis.telemetry, res.sample
-        drive = (
-            tel.motor_position if sample is not None else math.nan,
-            tel.motor_velocity if sample is not None else math.nan,
-            tel.current_setpoint,
-            tel.current_measured,
-            tel.torque_estimate,
-            tel.bus_voltage,
-            tel.axis_state & 0xFFFFFFFF,
-            tel.axis_error & 0xFFFFFFFF,
-            flags,
-            self.axis.enabled,
-        )
-        packets = self._packets
-        if packets is not None:
-            if sample is not None:
+        if None not in samples:
+            if self._raw:
                 self.pub_joint.publish(
-                    packets.set_joint(sec, nsec, sample.position, sample.velocity, sample.effort)
+                    self._pack_joints(
+                        sec,
+                        nsec,
+                        *[s.position for s in samples],
+                        *[s.velocity for s in samples],
+                        *[s.effort for s in samples],
+                    )
                 )
-            if self.pub_drive.get_subscription_count():  # nobody listening: nothing to send
-                self.pub_drive.publish(packets.set_drive(sec, nsec, *drive))
-        else:
-            self._publish_objects(sec, nsec, sample, drive)
+            else:
+                self._publish_joint_objects(sec, nsec, ports, samples)
+        elif any(s is not None for s in samples):  # no made-up values: only the drives with telemetry
+            fresh = [(p, s) for p, s in zip(ports, samples) if s is not None]
+            self._publish_joint_objects(sec, nsec, [p for p, _ in fresh], [s for _, s in fresh])
+        if self.pub_drive.get_subscription_count():  # nobody listening: nothing to send
+            for port, sample in zip(ports, samples):
+                drive = port.drive_values(sample, port.flags)
+                if self._raw:
+                    self.pub_drive.publish(port.packets.set_drive(sec, nsec, *drive))
+                else:
+                    self._publish_drive_object(sec, nsec, port, drive)
         if now >= self._diag_next:
             self._diag_next = now + self.v["diagnostics_period"]
-            self._publish_diagnostics(now, flags)
+            self._publish_diagnostics(now)
 
-    def _publish_objects(self, sec: int, nsec: int, sample, drive: tuple) -> None:
-        """Fallback of the pre-serialised path: the same values through reused message objects."""
-        js, ds = self._js, self._ds
-        js.header.stamp.sec = ds.header.stamp.sec = sec
-        js.header.stamp.nanosec = ds.header.stamp.nanosec = nsec
-        if sample is not None:
-            js.position[0], js.velocity[0], js.effort[0] = sample.position, sample.velocity, sample.effort
-            self.pub_joint.publish(js)
+    def _publish_joint_objects(self, sec: int, nsec: int, ports: list[AxisPort], samples: list) -> None:
+        """joint_states as a message object (fallback path, or a subset of the joints)."""
+        js = self._js if len(ports) == len(self.ports) else JointState()
+        js.header.stamp.sec, js.header.stamp.nanosec = sec, nsec
+        js.name = [p.joint for p in ports]
+        js.position = [s.position for s in samples]
+        js.velocity = [s.velocity for s in samples]
+        js.effort = [s.effort for s in samples]
+        self.pub_joint.publish(js)
+
+    def _publish_drive_object(self, sec: int, nsec: int, port: AxisPort, drive: tuple) -> None:
+        ds = port.ds
+        ds.header.stamp.sec, ds.header.stamp.nanosec = sec, nsec
         (
             ds.motor_position, ds.motor_velocity, ds.current_setpoint, ds.current_measured, ds.torque_estimate,
             ds.bus_voltage, ds.axis_state, ds.axis_error, ds.fault_flags, ds.enabled,
         ) = drive  # fmt: skip
-        if self.pub_drive.get_subscription_count():
-            self.pub_drive.publish(ds)
+        self.pub_drive.publish(ds)
 
-    def _publish_diagnostics(self, now: float, flags: int) -> None:
-        c, st = self.axis.counters, self.axis.decode_stats
+    def _axis_status(self, port: AxisPort, now: float) -> tuple[int, str, dict]:
+        """Diagnostic level, message and values of one drive."""
+        axis, flags = port.axis, port.flags
+        c, st = axis.counters, axis.decode_stats
         cur = (now, c.frames_rx, c.frames_tx, c.encoder_frames, c.commands)
         rates = [math.nan] * 4
-        if self._diag_prev is not None and now > self._diag_prev[0]:
-            dt = now - self._diag_prev[0]
-            rates = [(a - b) / dt for a, b in zip(cur[1:], self._diag_prev[1:])]
-        self._diag_prev = cur
+        if port.diag_prev is not None and now > port.diag_prev[0]:
+            dt = now - port.diag_prev[0]
+            rates = [(a - b) / dt for a, b in zip(cur[1:], port.diag_prev[1:])]
+        port.diag_prev = cur
+        latched = axis.latched
+        if latched & LATCHING:
+            level, message = ERROR, f"fault: {axis.fault_reason}"
+        elif flags:
+            level, message = WARN, f"{'enabled' if axis.enabled else 'disabled'}, flags {fault_text(flags)}"
+        else:
+            level, message = OK, "enabled" if axis.enabled else "disabled (telemetry ok)"
+        values = {
+            "enabled": axis.enabled,
+            "fault_flags": fault_text(flags),
+            "latched_faults": fault_text(latched),
+            "fault_reason": axis.fault_reason,
+            "rx_frame_rate_hz": rates[0],
+            "tx_frame_rate_hz": rates[1],
+            "encoder_rate_hz": rates[2],
+            "command_rate_hz": rates[3],
+            "frames_decoded": st.decoded,
+            "frames_ignored": st.ignored,
+            "frames_rejected": st.rejected,
+            "last_reject_reason": st.last_reject_reason,
+            "commands_rejected": c.commands_rejected,
+            "watchdog_trips": c.watchdog_trips,
+            "fault_trips": c.fault_trips,
+            "limit_hits": c.limit_hits,
+            "bus_faults": c.bus_errors,
+            "axis_state": axis.telemetry.axis_state,
+            "axis_error": f"0x{axis.telemetry.axis_error:X}",
+        }
+        return _level(level), message, values
+
+    def _publish_diagnostics(self, now: float) -> None:
         try:
             bus_state = self.bus.state.name.lower()
         except Exception:
             bus_state = "unknown"
         if self._bus_dead_since is not None:
             bus_state = "dead (reopening)"
-        latched = self.axis.latched
-        if latched & LATCHING:
-            level, message = ERROR, f"fault: {self.axis.fault_reason}"
-        elif flags:
-            level, message = (
-                WARN,
-                f"{'enabled' if self.axis.enabled else 'disabled'}, flags {fault_text(flags)}",
-            )
+        statuses = [self._axis_status(p, now) for p in self.ports]
+        if len(statuses) == 1:
+            level, message, values = statuses[0]
         else:
-            level, message = OK, "enabled" if self.axis.enabled else "disabled (telemetry ok)"
+            level = max(s[0] for s in statuses)
+            message = "; ".join(f"{p.joint}: {s[1]}" for p, s in zip(self.ports, statuses))
+            values = {f"{p.joint}.{k}": v for p, s in zip(self.ports, statuses) for k, v in s[2].items()}
         stats = self.loop.stats
-        self.diag.publish(
-            _level(level),
-            message,
+        values.update(
             {
-                "enabled": self.axis.enabled,
-                "fault_flags": fault_text(flags),
-                "latched_faults": fault_text(latched),
-                "fault_reason": self.axis.fault_reason,
-                "rx_frame_rate_hz": rates[0],
-                "tx_frame_rate_hz": rates[1],
-                "encoder_rate_hz": rates[2],
-                "command_rate_hz": rates[3],
-                "frames_decoded": st.decoded,
-                "frames_ignored": st.ignored,
-                "frames_rejected": st.rejected,
-                "last_reject_reason": st.last_reject_reason,
-                "commands_rejected": c.commands_rejected,
                 "commands_foreign": self.commands_foreign,
-                "watchdog_trips": c.watchdog_trips,
-                "fault_trips": c.fault_trips,
-                "limit_hits": c.limit_hits,
                 "send_errors": self.send_errors,
                 "error_frames": self.error_frames,
-                "bus_faults": c.bus_errors,
                 "bus_reopens": self.bus_reopens,
                 "bus_state": bus_state,
-                "axis_state": self.axis.telemetry.axis_state,
-                "axis_error": f"0x{self.axis.telemetry.axis_error:X}",
                 "loop_overruns": stats.overruns,
                 "loop_max_lateness_ms": stats.max_lateness * 1e3,
                 "loop_exec_ms": stats.last_exec * 1e3,
-            },
+            }
         )
+        self.diag.publish(level, message, values)
 
     # ---- shutdown -------------------------------------------------------------------------------------
     def on_shutdown(self) -> None:
@@ -672,7 +888,7 @@ class DriveInterface(Node):
         self._shutdown_done = True
         self.loop.stop()
         self.sub_cmd.destroy_when_not_in_use()
-        frames = self.axis.shutdown_frames()
+        frames = [f for a in self.axes for f in a.shutdown_frames()]
         for _attempt in range(3):
             if self.send_frames(frames):
                 break
@@ -680,7 +896,7 @@ class DriveInterface(Node):
         else:
             self.get_logger().error("could not send the idle request: check the drive (its own watchdog)")
         time.sleep(0.005)  # let the frames leave the socket before closing it
-        self.get_logger().info("drive left safe: zero torque, idle")
+        self.get_logger().info(f"drive{'s' if len(self.axes) > 1 else ''} left safe: zero torque, idle")
         try:
             self.bus.shutdown()
         except Exception as exc:
