@@ -32,8 +32,11 @@ bare-metal figure.
 Sustained rate: cycles/s >= 98 % of the requested rate, overruns <= 1 % of the cycles, the drive
 enabled without a fault trip for the whole window, and 3 frames x rate within the 1 Mbit/s bus.
 The first row runs ``loop_spin`` = 200 us (busy-wait before each deadline, on a loop thread of its
-own) for comparison; the other rows use the node's default (no spin, control period in the
-executor thread). Shared machine: other processes' load shows up as overruns, rerun when it matters.
+own) for comparison, with the emulator in its own process (an emulator thread in the node's
+process starves behind the spinning thread's GIL and its telemetry goes stale); the other rows use
+the node's default (no spin, control period in the executor thread). The last two rows run 2 and 3
+drives in one node (``joints``; one emulator process with ``--node-id 1 2 3``), CPU per axis =
+node CPU / drives. Shared machine: other processes' load shows up as overruns, rerun when it matters.
 """
 
 from __future__ import annotations
@@ -93,7 +96,13 @@ def codec_costs() -> list[list]:
 
 # ---- child: the node (+ the emulator, on the virtual bus) --------------------------------------------
 def child(
-    rate: float, duration: float, out: str, spin: float, bus: str = "virtual", pin: bool = False
+    rate: float,
+    duration: float,
+    out: str,
+    spin: float,
+    bus: str = "virtual",
+    pin: bool = False,
+    axes: int = 1,
 ) -> None:
     """Run drive_interface's real ``main()`` in this process and measure it.
 
@@ -126,7 +135,7 @@ def child(
     else:
         emu_proc = subprocess.Popen(
             (["taskset", "-c", "0"] if pin else []) + [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", bus, "--channel", channel,
-             "--node-id", "1", "--preset", "abb_m19s", "--physics-rate", str(rate), "--encoder-rate", str(rate),
+             "--node-id", *[str(i + 1) for i in range(axes)], "--preset", "abb_m19s", "--physics-rate", str(rate), "--encoder-rate", str(rate),
              "--iq-rate", str(rate), "--status-period", "60"],
             stdout=subprocess.DEVNULL,
         )  # fmt: skip
@@ -159,34 +168,41 @@ def child(
         node = holder["node"]
         c0, t0 = task_cpu(), time.monotonic()
         e0 = proc_cpu(emu_proc.pid) if emu_proc else 0.0
-        cyc0, rx0, tx0 = node.loop.stats.cycles, node.axis.counters.frames_rx, node.axis.counters.frames_tx
-        ov0, cmd0 = node.loop.stats.overruns, node.axis.counters.commands
-        trips0, en0 = node.axis.counters.fault_trips, node.axis.enabled
+
+        def total(attr: str) -> int:
+            return sum(getattr(a.counters, attr) for a in node.axes)
+
+        cyc0, rx0, tx0 = node.loop.stats.cycles, total("frames_rx"), total("frames_tx")
+        ov0, cmd0 = node.loop.stats.overruns, total("commands")
+        trips0, en0 = total("fault_trips"), all(a.enabled for a in node.axes)
         time.sleep(duration)
         c1, t1 = task_cpu(), time.monotonic()
         dt = t1 - t0
         emu_tid = emu._thread.native_id if emu else None
         cpu = {tid: (c1.get(tid, 0) - c0.get(tid, 0)) / dt for tid in c1}
         names = {t.native_id: t.name for t in threading.enumerate()}
-        total = sum(cpu.values())
+        proc_total = sum(cpu.values())
         emu_cpu = cpu.get(emu_tid, 0.0) if emu else (proc_cpu(emu_proc.pid) - e0) / dt
         result = {
             "rate_hz": rate,
             "bus": bus,
             "pinned": pin,
             "window_s": dt,
-            "process_cpu": total,
+            "axes": len(node.axes),
+            "process_cpu": proc_total,
             "emulator_cpu": emu_cpu,
-            "node_cpu": total - (cpu.get(emu_tid, 0.0) if emu else 0.0),
+            "node_cpu": proc_total - (cpu.get(emu_tid, 0.0) if emu else 0.0),
             "threads": {names.get(t, str(t)): v for t, v in cpu.items() if v > 0.005},
             "cycle_rate_hz": (node.loop.stats.cycles - cyc0) / dt,
             "overruns": node.loop.stats.overruns - ov0,
-            "rx_fps": (node.axis.counters.frames_rx - rx0) / dt,
-            "tx_fps": (node.axis.counters.frames_tx - tx0) / dt,
-            "command_rate_hz": (node.axis.counters.commands - cmd0) / dt,
-            "enabled": node.axis.enabled,
-            "enabled_throughout": en0 and node.axis.enabled and node.axis.counters.fault_trips == trips0,
-            "fault_reason": node.axis.fault_reason,
+            "rx_fps": (total("frames_rx") - rx0) / dt,
+            "tx_fps": (total("frames_tx") - tx0) / dt,
+            "command_rate_hz": (total("commands") - cmd0) / dt / len(node.axes),
+            "enabled": all(a.enabled for a in node.axes),
+            "enabled_throughout": en0
+            and all(a.enabled for a in node.axes)
+            and total("fault_trips") == trips0,
+            "fault_reason": "; ".join(a.fault_reason for a in node.axes if a.fault_reason),
             "max_lateness_ms": node.loop.stats.max_lateness * 1e3,
             "loop_spin_s": node.v["loop_spin"],
         }
@@ -194,7 +210,11 @@ def child(
         os.kill(os.getpid(), signal.SIGINT)
 
     threading.Thread(target=measure, daemon=True).start()
-    ros = ["-p", f"interface:={bus}", "-p", f"channel:={channel}", "-p", "node_id:=1", "-p", "joint_name:=j1",
+    joints = ["-p", "node_id:=1", "-p", "joint_name:=j1"]
+    if axes > 1:
+        joints = ["-p", f"joints:=[{', '.join(f'j{i + 1}' for i in range(axes))}]"]
+        joints += [x for i in range(axes) for x in ("-p", f"j{i + 1}.node_id:={i + 1}")]
+    ros = ["-p", f"interface:={bus}", "-p", f"channel:={channel}", *joints,
            "-p", "enable_on_start:=true", "-p", f"control_rate_hz:={rate}", "-p", "torque_constant:=0.49",
            "-p", "telemetry_timeout:=0.05", "-p", "command_timeout:=0.2", "-p", f"loop_spin:={spin}",
            "-p", f"cpu_affinity:={1 if pin else -1}"]  # fmt: skip
@@ -208,7 +228,9 @@ def child(
             emu_proc.wait(10)
 
 
-def run_rate(rate: float, duration: float, spin: float, bus: str = "virtual", pin: bool = False) -> dict:
+def run_rate(
+    rate: float, duration: float, spin: float, bus: str = "virtual", pin: bool = False, axes: int = 1
+) -> dict:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
@@ -216,7 +238,18 @@ def run_rate(rate: float, duration: float, spin: float, bus: str = "virtual", pi
     from friction_ros.nodes.node_utils import COMMAND_QOS, STATE_QOS
 
     out = f"/tmp/can_bench_{uuid.uuid4().hex[:6]}.json"
-    args = [sys.executable, __file__, "--child", str(rate), str(duration), out, str(spin), bus, str(int(pin))]
+    args = [
+        sys.executable,
+        __file__,
+        "--child",
+        str(rate),
+        str(duration),
+        out,
+        str(spin),
+        bus,
+        str(int(pin)),
+        str(axes),
+    ]
     if pin:
         os.sched_setaffinity(0, {0})  # this controller on CPU 0 with the emulator, the node on CPU 1
     proc = subprocess.Popen(args)
@@ -225,8 +258,12 @@ def run_rate(rate: float, duration: float, spin: float, bus: str = "virtual", pi
     node = rclpy.create_node("can_bench_controller", context=ctx)
     pub = node.create_publisher(JointState, "joint_commands", COMMAND_QOS)
 
-    def on_state(msg):  # a PD holding 0 rad: one command per received joint state
-        pub.publish(JointState(name=["j1"], effort=[-5.0 * msg.position[0] - 0.1 * msg.velocity[0]]))
+    def on_state(msg):  # a PD holding 0 rad: one command (all joints) per received joint state
+        pub.publish(
+            JointState(
+                name=msg.name, effort=[-5.0 * q - 0.1 * dq for q, dq in zip(msg.position, msg.velocity)]
+            )
+        )
 
     node.create_subscription(JointState, "joint_states", on_state, STATE_QOS)
     ex = SingleThreadedExecutor(context=ctx)
@@ -247,7 +284,7 @@ def sustained(r: dict) -> bool:
         r["cycle_rate_hz"] >= 0.98 * r["rate_hz"]
         and r["overruns"] <= 0.01 * r["cycle_rate_hz"] * max(r.get("window_s", 1.0), 1.0)
         and r["enabled_throughout"]
-        and 3 * r["rate_hz"] <= BUS_LIMIT_FPS
+        and 3 * r.get("axes", 1) * r["rate_hz"] <= BUS_LIMIT_FPS
     )
 
 
@@ -350,6 +387,7 @@ def main() -> None:
             float(sys.argv[5]),
             sys.argv[6],
             sys.argv[7] == "1",
+            int(sys.argv[8]),
         )
         return
     import argparse
@@ -370,48 +408,52 @@ def main() -> None:
         ["probe", "value"],
         [[k.replace("_", " "), v] for k, v in platform.items()],
     )
-    runs = [run_rate(1000.0, a.duration, 0.0002)]  # node_utils' default spin, for comparison
+    runs = [run_rate(1000.0, a.duration, 0.0002, "friction_local")]  # busy-wait spin, for comparison
     runs += [run_rate(float(r), a.duration, 0.0) for r in a.rates.split(",")]
     runs += [run_rate(1000.0, a.duration, 0.0, "friction_local", pin) for pin in (False, True)]
+    runs += [run_rate(1000.0, a.duration, 0.0, "friction_local", False, n) for n in (2, 3)]
     rows = []
     for r in runs:
         fps = r["rx_fps"] + r["tx_fps"]
         r["sustained"] = sustained(r)
         where = "thread" if r["bus"] == "virtual" else "process"
+        n = r.get("axes", 1)
         rows.append([
-            r["bus"], "yes" if r["pinned"] else "no", where, f"{r['rate_hz']:.0f}", f"{r['loop_spin_s'] * 1e6:.0f}",
+            r["bus"], "yes" if r["pinned"] else "no", where, n, f"{r['rate_hz']:.0f}", f"{r['loop_spin_s'] * 1e6:.0f}",
             r["cycle_rate_hz"], r["overruns"], r["command_rate_hz"], fps, 100 * fps / BUS_LIMIT_FPS,
-            100 * r["node_cpu"], 100 * r["emulator_cpu"],
+            100 * r["node_cpu"], 100 * r["node_cpu"] / n, 100 * r["emulator_cpu"],
             "yes" if r["enabled_throughout"] else "FAULT", "yes" if r["sustained"] else "no",
         ])  # fmt: skip
     print_table(
-        "drive_interface, 1 axis, 3 frames/cycle",
-        ["bus", "pinned", "emulator in", "rate Hz", "spin us", "cycles/s", "overruns", "cmds/s", "frames/s",
-         "% of 1 Mbit/s", "node CPU %", "emulator CPU %", "enabled", "sustained"],
+        "drive_interface at 1 kHz..3 kHz, 3 frames/cycle per axis (cmds/s: per axis)",
+        ["bus", "pinned", "emulator in", "axes", "rate Hz", "spin us", "cycles/s", "overruns", "cmds/s", "frames/s",
+         "% of 1 Mbit/s", "node CPU %", "node CPU % per axis", "emulator CPU %", "enabled", "sustained"],
         rows,
     )  # fmt: skip
     for r in runs:
         print(
-            f"threads at {r['rate_hz']:.0f} Hz ({r['bus']}{', pinned' if r['pinned'] else ''}): "
+            f"threads at {r['rate_hz']:.0f} Hz ({r['bus']}{', pinned' if r['pinned'] else ''}, {r.get('axes', 1)} axes): "
             + ", ".join(f"{k} {100 * v:.1f}%" for k, v in r["threads"].items())
             + ("" if r["enabled_throughout"] else f" (drive faulted: {r['fault_reason']})")
         )
 
-    def cpu_at_1k(bus: str, pin: bool):
+    def cpu_at_1k(bus: str, pin: bool, axes: int = 1):
         ok = [
-            r["node_cpu"]
+            r["node_cpu"] / axes
             for r in runs
             if r["bus"] == bus and r["pinned"] == pin and r["loop_spin_s"] == 0
-            and r["rate_hz"] == 1000.0 and r["enabled_throughout"]
+            and r["rate_hz"] == 1000.0 and r["enabled_throughout"] and r.get("axes", 1) == axes
         ]  # fmt: skip
         return ok[0] if ok else None
 
-    default = [r for r in runs if r["loop_spin_s"] == 0 and r["bus"] == "virtual"]
+    default = [r for r in runs if r["loop_spin_s"] == 0 and r.get("axes", 1) == 1]
     ok = [r["rate_hz"] for r in default if r["sustained"]]
     summary = {
         "node_cpu_1khz": cpu_at_1k("virtual", False),
         "node_cpu_1khz_separate_process": cpu_at_1k("friction_local", False),
         "node_cpu_1khz_separate_process_pinned": cpu_at_1k("friction_local", True),
+        "node_cpu_per_axis_1khz_2_axes": cpu_at_1k("friction_local", False, 2),
+        "node_cpu_per_axis_1khz_3_axes": cpu_at_1k("friction_local", False, 3),
         "max_sustained_rate_hz": max(ok) if ok else None,
         "bus_limit_rate_hz": BUS_LIMIT_FPS / 3,
         **{f"platform_{k}": v for k, v in platform.items()},
@@ -420,6 +462,8 @@ def main() -> None:
         ("emulator thread, virtual bus", "node_cpu_1khz"),
         ("emulator process, friction_local bus", "node_cpu_1khz_separate_process"),
         ("emulator process, node pinned to CPU 1", "node_cpu_1khz_separate_process_pinned"),
+        ("per axis, 2 drives in one node", "node_cpu_per_axis_1khz_2_axes"),
+        ("per axis, 3 drives in one node", "node_cpu_per_axis_1khz_3_axes"),
     ):
         v = summary[key]
         print(
