@@ -140,29 +140,57 @@ def test_clear_errors(channel):
 
 
 # ---- end to end: emulator process + drive_interface process + controller and sniffer here ------------
+class Sniffer:
+    """This process as one more member of the bus: every frame with its receive time (candump)."""
+
+    def __init__(self, channel: str):
+        self.bus = LocalBus(channel)
+        self.rows: list[tuple[float, int, bytes]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self):
+        while not self._stop.is_set():
+            m = self.bus.recv(0.05)
+            if m is not None:
+                self.rows.append((time.time(), m.arbitration_id, bytes(m.data)))
+
+    def stop(self):
+        self._stop.set()
+        self._thread.join(2)
+        self.bus.shutdown()
+
+
+def stop_all(*procs: subprocess.Popen) -> None:
+    """SIGINT (the drives' safe stop) to every process still running, SIGKILL after 10 s."""
+    for p in procs:
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            try:
+                p.communicate(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+def start_emulator(channel: str, *node_ids: int) -> subprocess.Popen:
+    """The drive_emulator program (ABB M19-S preset behind each drive) as a process of its own."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", "friction_local",
+         "--channel", channel, "--node-id", *map(str, node_ids), "--preset", "abb_m19s", "--status-period", "60"],
+        env=os.environ.copy(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+
+
 @pytest.mark.ros
 @pytest.mark.flaky(reruns=2)
 def test_emulator_and_node_in_separate_processes(channel):
     from test_can_e2e import KT, PdController
 
-    sniffer = LocalBus(channel)
-    rows: list[tuple[float, int, bytes]] = []
-    stop_sniff = threading.Event()
-
-    def sniff():
-        while not stop_sniff.is_set():
-            m = sniffer.recv(0.05)
-            if m is not None:
-                rows.append((time.time(), m.arbitration_id, bytes(m.data)))
-
-    th = threading.Thread(target=sniff, daemon=True)
-    th.start()
+    sniffer = Sniffer(channel)
+    rows = sniffer.rows
     env = os.environ.copy()
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", "friction_local",
-         "--channel", channel, "--node-id", "1", "--preset", "abb_m19s", "--status-period", "60"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+    emu = start_emulator(channel, 1)
     node = subprocess.Popen(
         [sys.executable, "-m", "friction_ros.nodes.drive_interface", "--ros-args",
          "-p", "interface:=friction_local", "-p", f"channel:={channel}", "-p", "node_id:=1",
@@ -183,16 +211,8 @@ def test_emulator_and_node_in_separate_processes(channel):
         time.sleep(0.1)
     finally:
         pd.close()
-        for p in (node, emu):
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.communicate(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-        stop_sniff.set()
-        th.join(2)
-        sniffer.shutdown()
+        stop_all(node, emu)
+        sniffer.stop()
     assert node.returncode == 0, out
     assert hold and max(hold) < 0.05, f"hold error {max(hold) if hold else math.nan:.4f} rad"
     enc = [r for r in rows if r[1] == (1 << 5) | od.Cmd.GET_ENCODER_ESTIMATES]
@@ -250,24 +270,10 @@ def test_two_drives_on_one_bus_one_node(channel):
 
     from friction_ros.nodes.node_utils import COMMAND_QOS, SENSOR_QOS, STATE_QOS
 
-    sniffer = LocalBus(channel)
-    rows: list[tuple[float, int, bytes]] = []
-    stop_sniff = threading.Event()
-
-    def sniff():
-        while not stop_sniff.is_set():
-            m = sniffer.recv(0.05)
-            if m is not None:
-                rows.append((time.time(), m.arbitration_id, bytes(m.data)))
-
-    th = threading.Thread(target=sniff, daemon=True)
-    th.start()
+    sniffer = Sniffer(channel)
+    rows = sniffer.rows
     env = os.environ.copy()
-    emu = subprocess.Popen(
-        [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", "friction_local",
-         "--channel", channel, "--node-id", "1", "2", "--preset", "abb_m19s", "--status-period", "60"],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+    emu = start_emulator(channel, 1, 2)
     node = subprocess.Popen(
         _node_cmd(channel, "joints:=[shoulder, elbow]", "shoulder.node_id:=1", "elbow.node_id:=2",
                   f"torque_constant:={KT}", "torque_limit:=4.0", "command_timeout:=0.1",
@@ -313,16 +319,8 @@ def test_two_drives_on_one_bus_one_node(channel):
     finally:
         ros.destroy_node()
         rclpy.shutdown(context=ctx)
-        for p in (node, emu):
-            if p.poll() is None:
-                p.send_signal(signal.SIGINT)
-                try:
-                    p.communicate(timeout=10)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-        stop_sniff.set()
-        th.join(2)
-        sniffer.shutdown()
+        stop_all(node, emu)
+        sniffer.stop()
     assert node.returncode == 0, out
     assert len(states) >= 3000, f"{len(states)} joint_states in 30 s"
     # one message with both joints (a drive without fresh telemetry, e.g. before its first frames,
