@@ -405,3 +405,37 @@ def test_several_drives_parameters_per_joint_and_at_run_time(channel):
         node.on_shutdown()
         node.destroy_node()
         rclpy.shutdown(context=ctx)
+
+
+def test_bursts_wait_for_a_full_queue_and_a_stalled_member_does_not_stall_the_bus(channel):
+    """A receive queue holds only net.unix.max_dgram_qlen (10) frames: a burst of 100 frames to a
+    member that keeps reading arrives whole and in order (the sender waits for room); a member that
+    never reads loses frames after the send timeout instead of blocking the sender."""
+    tx, rx = LocalBus(channel), LocalBus(channel)
+    got: list[int] = []
+
+    def reader():
+        while len(got) < 100:
+            m = rx.recv(0.5)
+            if m is None:
+                return
+            got.append(m.data[0])
+
+    th = threading.Thread(target=reader)
+    th.start()
+    try:
+        for i in range(100):
+            tx.send(can.Message(arbitration_id=0x10, data=bytes([i]), is_extended_id=False))
+        th.join(10)
+        assert got == list(range(100)) and tx.frames_dropped == 0
+        stalled = LocalBus(channel)  # joins, never reads
+        time.sleep(0.25)  # past the peer refresh period
+        t0 = time.monotonic()
+        for i in range(30):
+            tx.send(can.Message(arbitration_id=0x11, data=bytes([i]), is_extended_id=False), timeout=0.001)
+        assert time.monotonic() - t0 < 1.0
+        assert tx.frames_dropped >= 15  # everything beyond the stalled member's queue
+        stalled.shutdown()
+    finally:
+        tx.shutdown()
+        rx.shutdown()

@@ -15,8 +15,11 @@ is one non-blocking ``sendto`` per peer, a receive one ``recv``, and frames trav
 16-byte classic ``struct can_frame`` (``can_id`` with the EFF/RTR/ERR flags, ``len``, 8 data bytes),
 so the per-frame cost is close to a SocketCAN raw socket's. Peers are found by listing the channel
 folder at most every ``refresh_period`` (a new member is heard within 0.2 s); a dead member's
-socket is removed on the first refused send. A peer whose receive queue is full drops the frame
-(``frames_dropped``), as a SocketCAN receiver does. CAN FD, bit timing and bus errors are not
+socket is removed on the first refused send. A receive queue holds only
+``net.unix.max_dgram_qlen`` frames (10 by default), so a send to a full queue is retried until the
+send timeout (2 ms without one) before that member loses the frame (``frames_dropped``), as an
+overflowing SocketCAN receiver would; it then gets no waiting for 0.1 s (a stalled member cannot
+stall the bus). CAN FD, bit timing and bus errors are not
 emulated; ``bitrate`` is accepted and ignored. Registered with python-can as ``friction_local``.
 """
 
@@ -82,6 +85,9 @@ def unpack_frame(raw: bytes, timestamp: float, channel: str) -> can.Message | No
 class LocalBus(can.BusABC):
     """A CAN bus between processes of one machine (see the module docstring)."""
 
+    FULL_QUEUE_WAIT = 0.002  # [s] longest wait for a full receive queue when send() has no timeout
+    CONGESTED_HOLD = 0.1  # [s] a member whose queue stayed full gets no waiting for this long
+
     def __init__(
         self,
         channel: str = "can0",
@@ -114,6 +120,7 @@ class LocalBus(can.BusABC):
         self._peers: list[str] = []
         self._refreshed = -1e9
         self.frames_dropped = 0
+        self._congested: dict[str, float] = {}
         self._closed = False
         super().__init__(channel=name, can_filters=can_filters, **kwargs)
 
@@ -134,6 +141,14 @@ class LocalBus(can.BusABC):
 
     # ---- BusABC -----------------------------------------------------------------------------------
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        """Send to every other member.
+
+        A receive queue holds only ``net.unix.max_dgram_qlen`` (10) frames, less than a burst such
+        as the enable sequences of several drives. A member whose queue is full is retried every
+        50 us until ``timeout`` (None: :attr:`FULL_QUEUE_WAIT`); if it stays full it loses the frame
+        (``frames_dropped``) and counts as congested for :attr:`CONGESTED_HOLD`: frames for it are
+        dropped at once meanwhile, so a member that does not read cannot stall the bus.
+        """
         if self._closed:
             raise can.CanOperationError("friction_local bus is shut down")
         now = time.monotonic()
@@ -141,18 +156,31 @@ class LocalBus(can.BusABC):
             self._refresh(now)
         raw = pack_frame(msg)
         sendto = self._sock.sendto
+        deadline = None
+        congested = self._congested
         for peer in tuple(self._peers):
-            try:
-                sendto(raw, peer)
-            except (ConnectionRefusedError, FileNotFoundError):
-                self._forget(peer)
-            except BlockingIOError:
-                self.frames_dropped += 1  # the peer's queue is full: it loses the frame
-            except OSError as exc:
-                if exc.errno in (errno.ENOBUFS, errno.EAGAIN):
-                    self.frames_dropped += 1
-                else:
-                    raise can.CanOperationError(f"friction_local send failed: {exc}", exc.errno) from exc
+            while True:
+                try:
+                    sendto(raw, peer)
+                    break
+                except (ConnectionRefusedError, FileNotFoundError):
+                    self._forget(peer)
+                    break
+                except OSError as exc:
+                    if exc.errno not in (errno.EAGAIN, errno.EWOULDBLOCK, errno.ENOBUFS):
+                        raise can.CanOperationError(f"friction_local send failed: {exc}", exc.errno) from exc
+                    t = time.monotonic()
+                    if congested.get(peer, -1.0) > t:
+                        self.frames_dropped += 1
+                        break
+                    if deadline is None:
+                        wait = self.FULL_QUEUE_WAIT if timeout is None else max(float(timeout), 0.0)
+                        deadline = t + wait
+                    if t >= deadline:
+                        self.frames_dropped += 1  # its queue stayed full: it loses the frame
+                        congested[peer] = t + self.CONGESTED_HOLD
+                        break
+                    time.sleep(5e-5)
 
     def _recv_internal(self, timeout: float | None):
         if self._closed:
