@@ -147,6 +147,60 @@ def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
     assert a.cycle(0.0175).flags == ax.FAULT_COMMAND_WATCHDOG and a.enabled
 
 
+def test_drive_that_does_not_enter_closed_loop_gets_one_more_enable_then_a_fault():
+    """Enable frames lost (or refused without an error): heartbeats keep reporting IDLE. 0.2 s after
+    the sequence it is sent once more; 0.2 s after that the axis faults and idles the drive."""
+    a, res = enabled_axis(telemetry_timeout=1.0)
+    assert states_of(res.frames) == [od.AxisState.CLOSED_LOOP_CONTROL]
+    t, resent = 0.0, []
+    while t < 0.35:
+        t += 0.05
+        feed(a, telemetry(state=od.AxisState.IDLE), t)
+        r = a.cycle(t)
+        resent += [(t, s) for s in states_of(r.frames)]
+        assert a.enabled, t
+    assert resent == [(pytest.approx(0.2), od.AxisState.CLOSED_LOOP_CONTROL)]  # one more enable sequence
+    while a.enabled and t < 1.0:
+        t += 0.05
+        feed(a, telemetry(state=od.AxisState.IDLE), t)
+        r = a.cycle(t)
+    assert t == pytest.approx(0.45) and not a.enabled
+    assert r.flags & ax.FAULT_DRIVE_ERROR and states_of(r.frames) == [od.AxisState.IDLE]
+    assert "did not enter closed loop" in a.fault_reason and "IDLE" in a.fault_reason
+    assert torque_of(r.frames) == 0.0 and a.counters.fault_trips == 1
+
+
+def test_drive_that_takes_the_second_enable_runs_and_one_that_drops_out_faults():
+    a, _ = enabled_axis(telemetry_timeout=1.0)
+    feed(a, telemetry(state=od.AxisState.IDLE), 0.25)
+    r = a.cycle(0.25)  # first sequence lost: sent again
+    assert states_of(r.frames) == [od.AxisState.CLOSED_LOOP_CONTROL]
+    for t in (0.3, 0.5, 0.7):  # the drive takes it
+        feed(a, telemetry(state=od.AxisState.CLOSED_LOOP_CONTROL), t)
+        a.set_command(0.5, t)
+        r = a.cycle(t)
+        assert a.enabled and not r.flags and torque_of(r.frames) == pytest.approx(0.5)
+    feed(a, telemetry(state=od.AxisState.IDLE), 0.8)  # drops out of closed loop without an error
+    r = a.cycle(0.8)
+    assert not a.enabled and r.flags & ax.FAULT_DRIVE_ERROR and "left closed loop" in a.fault_reason
+    a.request_enable()  # explicit re-enable clears it
+    feed(a, telemetry(state=od.AxisState.IDLE), 0.81)
+    r = a.cycle(0.81)
+    assert a.enabled and states_of(r.frames) == [od.AxisState.CLOSED_LOOP_CONTROL]
+
+
+def test_no_heartbeat_no_closed_loop_check():
+    """A drive configured without heartbeats (rate 0): nothing to check, the axis stays enabled."""
+    a = DriveAxis(AxisConfig(telemetry_timeout=1.0))
+    a.request_enable()
+    feed(a, telemetry()[:2], 0.0)
+    a.cycle(0.0)
+    for t in (0.3, 0.6, 0.9):
+        feed(a, telemetry()[:2], t)
+        r = a.cycle(t)
+        assert a.enabled and not r.flags & ax.FAULT_DRIVE_ERROR and not states_of(r.frames)
+
+
 def test_drive_error_latches_and_clear_on_enable():
     a, _ = enabled_axis(telemetry_timeout=1.0)
     feed(a, telemetry(err=od.ERROR_CURRENT_LIMIT_VIOLATION, state=1), 0.1)

@@ -143,6 +143,11 @@ class DriveAxis:
     """One axis: decode telemetry, supervise, produce command frames. Thread-safe."""
 
     ERROR_GRACE_S = 0.05  # error reports sent before the drive processed Clear_Errors are ignored
+    # ODrive: a heartbeat this long after the enable sequence must report CLOSED_LOOP_CONTROL; if not,
+    # the sequence is sent once more, then the axis faults (frames lost, drive refused). Once in
+    # closed loop, a heartbeat reporting any other state (the drive dropped out) is a fault too.
+    CLOSED_LOOP_GRACE_S = 0.2
+    ENABLE_ATTEMPTS = 2
 
     def __init__(self, config: AxisConfig):
         self.cfg = config
@@ -160,6 +165,9 @@ class DriveAxis:
         self._rejected_pending = False
         self._last_flags = 0
         self._ignore_errors_until = -math.inf  # drive errors in flight while clearing are ignored
+        self._enable_time = -math.inf  # when the enable sequence was last sent
+        self._enable_attempts = 0
+        self._closed_loop_seen = False  # a heartbeat after enabling reported CLOSED_LOOP_CONTROL
         # Fast path of the two telemetry frames of every period (ODrive encoder estimates + Iq): one
         # dict lookup by arbitration id and one unpack instead of a message object and an isinstance
         # chain. Same checks and counters as the decoder; anything else takes the general path.
@@ -352,6 +360,15 @@ class DriveAxis:
                 self.enabled = True
                 self._cmd, self._cmd_time, self._watchdog_tripped = 0.0, None, True
                 self._ignore_errors_until = t + self.ERROR_GRACE_S
+                self._enable_time, self._enable_attempts, self._closed_loop_seen = t, 1, False
+            elif self.enabled and self.mit is None:
+                frames += self._check_closed_loop(t)
+                if self.latched:  # the drive is not in closed loop: disable (zero torque + IDLE)
+                    flags |= self.latched
+                    self.counters.fault_trips += 1
+                    frames += self.disable_frames()
+                    self.enabled = False
+                    self.enable_requested = False
 
             sample = None
             if fresh:
@@ -405,6 +422,41 @@ class DriveAxis:
             self.counters.frames_tx += len(frames)
             self._last_flags = flags
             return CycleResult(frames, sample, flags, cmd)
+
+    def _check_closed_loop(self, t: float) -> list[Frame]:
+        """ODrive heartbeat check of an enabled axis (lock held): see :attr:`CLOSED_LOOP_GRACE_S`."""
+        tel = self.telemetry
+        hb = tel.heartbeat_time
+        if hb is None or hb < self._enable_time + self.CLOSED_LOOP_GRACE_S:
+            if (
+                hb is not None
+                and hb >= self._enable_time
+                and tel.axis_state == od.AxisState.CLOSED_LOOP_CONTROL
+            ):
+                self._closed_loop_seen = True
+            return []
+        if tel.axis_state == od.AxisState.CLOSED_LOOP_CONTROL:
+            self._closed_loop_seen = True
+            return []
+        state = (
+            od.AxisState(tel.axis_state).name
+            if tel.axis_state in od.AxisState._value2member_map_
+            else tel.axis_state
+        )
+        if self._closed_loop_seen:
+            self._latch(FAULT_DRIVE_ERROR, f"drive left closed loop: heartbeat reports axis state {state}")
+            return []
+        if self._enable_attempts < self.ENABLE_ATTEMPTS:
+            self._enable_attempts += 1
+            self._enable_time = t
+            self._ignore_errors_until = t + self.ERROR_GRACE_S
+            return self.enable_frames()
+        self._latch(
+            FAULT_DRIVE_ERROR,
+            f"drive did not enter closed loop: heartbeat reports axis state {state} "
+            f"{self.CLOSED_LOOP_GRACE_S:g} s after each of {self._enable_attempts} enable requests",
+        )
+        return []
 
     def shutdown_frames(self) -> list[Frame]:
         """Frames that leave the drive safe; marks the axis disabled."""
