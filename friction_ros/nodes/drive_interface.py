@@ -15,7 +15,8 @@ publishes ``diagnostics``. Service ``~/enable`` (std_srvs/SetBool) enables (clea
 or disables the drive.
 
 Safe by default: the drive is only enabled on request (``enable_on_start`` or ``~/enable``); command
-watchdog, torque/current/velocity limits, NaN/inf rejection, stale-telemetry and drive-error faults
+watchdog, torque/current/velocity limits, NaN/inf rejection, stale-telemetry and drive-error faults,
+the ODrive closed-loop check (heartbeat must report CLOSED_LOOP after enabling; one retry)
 live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTERM and shutdown send
 zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
 bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
