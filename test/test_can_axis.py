@@ -406,3 +406,24 @@ def test_fast_telemetry_path_matches_the_decoder():
     assert repr(a.telemetry) == repr(b.telemetry)
     assert a.counters == b.counters and a.decoder.stats == b.decoder.stats
     assert a.decoder.stats.decoded == 2 and a.decoder.stats.rejected == 3
+
+
+@pytest.mark.parametrize("protocol", ["odrive_cansimple", "mit"])
+def test_frame_router_sends_each_drives_frames_to_its_axis(protocol):
+    """Several drives on one bus: frames go to the axis of their drive; unknown drives and the single
+    drive case go to the first axis (whose decoder counts them as ignored)."""
+    axes = [DriveAxis(AxisConfig(protocol=protocol, node_id=n)) for n in (1, 2, 5)]
+    route = ax.frame_router(axes)
+    if protocol == "odrive_cansimple":
+        for n, axis in zip((1, 2, 5), axes):
+            f = od.encode_encoder_estimates(n, 0.5, 0.0)
+            assert route(f.arbitration_id, f.data) is axis
+        foreign = od.encode_encoder_estimates(7, 0.5, 0.0)
+        assert route(foreign.arbitration_id, foreign.data) is axes[0]
+    else:
+        for n, axis in zip((1, 2, 5), axes):
+            reply = mitc.MitCodec(n).encode_reply(0.1, 0.2, 0.3)
+            assert route(reply.arbitration_id, reply.data) is axis
+        assert route(0, b"") is axes[0] and route(0, bytes([9, 0, 0, 0, 0, 0])) is axes[0]
+    single = ax.frame_router(axes[1:2])
+    assert single(0x7FF, b"") is axes[1]

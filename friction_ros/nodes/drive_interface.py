@@ -64,6 +64,7 @@ from friction_ros.core.can.axis import (
     AxisConfig,
     DriveAxis,
     fault_text,
+    frame_router,
 )
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.can.joint import JointConversion
@@ -456,7 +457,7 @@ class DriveInterface(Node):
         self.joints = [p.joint for p in self.ports]
         self.joint = self.joints[0]
         check_distinct_ids(self.joints, [a.cfg for a in self.axes])
-        self._route = self._router()
+        self._route = frame_router(self.axes)
         self.period = 1.0 / v["control_rate_hz"]
         self.error_frames = 0
         self.send_errors = 0
@@ -533,19 +534,6 @@ class DriveInterface(Node):
         for a in self.axes:
             out += [f for f in can_filters(a.cfg) if f not in out]
         return out
-
-    def _router(self):
-        """Received frame -> the axis it belongs to (ODrive: node id = id >> 5; MIT: first data byte
-        of a reply). With one drive, or for a frame of no configured drive, the first axis: its
-        decoder counts the frame as ignored or rejected, as the single-drive node always did."""
-        first = self.axes[0]
-        if len(self.axes) == 1:
-            return lambda arb_id, data: first
-        if self.axes[0].cfg.protocol == "odrive_cansimple":
-            by_id = {a.cfg.node_id: a for a in self.axes}
-            return lambda arb_id, data: by_id.get(arb_id >> 5, first)
-        by_motor = {a.cfg.node_id & 0xFF: a for a in self.axes}
-        return lambda arb_id, data: by_motor.get(data[0], first) if data else first
 
     # ---- parameters / service / commands ------------------------------------------------------------
     def _apply(self, changes: dict) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import struct
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -464,3 +465,20 @@ class DriveAxis:
             self.enabled = False
             self.enable_requested = False
             return self.disable_frames()
+
+
+def frame_router(axes: list[DriveAxis]) -> Callable[[int, bytes], DriveAxis]:
+    """Received frame (arbitration id, data) -> the axis it belongs to, for several drives on one bus.
+
+    ODrive CANSimple: node id = arbitration id >> 5. MIT: a reply's first data byte is the motor id.
+    With one axis, or for a frame of no configured drive, the first axis: its decoder counts the
+    frame as ignored or rejected, as a single-drive node does.
+    """
+    first = axes[0]
+    if len(axes) == 1:
+        return lambda arb_id, data: first
+    if first.cfg.protocol == "odrive_cansimple":
+        by_id = {a.cfg.node_id: a for a in axes}
+        return lambda arb_id, data: by_id.get(arb_id >> 5, first)
+    by_motor = {a.cfg.node_id & 0xFF: a for a in axes}
+    return lambda arb_id, data: by_motor.get(data[0], first) if data else first
