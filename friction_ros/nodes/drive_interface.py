@@ -73,9 +73,9 @@ from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
     OK,
+    RECORDED_QOS,
     SCHEDULING_PARAMS,
     SENSOR_QOS,
-    STATE_QOS,
     WARN,
     DeadlineLoop,
     DiagnosticsPublisher,
@@ -470,7 +470,7 @@ class DriveInterface(Node):
         self._rx_ok = True  # False after a read failure until the bus is reopened
         self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
 
-        self.pub_joint = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.pub_joint = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
         self.pub_drive = self.create_publisher(DriveState, "drive_state", SENSOR_QOS)
         # joint_commands is taken by the control period itself (see _take_commands), not by the
         # executor: an rcl subscription that no executor waits on, so a command costs no wake-up.

@@ -23,6 +23,7 @@ from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.nodes.node_utils import (
     OK,
+    RECORDED_QOS,
     SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
@@ -110,7 +111,7 @@ class FrictionEstimatorNode(Node):
         )  # refuses to start if invalid
         add_runtime_validation(self, specs, self._apply)
         self.joint = self.values["joint_name"]
-        self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", STATE_QOS)
+        self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", RECORDED_QOS)
         self._decoder = JointStateDecoder()
         self._one_joint = (self.joint,)
         # raw: joint states decoded by node_utils' JointState codec (no message object per sample)

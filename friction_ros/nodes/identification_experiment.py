@@ -20,7 +20,9 @@ The program starts with the first joint state once ``wait_for_subscribers`` subs
 bag recorder) listen on ``experiment_events`` and ``joint_states``; until then states are not
 answered (lockstep: the plant waits; realtime: the plant/drive applies zero torque by timeout).
 When the program is over (completed or stopped by a safety limit) the node answers with zero
-torque, waits ``exit_delay`` and exits by itself: exit code 0 when it completed, 3 when a safety
+torque for ``end_tail`` seconds of joint time (stamps, not wall time), then answers no more states
+(a lockstep plant stops, so the record ends at the same simulated time on any machine), waits
+``exit_delay`` of wall time and exits by itself: exit code 0 when it completed, 3 when a safety
 limit stopped it. Ctrl-C/SIGTERM: zero torque, exit. Progress (percentage, segment) is logged every
 ``progress_period`` s of wall time.
 """
@@ -48,6 +50,7 @@ from friction_ros.core.excitation import (
 from friction_ros.nodes.node_utils import (
     ERROR,
     OK,
+    RECORDED_QOS,
     STATE_QOS,
     WARN,
     CommandPublisher,
@@ -114,6 +117,16 @@ NODE_PARAMS = [
     ),
     Param("exit_when_done", True, "exit by itself when the program is over", read_only=True),
     Param(
+        "end_tail",
+        0.2,
+        "joint time answered with zero torque after the program ends; later states are not answered, "
+        "so a lockstep plant stops and the record ends on simulated time",
+        lo=0.0,
+        hi=60.0,
+        unit="s",
+        read_only=True,
+    ),
+    Param(
         "exit_delay", 0.5, "wall time between the end of the program and the exit", lo=0.0, hi=60.0, unit="s"
     ),
     Param(
@@ -165,7 +178,7 @@ class IdentificationExperiment(Node):
 
         self.joint = self.values["joint_name"]
         self.commands = CommandPublisher(self, self.joint)
-        self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", STATE_QOS)
+        self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", RECORDED_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
         self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
@@ -176,6 +189,7 @@ class IdentificationExperiment(Node):
         self._last_stamp = None
         self._ready = self.values["wait_for_subscribers"] == 0
         self._done_wall: float | None = None
+        self._end_ns: int | None = None
         self._last_progress = time.monotonic()
         self._wall0: float | None = None
         self.counts = {"cycles": 0, "duplicates": 0, "rejected_states": 0, "events": 0, "aborts": 0}
@@ -207,6 +221,8 @@ class IdentificationExperiment(Node):
             self._ready = True
             self.get_logger().info("subscribers present: starting the program")
         t_ns = stamp_to_ns(msg.header.stamp)
+        if self._end_ns is not None and t_ns > self._end_ns:
+            return  # the program and its tail are over: not answered (ends on joint time)
         if self._last_ns is not None and t_ns <= self._last_ns:
             if t_ns == self._last_ns and self.commands.last is not None:
                 self.counts["duplicates"] += 1
@@ -228,6 +244,7 @@ class IdentificationExperiment(Node):
         self._report_progress()
         if self.program.done and self._done_wall is None:
             self._done_wall = time.monotonic()
+            self._end_ns = t_ns + int(round(self.values["end_tail"] * 1e9))
             st = self.program.status()
             wall = time.monotonic() - (self._wall0 or time.monotonic())
             if self.program.aborted and self.program.on_limit == "stop":

@@ -35,6 +35,7 @@ from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
     OK,
+    RECORDED_QOS,
     SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
@@ -152,7 +153,7 @@ class PlantSimulator(Node):
         # bytes: same wire type, no message objects in the 1 kHz path
         self._encoder = JointStateEncoder([self.joint])
         self._decoder = JointStateDecoder()
-        self.state_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.state_pub = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
         self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS, raw=True)
         # realtime mode is the clock source: wall time without an rclpy Time object per cycle

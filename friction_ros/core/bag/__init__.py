@@ -16,6 +16,7 @@ Writing::
 """
 
 from .cdr import decode, decode_batch, encode
+from .digest import content_digest
 from .errors import (
     BagError,
     CdrError,
@@ -59,6 +60,7 @@ __all__ = [
     "UnsupportedBagError",
     "bag_files",
     "bag_info",
+    "content_digest",
     "decode",
     "decode_batch",
     "dump_qos",
