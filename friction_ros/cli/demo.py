@@ -1,21 +1,25 @@
 """friction-demo: identify and compensate a simulated joint end to end, over real ROS 2 topics.
 
-The main job of friction_ros (``make demo``). With the ABB M19-S preset and GMS-4 friction as the
-hidden truth, every node a separate process, lockstep mode (deterministic, as fast as the machine
-allows):
+The main job of friction_ros (``make demo``). A plant preset is the hidden truth; every node is a
+separate process; lockstep mode (deterministic: the same bag, fit and figures on any machine, at
+any load, as fast as the machine allows):
 
-1. identification experiment (plant_simulator + identification_experiment + bag_recorder) -> bag in
-   ``bags/``;
-2. offline fit of the candidate models from that bag (friction-fit core) -> parameter file in
-   ``params/`` and a report;
-3. tracking runs (plant_simulator + compensating_controller) without compensation, then with the
-   fitted model as feedforward, as feedback and blended;
-4. a table (model chosen, fit NMSE, RMS and max tracking error with and without compensation,
-   reduction in percent) and plots (tracking error before/after, friction map with the fit).
+1. identification experiment sized to the joint (plateau speeds, ramp torques, amplitudes and
+   loop gains from the preset's scale: breakaway torque, inertia, limits, encoder resolution,
+   current lag and delays) -> bag in ``bags/``;
+2. offline fit of the candidate models from that bag -> recommended model (the rule that decided
+   is printed), a report, and a parameter file in the results folder whose compensation modes
+   passed the safety gate (closed-loop check on the identified plant with +-20 % coefficient
+   errors; a mode worse than none or not robustly stable is written disabled with the reason);
+3. tracking runs with gains from the tuning rule (stated phase margin including the current lag
+   and the control-period delay): no compensation, then every mode (feedforward, feedback,
+   blended), each marked enabled or refused; every controller sample is read (count checked);
+4. a table (RMS and max tracking error, stick-slip and hunting per mode, enabled/refused and why),
+   warnings for anything suspicious, plots, ``demo_summary.json``.
 
-Options run the same pipeline on another preset (``--preset``), on a bag the user already has
-(``--bag``: steps 2-4; the tracking runs then use ``--preset`` as the stand-in plant), and with
-shorter runs (``--quick``, used by the tests and CI).
+``--all-presets`` runs every preset in ``params/`` (top-level ``presets_ok`` in the summary);
+``--bag`` fits a bag the user already has (steps 2-4; tracking runs on ``--preset`` as the
+stand-in plant); ``--quick`` shortens the fit and the tracking runs (tests, CI).
 """
 
 from __future__ import annotations
@@ -33,31 +37,30 @@ import numpy as np
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
-DEFAULT_REFERENCE = {
-    "type": "band_limited_random",
-    "amplitude": 0.05,
-    "cutoff": 1.0,
-    "duration": 20.0,
-    "seed": 1,
-}
-# seed 003's PD (Kp = 200 N m/rad, Kd = 0.15 N m s/rad) at 1 kHz
-DEFAULT_GAINS = {"p": 200.0, "d": 0.15}
-# real time (CAN path): one period of command delay and scheduling jitter -> softer gains
-REALTIME_GAINS = {"p": 30.0, "i": 60.0, "d": 0.3}
 SCHEMES = ("feedforward", "feedback", "blended")
+# an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
+WORSE_TOLERANCE = 0.02
+# the ROS graph's control period (plant_simulator / compensating_controller / experiment default)
+GRAPH_PERIOD = 1e-3
 
 
 @dataclass
 class TrackingRun:
-    """One closed-loop tracking run through the ROS graph."""
+    """One closed-loop tracking run through the ROS graph (every control period, in order)."""
 
     label: str
     t: np.ndarray
     reference: np.ndarray
+    reference_velocity: np.ndarray
     position: np.ndarray
+    velocity: np.ndarray
     error: np.ndarray
     command: np.ndarray
+    friction: np.ndarray
     wall_seconds: float
+    enabled: bool = True
+    reason: str = ""
+    metrics: dict = field(default_factory=dict)
 
     @property
     def rms(self) -> float:
@@ -67,29 +70,81 @@ class TrackingRun:
     def max(self) -> float:
         return float(np.max(np.abs(self.error)))
 
+    @property
+    def samples(self) -> int:
+        return int(self.t.size)
+
+    def fallback_time(self) -> float | None:
+        """Time after which the friction terms stayed exactly zero while they were active before
+        (the controller's run-time limit-cycle fallback), else None."""
+        active = self.friction != 0.0
+        if not active.any() or active[-1]:
+            return None
+        last = int(np.nonzero(active)[0][-1])
+        return float(self.t[last + 1]) if last + 1 < self.t.size else None
+
 
 @dataclass
 class DemoResult:
+    preset: str = ""
     bag: str = ""
+    bag_digest: str = ""
     fit_dir: str = ""
     params_file: str = ""
     model: str = ""
+    recommendation: dict = field(default_factory=dict)
     fit_nmse: dict = field(default_factory=dict)
+    gate: dict = field(default_factory=dict)
+    gains: dict = field(default_factory=dict)
+    reference: dict = field(default_factory=dict)
     runs: dict[str, TrackingRun] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
+    map_error: dict = field(default_factory=dict)
 
-    def table(self) -> list[list]:
-        base = self.runs["none"]
-        rows = []
-        for label, run in self.runs.items():
-            red = 100.0 * (1.0 - run.rms / base.rms) if base.rms > 0 else 0.0
-            rows.append([label, run.rms * 1e3, run.max * 1e3, red])
-        return rows
+    def reduction(self, label: str) -> float:
+        base = self.runs["none"].rms
+        return 100.0 * (1.0 - self.runs[label].rms / base) if base > 0 else 0.0
 
     @property
     def best(self) -> str:
-        return min((k for k in self.runs if k != "none"), key=lambda k: self.runs[k].rms)
+        """The enabled mode with the lowest RMS error ("none" when no mode is enabled)."""
+        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled]
+        return min(enabled, key=lambda k: self.runs[k].rms) if enabled else "none"
+
+    def summary(self) -> dict:
+        return {
+            "preset": self.preset,
+            "bag": self.bag,
+            "bag_digest": self.bag_digest,
+            "model": self.model,
+            "recommendation": self.recommendation,
+            "fit_nmse_percent": self.fit_nmse,
+            "map_error_vs_truth": self.map_error,
+            "params_file": self.params_file,
+            "control_period": GRAPH_PERIOD,
+            "gains": self.gains,
+            "reference": self.reference,
+            "gate": self.gate,
+            "runs": {
+                k: {
+                    "rms_mrad": r.rms * 1e3,
+                    "max_mrad": r.max * 1e3,
+                    "wall_seconds": r.wall_seconds,
+                    "enabled": r.enabled,
+                    "reason": r.reason,
+                    "samples": r.samples,
+                    "fallback_s": r.fallback_time(),
+                    **{f"{m}": v for m, v in r.metrics.items()},
+                }
+                for k, r in self.runs.items()
+            },
+            "best": self.best,
+            "reduction_percent": {k: self.reduction(k) for k in self.runs},
+            "warnings": self.warnings,
+            "timings_s": self.timings,
+        }
 
 
 def _say(msg: str) -> None:
@@ -97,25 +152,46 @@ def _say(msg: str) -> None:
 
 
 # -- step 1 -------------------------------------------------------------------------------------------
-def run_experiment(preset: str, profile: str, bag: Path) -> None:
+def run_experiment(preset: str, profile: str, bag: Path, joint: str, seed: int | None = None) -> None:
+    """friction-experiment in lockstep, sized to the preset (its default for a simulated joint)."""
     from friction_ros.cli import experiment
 
     argv = ["--profile", profile, "--preset", preset, "--mode", "lockstep", "-o", str(bag), "--overwrite"]
+    argv += ["--joint", joint]
+    if seed is not None:
+        argv += ["--set", f"random.seed={int(seed)}"]
     code = experiment.main(argv)
+    if code == 3:
+        raise RuntimeError("identification experiment stopped by a safety limit (see the ABORT lines above)")
     if code != 0:
         raise RuntimeError(f"identification experiment failed (exit code {code})")
 
 
 # -- step 2 -------------------------------------------------------------------------------------------
-def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool, preset: str):
+def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool, preset: str, params_file: Path):
     from friction_ros.core.identification import fit_bag
 
     options = {"maxiter": 25} if quick else {}
-    return fit_bag([str(bag)], "/joint_states", joint, models, out_dir, plant_preset=preset, **options)
+    return fit_bag(
+        [str(bag)],
+        "/joint_states",
+        joint,
+        models,
+        out_dir,
+        plant_preset=preset,
+        params_file=str(params_file),
+        **options,
+    )
 
 
 def controller_document(
-    model_config: dict | None, inertia: float, scheme: str, reference: dict, gains: dict
+    model_config: dict | None,
+    inertia: float,
+    scheme: str,
+    reference: dict,
+    gains: dict,
+    *,
+    override_refusal: bool = False,
 ) -> dict:
     """compensating_controller parameters (README layout: ``friction`` = model, ``compensation`` = how)."""
     params: dict = {"mode": "pid", "pid": dict(gains), "reference": dict(reference)}
@@ -128,12 +204,18 @@ def controller_document(
 
 # -- step 3 -------------------------------------------------------------------------------------------
 def track(
-    preset: str, params_file: Path, duration: float, label: str, joint: str = "joint1", can_path: bool = False
+    preset: str,
+    params_file: Path,
+    duration: float,
+    label: str,
+    joint: str = "joint1",
+    period: float = 1e-3,
 ) -> TrackingRun:
     """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
 
-    ``can_path``: instead, the real drive_interface node talks CAN frames to the emulated drive
-    (``simulated_drive``) in real time, and the controller runs on the wall clock.
+    Every controller_state of the run is read (a reliable subscription as deep as the publisher's
+    history); the run fails if one control period is missing, so the figures never depend on what
+    a loaded machine happened to deliver.
     """
     import threading
 
@@ -142,32 +224,20 @@ def track(
     from rclpy.executors import SingleThreadedExecutor
 
     from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
-    from friction_ros.nodes.node_utils import STATE_QOS
+    from friction_ros.nodes.node_utils import RECORDED_QOS
 
-    if can_path:
-        specs = [
-            NodeSpec(
-                "simulated_drive",
-                "",
-                [],
-                {"joint_name": joint, "torque_limit": 5.0, "enable_on_start": True},
-                args=["--preset", preset],
-            ),
-            NodeSpec("compensating_controller", "", [str(params_file)], {"joint_name": joint}),
-        ]
-    else:
-        specs = [
-            NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
-            NodeSpec(
-                "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
-            ),
-        ]
-        pin_latency_chain(specs)  # lockstep: ~1.7x faster on 2 cores
+    specs = [
+        NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
+        NodeSpec(
+            "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
+        ),
+    ]
+    pin_latency_chain(specs)
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
     states: list = []
-    node.create_subscription(ControllerState, "controller_state", states.append, STATE_QOS)
+    node.create_subscription(ControllerState, "controller_state", states.append, RECORDED_QOS)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     stop = threading.Event()
@@ -181,6 +251,7 @@ def track(
     bring = Bringup(specs, quiet=True)
     t0 = time.monotonic()
     bring.start()
+    n_periods = int(round(duration / period))
     try:
         last_print = 0.0
         while True:
@@ -188,7 +259,7 @@ def track(
                 out = "\n".join(sum(bring.output.values(), [])[-20:])
                 raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
             t_sim = _stamp(states[-1]) - _stamp(states[0]) if states else 0.0
-            if t_sim >= duration:
+            if t_sim >= duration + 2 * period:
                 break
             if time.monotonic() - t0 > 60 + 20 * duration:
                 raise RuntimeError(f"tracking run {label}: timed out at t = {t_sim:.2f} s")
@@ -206,25 +277,56 @@ def track(
         f"{chr(13) if sys.stdout.isatty() else ''}[demo]   {label:<12} {duration:g} s simulated in {wall:.1f} s",
         flush=True,
     )
+    t_first = _stamp(states[0])
     by_k: dict[int, object] = {}
-    t_first = _stamp(states[0]) if states else 0.0
     for m in states:
-        by_k[int(round((_stamp(m) - t_first) * 1000))] = m
-    ks = sorted(k for k in by_k if k <= duration * 1000)
-    msgs = [by_k[k] for k in ks]
+        by_k.setdefault(int(round((_stamp(m) - t_first) / period)), m)
+    missing = [k for k in range(n_periods + 1) if k not in by_k]
+    if missing:
+        raise RuntimeError(
+            f"tracking run {label}: {len(missing)} of {n_periods + 1} controller states were not received "
+            f"(first missing period {missing[0]}): the figures would not be of the whole run"
+        )
+    msgs = [by_k[k] for k in range(n_periods + 1)]
+    col = lambda name: np.array([getattr(m, name) for m in msgs])  # noqa: E731
     return TrackingRun(
         label=label,
-        t=np.array([_stamp(m) - t_first for m in msgs]),
-        reference=np.array([m.reference_position for m in msgs]),
-        position=np.array([m.position for m in msgs]),
-        error=np.array([m.error for m in msgs]),
-        command=np.array([m.command for m in msgs]),
+        t=np.arange(n_periods + 1) * period,
+        reference=col("reference_position"),
+        reference_velocity=col("reference_velocity"),
+        position=col("position"),
+        velocity=col("velocity"),
+        error=col("error"),
+        command=col("command"),
+        friction=col("friction_feedforward") + col("friction_feedback"),
         wall_seconds=wall,
     )
 
 
 def _stamp(m) -> float:
     return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
+
+
+def run_metrics(run: TrackingRun, resolution: float) -> dict:
+    """Stick-slip and hunting of one run from the measured signals (harness.tracking_metrics)."""
+    from friction_ros.core.harness import tracking_metrics
+
+    v_stick = max(2.0 * resolution / 0.01, 1e-4)  # under two counts per 10 ms counts as stuck
+    m = tracking_metrics(
+        run.t,
+        run.reference,
+        run.position,
+        run.velocity,
+        run.reference_velocity,
+        v_stick=v_stick,
+        resolution=2.0 * resolution,
+    )
+    return {
+        "stick_fraction": m["stick_fraction"],
+        "stick_events": m["stick_events"],
+        "hunting_reversals": m["hunting_reversals"],
+        "hunting_amplitude_mrad": m["hunting_amplitude"] * 1e3,
+    }
 
 
 # -- step 4 -------------------------------------------------------------------------------------------
@@ -238,16 +340,22 @@ def plot_tracking(result: DemoResult, path: Path) -> None:
     base = result.runs["none"]
     axes[0].plot(base.t, base.reference, "k", lw=1, label="reference")
     axes[0].plot(base.t, base.position, lw=0.8, label="no compensation")
-    best = result.runs[result.best]
-    axes[0].plot(best.t, best.position, lw=0.8, label=f"{result.best}")
+    if result.best != "none":
+        best = result.runs[result.best]
+        axes[0].plot(best.t, best.position, lw=0.8, label=f"{result.best}")
     axes[0].set_ylabel("position [rad]")
     axes[0].legend(loc="upper right", fontsize=8)
     for label, run in result.runs.items():
-        axes[1].plot(run.t, run.error * 1e3, lw=0.7, label=f"{label}: RMS {run.rms * 1e3:.3f} mrad")
+        state = "" if run.enabled else " (refused)"
+        axes[1].plot(
+            run.t, run.error * 1e3, lw=0.7, label=f"{label}{state}: RMS {run.rms * 1e3:.3f} mrad", alpha=0.9
+        )
     axes[1].set_ylabel("tracking error [mrad]")
     axes[1].set_xlabel("time [s]")
     axes[1].legend(loc="upper right", fontsize=8)
-    fig.suptitle("Tracking error before and after friction compensation (lockstep ROS graph)")
+    fig.suptitle(
+        f"{result.preset}: tracking error before and after friction compensation (lockstep ROS graph)"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -266,9 +374,10 @@ def plot_friction_map(fit_result, truth, path: Path) -> None:
         f = np.array([p.torque for p in plateaus])
         ax.plot(v, f, "ko", ms=4, label="plateau means (bag)")
         vmax = float(np.max(np.abs(v))) * 1.1
+        vmin = max(float(np.min(np.abs(v))) / 10.0, 1e-6)
     else:
-        vmax = 5.0
-    grid = np.concatenate([-np.geomspace(vmax, 1e-3, 200), np.geomspace(1e-3, vmax, 200)])
+        vmax, vmin = 5.0, 1e-3
+    grid = np.concatenate([-np.geomspace(vmax, vmin, 200), np.geomspace(vmin, vmax, 200)])
     if truth is not None:
         ax.plot(grid, truth.steady_state(grid), "k--", lw=1, label=f"truth ({truth.name})")
     for name, m in fit_result.models.items():
@@ -276,7 +385,7 @@ def plot_friction_map(fit_result, truth, path: Path) -> None:
             ax.plot(grid, m.steady_state(grid), lw=1, label=f"fit: {name}")
         except Exception:  # a learned model without a steady-state map
             continue
-    ax.set_xscale("symlog", linthresh=0.05)
+    ax.set_xscale("symlog", linthresh=vmin * 10)
     ax.set_xlabel("velocity [rad/s]")
     ax.set_ylabel("friction torque [N m]")
     ax.grid(True, alpha=0.3)
@@ -289,100 +398,184 @@ def plot_friction_map(fit_result, truth, path: Path) -> None:
 
 def print_table(result: DemoResult) -> None:
     nmse = result.fit_nmse
+
+    def fmt(x):
+        return "n/a" if x is None or not math.isfinite(x) else f"{x:.3f} %"
+
     print()
     print(
-        f"Model chosen: {result.model}   fit NMSE (validation): "
-        f"high velocity {nmse.get('high', math.nan):.3f} %, low velocity {nmse.get('low', math.nan):.3f} %"
+        f"[{result.preset}] Model chosen: {result.model}   fit NMSE (validation): "
+        f"high velocity {fmt(nmse.get('high'))}, low velocity {fmt(nmse.get('low'))}"
     )
+    if result.recommendation.get("rule"):
+        print(f"  chosen by: {result.recommendation['rule']}")
+    print(f"  tracking gains {result.gains}; reference {result.reference.get('type')}")
     print()
-    print("| compensation | RMS error [mrad] | max error [mrad] | RMS reduction [%] |")
-    print("|---|---|---|---|")
-    for label, rms, mx, red in result.table():
-        print(f"| {label} | {rms:.4f} | {mx:.4f} | {red:.1f} |")
     print(
-        f"\nbest: {result.best} ({result.table()[list(result.runs).index(result.best)][3]:.1f} % lower RMS error)"
+        "| compensation | state | RMS error [mrad] | max error [mrad] | RMS reduction [%] "
+        "| stick fraction | hunting reversals |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for label, run in result.runs.items():
+        state = "-" if label == "none" else ("enabled" if run.enabled else f"refused: {run.reason}")
+        print(
+            f"| {label} | {state} | {run.rms * 1e3:.4f} | {run.max * 1e3:.4f} | {result.reduction(label):.1f} "
+            f"| {run.metrics.get('stick_fraction', math.nan):.3f} | {run.metrics.get('hunting_reversals', 0)} |"
+        )
+    if result.best == "none":
+        print("\nbest: no compensation mode is enabled for this joint")
+    else:
+        print(f"\nbest enabled mode: {result.best} ({result.reduction(result.best):.1f} % lower RMS error)")
+    for w in result.warnings:
+        print(f"WARNING: {w}")
+
+
+def _gate_and_gains(preset_obj, fit_result, model_name: str, reference: dict, gains: dict) -> dict:
+    """Closed-loop safety gate of every compensation mode on the identified plant."""
+    from friction_ros.core.control.compensation_gate import gate_modes
+
+    model = fit_result.models[model_name]
+    p = preset_obj.params
+    return gate_modes(
+        model.config,
+        float(model.coefficients.get("J", p.reflected_inertia)),
+        gains=gains,
+        current_lag=p.current_time_constant,
+        delay=GRAPH_PERIOD + p.measurement_delay + p.actuation_delay,
+        period=GRAPH_PERIOD,
+        reference=reference,
+        resolution=_resolution(preset_obj),
+        modes=SCHEMES,
     )
 
 
-def run(args) -> DemoResult:
+def _resolution(preset_obj) -> float:
+    p = preset_obj.params
+    if p.encoder_cpr <= 0:
+        return 0.0
+    per_rev = 2.0 * math.pi / p.encoder_cpr
+    return per_rev / p.ratio if p.encoder_location == "motor" else per_rev
+
+
+def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
+    """Steps 1-4 for one preset; raises RuntimeError/ParameterError naming what failed."""
     from friction_ros.core.identification.export import dump_yaml
+    from friction_ros.core.joint_sizing import JointScale, tracking_gains, tracking_reference
     from friction_ros.core.presets import load_preset
 
-    stamp = time.strftime("%Y%m%d_%H%M%S")
-    preset = load_preset(args.preset)  # validates the name early
-    res = DemoResult()
-    results_dir = Path(args.results or ROOT / "results" / f"demo_{args.preset}_{stamp}")
+    preset = load_preset(preset_name)  # validates the name early
+    scale = JointScale.from_preset(preset)
+    res = DemoResult(preset=preset_name)
     results_dir.mkdir(parents=True, exist_ok=True)
-    bag = Path(args.bag) if args.bag else ROOT / "bags" / f"demo_{args.preset}_{stamp}"
+    stamp = time.strftime("%Y%m%d_%H%M%S")
+    bag = Path(args.bag) if args.bag else ROOT / "bags" / f"demo_{preset_name}_{stamp}"
     t_all = time.monotonic()
     if not args.bag:
-        _say(f"1/4 identification experiment on {args.preset} ({args.profile} profile, lockstep) -> {bag}")
+        _say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, lockstep) -> {bag}")
         t = time.monotonic()
-        run_experiment(args.preset, args.profile, bag)
+        run_experiment(preset_name, args.profile, bag, args.joint, args.seed)
         res.timings["experiment"] = time.monotonic() - t
     else:
         _say(f"1/4 using the bag you gave: {bag}")
     res.bag = str(bag)
+    from friction_ros.core.bag import content_digest
+
+    res.bag_digest = content_digest(bag, ["/joint_states", "/experiment_events"])[0] if not args.bag else ""
 
     _say(f"2/4 fitting {', '.join(args.models)} from the bag")
     t = time.monotonic()
     fit_dir = results_dir / "fit"
-    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, args.preset)
-    res.timings["fit"] = time.monotonic() - t
+    params_file = results_dir / "friction_params.yaml"
+    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, preset_name, params_file)
     res.fit_dir = str(fit_dir)
     name = fit_result.recommended
     if name is None or fit_result.models[name].config is None:
         raise RuntimeError("the fit recommended no model with a parameter set")
     model = fit_result.models[name]
     res.model = name
+    res.recommendation = dict(getattr(fit_result, "recommendation", {}) or {})
     res.fit_nmse = {
         "high": float(model.metrics.get("nmse_high_percent", math.nan)),
         "low": float(model.metrics.get("nmse_low_percent", math.nan)),
+        "all": float(model.metrics.get("nmse_percent", math.nan)),
     }
+    res.warnings += list(fit_result.warnings)
+    for key, text in (("high", "high-velocity"), ("low", "low-velocity")):
+        if not math.isfinite(res.fit_nmse[key]):
+            note = model.metrics.get(f"nmse_{key}_note", "no signal above the noise in that subset")
+            res.warnings.append(f"{text} NMSE not available: {note}")
+    if math.isfinite(res.fit_nmse["all"]) and res.fit_nmse["all"] > 30.0:
+        res.warnings.append(
+            f"the recommended model {name} explains little of the measured torque (validation NMSE "
+            f"{res.fit_nmse['all']:.1f} %): check the excitation, a load or gravity term, the sensor"
+        )
     inertia = float(model.coefficients.get("J", preset.params.reflected_inertia))
-    params_file = ROOT / "params" / f"fitted_{args.preset}.yaml"
-    doc = fit_result.parameter_document(name)
+    res.timings["fit"] = time.monotonic() - t
+    res.map_error = map_error_vs_truth(model.steady_state, preset.friction, fit_result.plateaus)
+
+    gains = tracking_gains(scale)
+    reference = tracking_reference(scale, duration=max(args.duration, 1.0))
+    res.gains, res.reference = dict(gains), dict(reference)
+    _say(
+        "   safety gate: every compensation mode in closed loop on the identified plant (+-20 % coefficients)"
+    )
+    t = time.monotonic()
+    verdicts = _gate_and_gains(preset, fit_result, name, reference, gains)
+    res.timings["gate"] = time.monotonic() - t
+    res.gate = {m: v.as_dict() for m, v in verdicts.items()}
+    doc = fit_result.parameter_document(name, gate=verdicts, gains=gains)
     params_file.write_text(
-        dump_yaml(doc, f"# Fitted by friction-demo from {bag.name} ({name}); regenerate with `make demo`.")
+        dump_yaml(
+            doc,
+            f"# Fitted by friction-demo from {bag.name} ({name}); compensation modes checked by the safety gate.",
+        )
     )
     res.params_file = str(params_file)
-    _say(f"   recommended model: {name}; parameters -> {params_file.relative_to(ROOT)}")
+    _say(f"   recommended model: {name}; parameters -> {params_file}")
+    for m, v in verdicts.items():
+        _say(f"   {m:<12} {'enabled' if v.enabled else 'REFUSED'}: {v.reason}")
+        if not v.enabled:
+            res.warnings.append(f"{m} compensation refused by the safety gate: {v.reason}")
 
-    path = "CAN path, real time" if args.can else "lockstep"
-    _say(f"3/4 tracking runs ({args.duration:g} s each, {path}): none, " + ", ".join(SCHEMES))
-    reference = dict(DEFAULT_REFERENCE, duration=max(args.duration, 1.0))
+    _say(
+        f"3/4 tracking runs ({args.duration:g} s each, lockstep): none, "
+        + ", ".join(SCHEMES)
+        + " (refused modes run only to show why)"
+    )
     t = time.monotonic()
     runs_spec = [("none", None)] + [(s, model.config) for s in SCHEMES]
     for label, cfg in runs_spec:
         f = results_dir / f"controller_{label}.yaml"
-        f.write_text(
-            dump_yaml(
-                controller_document(
-                    cfg, inertia, label, reference, REALTIME_GAINS if args.can else DEFAULT_GAINS
-                )
-            )
-        )
-        res.runs[label] = track(args.preset, f, args.duration, label, args.joint, can_path=args.can)
+        f.write_text(dump_yaml(controller_document(cfg, inertia, label, reference, gains)))
+        run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)
+        if label != "none":
+            run.enabled = bool(verdicts[label].enabled)
+            run.reason = verdicts[label].reason
+        run.metrics = run_metrics(run, _resolution(preset))
+        res.runs[label] = run
     res.timings["tracking"] = time.monotonic() - t
+    base = res.runs["none"]
+    for label, run in res.runs.items():
+        if label == "none":
+            continue
+        fb = run.fallback_time()
+        if fb is not None:
+            res.warnings.append(
+                f"{label}: the controller detected a compensation-induced limit cycle and fell back to no "
+                f"friction compensation at t = {fb:.3f} s"
+            )
+        if run.enabled and run.rms > base.rms * (1.0 + WORSE_TOLERANCE):
+            res.warnings.append(
+                f"{label} was enabled by the gate but tracked worse than no compensation "
+                f"({run.rms * 1e3:.3f} vs {base.rms * 1e3:.3f} mrad)"
+            )
+    if res.best == "none":
+        res.warnings.append("no compensation mode is enabled: the parameter file compensates nothing")
 
     _say("4/4 results")
     plot_tracking(res, results_dir / "tracking_error.png")
     plot_friction_map(fit_result, preset.friction, results_dir / "friction_map.png")
-    summary = {
-        "preset": args.preset,
-        "bag": res.bag,
-        "model": res.model,
-        "fit_nmse_percent": res.fit_nmse,
-        "params_file": res.params_file,
-        "runs": {
-            k: {"rms_mrad": r.rms * 1e3, "max_mrad": r.max * 1e3, "wall_seconds": r.wall_seconds}
-            for k, r in res.runs.items()
-        },
-        "best": res.best,
-        "reduction_percent": {row[0]: row[3] for row in res.table()},
-        "timings_s": res.timings,
-    }
-    (results_dir / "demo_summary.json").write_text(json.dumps(summary, indent=2))
+    res.timings["total"] = time.monotonic() - t_all
     res.files = [
         str(bag),
         str(params_file),
@@ -391,23 +584,99 @@ def run(args) -> DemoResult:
         str(results_dir / "friction_map.png"),
         str(results_dir / "demo_summary.json"),
     ]
-    res.timings["total"] = time.monotonic() - t_all
-    print_table(res)
-    print("\nfiles written:")
-    for f in res.files:
-        print(f"  {f}")
-    print(
-        f"\ntotal time {res.timings['total']:.0f} s "
-        + "("
-        + ", ".join(f"{k} {v:.0f} s" for k, v in res.timings.items() if k != "total")
-        + ")"
-    )
+    (results_dir / "demo_summary.json").write_text(json.dumps(res.summary(), indent=2, default=_json_default))
     return res
+
+
+def map_error_vs_truth(fitted, truth, plateaus) -> dict:
+    """Steady-state map of the fit against the preset's truth (both directions).
+
+    ``sliding_percent``: largest |f_fit(v) - f_true(v)| / |f_true(v)| over the plateau speed range
+    (lowest to highest plateau speed); ``static_peak_percent``: signed relative error of the static
+    peak, the largest |f(v)| for speeds from 1e-6 up to the lowest plateau speed (fs for a Stribeck
+    curve), as (fit - truth) / truth, the worse direction.
+    """
+    speeds = sorted(abs(p.velocity) for p in plateaus if abs(p.velocity) > 0)
+    lo, hi = (speeds[0], speeds[-1]) if speeds else (1e-2, 1.0)
+    out = {"v_min": lo, "v_max": hi, "sliding_percent": math.nan, "static_peak_percent": math.nan}
+    slide, peak = [], []
+    for sign in (1.0, -1.0):
+        v = sign * np.geomspace(lo, max(hi, lo * 1.0001), 200)
+        ft, ff = np.asarray(truth.steady_state(v)), np.asarray(fitted(v))
+        ok = np.abs(ft) > 0
+        if ok.any():
+            slide.append(float(np.max(np.abs(ff[ok] - ft[ok]) / np.abs(ft[ok]))))
+        vs = sign * np.geomspace(1e-6, lo, 200)
+        pt, pf = float(np.max(np.abs(truth.steady_state(vs)))), float(np.max(np.abs(fitted(vs))))
+        if pt > 0:
+            peak.append((pf - pt) / pt)
+    if slide:
+        out["sliding_percent"] = 100.0 * max(slide)
+    if peak:
+        out["static_peak_percent"] = 100.0 * max(peak, key=abs)
+    return out
+
+
+def _json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)
+
+
+def run(args) -> DemoResult | dict:
+    """One preset (a DemoResult) or, with ``--all-presets``, every preset (a summary dict)."""
+    from friction_ros.core.presets import PRESET_NAMES, load_preset
+
+    stamp = time.strftime("%Y%m%d_%H%M%S")
+    if not args.all_presets:
+        load_preset(args.preset)
+        results_dir = Path(args.results or ROOT / "results" / f"demo_{Path(args.preset).stem}_{stamp}")
+        res = run_preset(args, args.preset, results_dir)
+        print_table(res)
+        print("\nfiles written:")
+        for f in res.files:
+            print(f"  {f}")
+        print(
+            f"\ntotal time {res.timings['total']:.0f} s ("
+            + ", ".join(f"{k} {v:.0f} s" for k, v in res.timings.items() if k != "total")
+            + ")"
+        )
+        return res
+    results_dir = Path(args.results or ROOT / "results" / f"demo_all_{stamp}")
+    results_dir.mkdir(parents=True, exist_ok=True)
+    out: dict = {"presets": {}, "presets_ok": [], "presets_failed": {}}
+    for name in PRESET_NAMES:
+        _say(f"=== preset {name} ===")
+        try:
+            res = run_preset(args, name, results_dir / name)
+        except (ParameterError, RuntimeError, FileNotFoundError) as exc:
+            out["presets_failed"][name] = str(exc).splitlines()[0]
+            print(f"error: {name}: {exc}", file=sys.stderr)
+            continue
+        print_table(res)
+        s = res.summary()
+        out["presets"][name] = s
+        worse = [
+            k
+            for k, r in res.runs.items()
+            if k != "none" and r.enabled and r.rms > res.runs["none"].rms * 1.02
+        ]
+        if not worse:
+            out["presets_ok"].append(name)
+    out["presets_total"] = len(PRESET_NAMES)
+    (results_dir / "demo_summary.json").write_text(json.dumps(out, indent=2, default=_json_default))
+    print(
+        f"\npresets ok: {len(out['presets_ok'])} of {len(PRESET_NAMES)}; summary {results_dir / 'demo_summary.json'}"
+    )
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="friction-demo", description=__doc__.split("\n\n")[0])
     p.add_argument("--preset", default="abb_m19s", help="plant preset (hidden truth), default abb_m19s")
+    p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")
     p.add_argument("--joint", default="joint1", help="joint name in the bag / graph (default joint1)")
     p.add_argument("--profile", default="quick", choices=("quick", "default"), help="experiment profile")
@@ -420,9 +689,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--results", help="results folder (default results/demo_<preset>_<time>)")
     p.add_argument("--quick", action="store_true", help="shorter fit and tracking runs (tests, CI)")
     p.add_argument(
-        "--can",
-        action="store_true",
-        help="tracking runs on the CAN path: drive_interface + emulated ODrive (real time, simulated_drive)",
+        "--seed", type=int, help="seed of the experiment's random excitation (default: the profile's)"
     )
     return p
 
@@ -431,14 +698,22 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.quick:
         args.duration = min(args.duration, 4.0)
+    if args.all_presets and args.bag:
+        print(
+            "error: --all-presets runs the experiment on every preset: it cannot be combined with --bag",
+            file=sys.stderr,
+        )
+        return 2
     try:
-        run(args)
+        out = run(args)
     except (ParameterError, RuntimeError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("\ninterrupted", file=sys.stderr)
         return 130
+    if isinstance(out, dict) and out.get("presets_failed"):
+        return 1
     return 0
 
 

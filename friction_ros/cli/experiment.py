@@ -11,6 +11,15 @@ Examples::
     # a real joint: start drive_interface yourself (same namespace/joint name), then
     friction-experiment --no-sim --program plateaus --set plateaus.v_max=2.0 --set limits.max_travel=3.0
 
+Sizing: with a simulated joint (``--preset``) the program is sized to the joint by default
+(``--sizing joint``): plateau speeds from below the Stribeck velocity down to what the encoder
+resolves up to a fraction of the speed limit, ramp torques and amplitudes from the breakaway
+torque, travel and loop gains from the inertia, current lag and delays
+(``friction_ros.core.joint_sizing``). On a real joint (``--no-sim``) give what a short probe
+measured (``--breakaway``, ``--inertia``, ``--torque-limit``, ``--speed-limit``, ``--travel``,
+``--resolution``) to size it the same way; without them the ``--profile`` values are used as they
+are (``--sizing profile``, scaled for the ABB M19-S). ``--set`` overrides any key afterwards.
+
 Starts separate processes (friction-bringup machinery): ``plant_simulator`` (unless ``--no-sim``),
 ``bag_recorder`` (joint_states, experiment_events, optionally diagnostics) and
 ``identification_experiment``, which waits for the recorder before it begins. When the program is
@@ -98,6 +107,19 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="experiment parameter, e.g. plateaus.repeats=5, limits.max_velocity=20",
     )
+    p.add_argument(
+        "--sizing",
+        choices=("joint", "profile"),
+        help="joint: size the program to the joint (default with --preset or probe values); "
+        "profile: the profile's values as they are (ABB M19-S scale)",
+    )
+    probe = p.add_argument_group("real joint probe (size the program to a joint you measured)")
+    probe.add_argument("--breakaway", type=float, help="breakaway torque [N*m] (N for a linear axis)")
+    probe.add_argument("--inertia", type=float, help="joint-side inertia [kg*m^2] (kg for a linear axis)")
+    probe.add_argument("--torque-limit", type=float, help="largest torque the program may command [N*m]")
+    probe.add_argument("--speed-limit", type=float, help="largest speed [rad/s] (m/s)")
+    probe.add_argument("--travel", type=float, help="allowed travel from the start position [rad] (m)")
+    probe.add_argument("--resolution", type=float, help="encoder resolution at the joint [rad] (m) per count")
     p.add_argument("--diagnostics", action="store_true", help="also record /diagnostics")
     p.add_argument("--timeout", type=float, help="give up after this wall time (default 60 s + 10 x planned)")
     p.add_argument("--quiet", action="store_true", help="do not forward node output")
@@ -154,17 +176,88 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
     return "\n".join(lines)
 
 
+PROBE = ("breakaway", "inertia", "torque_limit", "speed_limit", "travel", "resolution")
+
+
+def sized_config(args, preset) -> dict:
+    """The program's sections sized to the joint (preset or probe values), or {} for the profile."""
+    from friction_ros.core.joint_sizing import JointScale, experiment_config
+
+    given = {k: getattr(args, k) for k in PROBE if getattr(args, k) is not None}
+    sizing = args.sizing or ("joint" if (preset is not None or given) else "profile")
+    if sizing == "profile":
+        if given:
+            raise ParameterError(
+                f"--{next(iter(given)).replace('_', '-')} sizes the program to the joint: drop --sizing profile"
+            )
+        return {}
+    if preset is not None:
+        scale = JointScale.from_preset(preset, **given)
+    else:
+        missing = [k for k in PROBE if k not in given]
+        if missing:
+            raise ParameterError(
+                "--sizing joint on a real joint needs the probe values "
+                + ", ".join("--" + k.replace("_", "-") for k in missing)
+                + " (or --sizing profile)"
+            )
+        scale = JointScale.from_probe(**given)
+    return experiment_config(scale, args.profile)
+
+
+def _flat(d: dict, prefix: str = "") -> dict:
+    out: dict = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(v, f"{prefix}{k}."))
+        else:
+            out[f"{prefix}{k}"] = v
+    return out
+
+
+def _typed_like_defaults(flat: dict, profile: str) -> dict:
+    """Plain Python values typed like the declared defaults (ROS parameters are typed: an int where
+    a double is declared is refused)."""
+    from friction_ros.core.excitation import profile_defaults
+
+    base = _flat(profile_defaults(profile))
+    out = {}
+    for k, v in flat.items():
+        ref = base.get(k)
+        if isinstance(v, (list, tuple)):
+            v = [float(x) if isinstance(ref, list) and ref and isinstance(ref[0], float) else x for x in v]
+        elif isinstance(ref, float) and not isinstance(v, (bool, str)):
+            v = float(v)
+        elif isinstance(ref, int) and not isinstance(ref, bool) and not isinstance(v, (bool, str)):
+            v = int(v)
+        elif hasattr(v, "item"):  # numpy scalar
+            v = v.item()
+        out[k] = v
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    params_tmp = None
     try:
         sets = _parse_sets(args.set)
-        core = {"program": args.program, "profile": args.profile, **_nest(sets)}
-        program = ExcitationProgram(core)  # validates everything before any process starts
         preset = None if args.no_sim else args.preset
+        preset_obj = None
         if preset:
             from friction_ros.core.presets import load_preset
 
-            load_preset(preset)
+            preset_obj = load_preset(preset)
+        sized = sized_config(args, preset_obj)
+        sized_flat = _typed_like_defaults(_flat(sized), args.profile)
+        sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
+        core = {"program": args.program, "profile": args.profile, **_nest({**sized_flat, **sets})}
+        program = ExcitationProgram(core)  # validates everything before any process starts
+        if sized_flat:
+            import tempfile
+
+            fd, params_tmp = tempfile.mkstemp(prefix="friction_experiment_", suffix=".yaml")
+            with open(fd, "w") as fh:
+                yaml.safe_dump({"identification_experiment": {"ros__parameters": sized_flat}}, fh)
         stamp = time.strftime("%Y%m%d_%H%M%S")
         out = Path(args.output or Path("bags") / f"experiment_{preset or 'joint'}_{stamp}")
         if out.exists() and any(out.iterdir()) and not args.overwrite:
@@ -204,7 +297,8 @@ def main(argv: list[str] | None = None) -> int:
                     {"preset": preset, "mode": args.mode, "joint_name": args.joint},
                 )
             )
-        specs.append(NodeSpec("identification_experiment", args.namespace, list(args.params), exp_over))
+        exp_params = ([params_tmp] if params_tmp else []) + list(args.params)
+        specs.append(NodeSpec("identification_experiment", args.namespace, exp_params, exp_over))
         for s in specs:
             s.command()
     except (ParameterError, ValueError, OSError) as exc:
@@ -259,6 +353,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"[experiment] summary not available: {exc}", file=sys.stderr)
         if status == "ok":
             status = "failed"
+    if params_tmp:
+        Path(params_tmp).unlink(missing_ok=True)
     if status != "ok":
         return 1
     return 3 if rc_exp == 3 else 0
