@@ -21,11 +21,33 @@ from friction_ros.cli import demo  # noqa: E402
 def main() -> int:
     args = demo.build_parser().parse_args(sys.argv[1:])
     res = demo.run(args)
+    rows = [
+        [
+            k,
+            "-" if k == "none" else ("enabled" if r.enabled else "refused"),
+            r.rms * 1e3,
+            r.max * 1e3,
+            res.reduction(k),
+            r.metrics.get("stick_fraction"),
+            r.metrics.get("hunting_reversals"),
+            r.samples,
+        ]
+        for k, r in res.runs.items()
+    ]
     print_table(
         f"friction-demo on {args.preset}: fitted {res.model} (validation NMSE high {res.fit_nmse['high']:.3f} %, "
-        f"low {res.fit_nmse['low']:.3f} %), {args.duration:g} s band-limited random reference, lockstep ROS graph",
-        ["compensation", "RMS error mrad", "max error mrad", "RMS reduction %"],
-        res.table(),
+        f"low {res.fit_nmse['low']:.3f} %), {args.duration:g} s reference sized to the joint, lockstep ROS graph",
+        [
+            "compensation",
+            "state",
+            "RMS error mrad",
+            "max error mrad",
+            "RMS reduction %",
+            "stick fraction",
+            "hunting reversals",
+            "samples",
+        ],
+        rows,
     )
     print_table(
         "friction-demo wall time (goal: under 5 minutes)",
@@ -35,7 +57,12 @@ def main() -> int:
     figures = {
         "model": res.model,
         "fit_nmse_percent": res.fit_nmse,
-        "runs": {k: {"rms_mrad": r.rms * 1e3, "max_mrad": r.max * 1e3} for k, r in res.runs.items()},
+        "runs": {
+            k: {"rms_mrad": r.rms * 1e3, "max_mrad": r.max * 1e3, "enabled": r.enabled, "reason": r.reason}
+            for k, r in res.runs.items()
+        },
+        "gate": res.gate,
+        "warnings": res.warnings,
         "best": res.best,
         "timings_s": res.timings,
     }

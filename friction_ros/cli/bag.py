@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from friction_ros.core.bag import BagWriter, bag_info, iter_messages
+from friction_ros.core.bag import BagWriter, bag_files, bag_info, iter_messages
 
 
 def _info(path: str) -> int:
@@ -38,21 +39,51 @@ def _info(path: str) -> int:
 
 
 def _recover(path: str, out: str, overwrite: bool) -> int:
-    bag = bag_info(path)
-    with BagWriter(out, metadata=bag.run_metadata or None, overwrite=overwrite) as w:
-        for t, i in bag.info.items():
-            if i.message_encoding == "cdr" and i.schema:
-                w.add_topic(
-                    t,
-                    i.msgtype,
-                    qos_profiles=i.qos_profiles,
-                    msgdef=i.schema,
-                    type_description_hash=i.type_hash,
-                )
-        n = 0
-        for m in iter_messages(path, list(w.topics)):
-            w.write(m.topic, m.data, m.log_time, m.publish_time)
-            n += 1
+    """Rewrite into a temporary folder next to ``out``, rename it into place on success.
+
+    The input is never touched: an output that is the input, lies inside it or contains one of its
+    files is refused before anything is written.
+    """
+    import shutil
+    import tempfile
+
+    src = Path(path).resolve()
+    dst = Path(out).resolve()
+    _, files = bag_files(src)
+    inputs = {src, *(f.resolve() for f in files)}
+    for f in inputs:
+        if dst == f or dst in f.parents or f in dst.parents:
+            raise ValueError(
+                f"output {out} overlaps the input bag {path}: recover into a new folder "
+                "(the input is left as it is)"
+            )
+    if dst.exists() and not overwrite:
+        raise ValueError(f"output {out} exists: choose another folder or pass --overwrite")
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    bag = bag_info(src)
+    tmp = Path(tempfile.mkdtemp(prefix=".friction-bag-recover-", dir=dst.parent))
+    work = tmp / dst.name  # the bag's files are named after its folder
+    try:
+        with BagWriter(work, metadata=bag.run_metadata or None, overwrite=True) as w:
+            for t, i in bag.info.items():
+                if i.message_encoding == "cdr" and i.schema:
+                    w.add_topic(
+                        t,
+                        i.msgtype,
+                        qos_profiles=i.qos_profiles,
+                        msgdef=i.schema,
+                        type_description_hash=i.type_hash,
+                    )
+            n = 0
+            for m in iter_messages(src, list(w.topics)):
+                w.write(m.topic, m.data, m.log_time, m.publish_time)
+                n += 1
+        if dst.exists():
+            shutil.rmtree(dst) if dst.is_dir() else dst.unlink()
+        work.rename(dst)
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
     print(f"wrote {n} messages to {out}" + (" (input was truncated)" if bag.truncated else ""))
     return 0
 
