@@ -41,7 +41,7 @@ def test_cli_end_to_end(small_bag, tmp_path, capsys):
             str(out),
             "--quiet",
             "--no-plots",
-            "--params",
+            "--params-out",
             str(tmp_path / "p.yaml"),
         ]
     )

@@ -5,9 +5,11 @@ Example::
     friction-fit bags/run_1 --joint joint1 --models coulomb stribeck lugre gms4 --out fit_run_1
 
 Writes ``<out>/report.md``, ``<out>/summary.json``, ``<out>/plots/*.png`` and the parameter file
-(``<out>/friction_params.yaml`` or ``--params``) for compensating_controller, friction_estimator
-and plant_simulator. Exit codes: 0 ok, 2 bad input (missing topic/joint, no motion, too little
-excitation, bad option), 1 unexpected error.
+(``<out>/friction_params.yaml`` or ``--params-out``) for compensating_controller,
+friction_estimator and plant_simulator. Inputs are never changed: an output that is one of the
+bags, or a parameter file this command did not write, is refused (``--force`` replaces a file that
+exists). Exit codes: 0 ok, 2 bad input (missing topic/joint, no motion, too little excitation, bad
+option, output collision), 1 unexpected error.
 """
 
 from __future__ import annotations
@@ -35,7 +37,19 @@ def build_parser() -> argparse.ArgumentParser:
         ),
     )
     p.add_argument("--out", default="friction_fit", help="output directory (default friction_fit)")
-    p.add_argument("--params", default=None, help="parameter YAML path (default <out>/friction_params.yaml)")
+    p.add_argument(
+        "--params-out",
+        default=None,
+        help="where to write the parameter YAML (default <out>/friction_params.yaml)",
+    )
+    p.add_argument(
+        "--params",
+        default=None,
+        help=argparse.SUPPRESS,  # an input in every other command: refused here with a hint
+    )
+    p.add_argument(
+        "--force", action="store_true", help="replace a parameter file that friction-fit did not write"
+    )
     p.add_argument(
         "--events-topic",
         default="/experiment_events",
@@ -93,9 +107,51 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+FITTED_HEADER = "# friction-fit:"
+
+
+def check_outputs(args) -> None:
+    """Refuse outputs that would overwrite an input or a file this command did not write."""
+    from pathlib import Path
+
+    from friction_ros.core.validation import ParameterError
+
+    if args.params is not None:
+        raise ParameterError(
+            "--params is an input (a parameter file to read) in friction-experiment and friction-bringup: "
+            "write the fitted parameters with --params-out PATH"
+        )
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ParameterError(f"--out {args.out} is a file: must be a directory (created if missing)")
+    bags = [Path(b).resolve() for b in args.bags]
+    pf = Path(args.params_out) if args.params_out else out / "friction_params.yaml"
+    for target, name in ((out.resolve(), "--out"), (pf.resolve(), "--params-out")):
+        for b in bags:
+            if target == b or b in target.parents or (name == "--out" and target in b.parents):
+                raise ParameterError(f"{name} {target} overlaps the input bag {b}: choose another path")
+    if pf.is_dir():
+        raise ParameterError(f"--params-out {pf} is a directory: must be a file path")
+    if pf.exists() and not args.force:
+        try:
+            first = pf.read_text(errors="replace").splitlines()[:1]
+        except OSError as exc:
+            raise ParameterError(f"--params-out {pf}: cannot read it ({exc.strerror})") from None
+        if not first or not first[0].startswith(FITTED_HEADER):
+            raise ParameterError(
+                f"--params-out {pf} exists and was not written by friction-fit: choose another path or pass --force"
+            )
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from friction_ros.core.validation import ParameterError
+
+    try:
+        check_outputs(args)
+    except ParameterError as exc:
+        print(f"friction-fit: error: {exc}", file=sys.stderr)
+        return 2
 
     try:
         from rich.console import Console
@@ -143,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
                 current_field=args.current_field,
                 torque_constant=args.torque_constant,
                 gear_ratio=args.gear_ratio,
-                params_file=args.params,
+                params_file=args.params_out,
                 plots=not args.no_plots,
                 torque_delay=args.torque_delay,
                 plant_preset=args.plant_preset,
