@@ -220,14 +220,21 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("friction-fit: interrupted", file=sys.stderr)
         return 130
-    print(f"{'model':<16}{'NMSE high %':>12}{'NMSE low %':>12}{'params':>8}{'BIC':>14}")
+
+    def pct(x) -> str:
+        return "n/a" if x is None or x != x else f"{x:.4g}"
+
+    print(f"{'model':<16} {'NMSE %':>10} {'NMSE high %':>12} {'NMSE low %':>12} {'params':>7} {'BIC':>14}")
     for n, m in res.models.items():
         mt = m.metrics
         mark = "  <- recommended" if n == res.recommended else ""
         print(
-            f"{n:<16}{mt['nmse_high_percent']:>12.3f}{mt['nmse_low_percent']:>12.3f}{mt['n_params']:>8d}"
-            f"{mt['bic']:>14.4g}{mark}"
+            f"{n:<16} {pct(mt.get('nmse_percent')):>10} {pct(mt['nmse_high_percent']):>12} "
+            f"{pct(mt['nmse_low_percent']):>12} {mt['n_params']:>7d} {mt['bic']:>14.6g}{mark}"
         )
+    rec = getattr(res, "recommendation", None) or {}
+    if rec.get("rule"):
+        print(f"recommended by: {rec['rule']}" + (f" ({rec['reason']})" if rec.get("reason") else ""))
     for w in res.warnings:
         print(f"warning: {w}")
     for kind, path in res.files.items():
