@@ -94,6 +94,13 @@ PARAMS = [
         unit="s",
     ),
     Param(
+        "max_effort",
+        1.0e6,
+        "plausibility bound: a commanded |effort| above it is rejected like a NaN (zero torque, logged)",
+        lo=1e-9,
+        unit="N*m",
+    ),
+    Param(
         "resend_period",
         0.2,
         "lockstep: re-publish the pending state after this wall time",
@@ -228,10 +235,11 @@ class PlantSimulator(Node):
         if effort is None:
             self._commands_ignored += 1
             return
-        if not math.isfinite(effort):
+        if not math.isfinite(effort) or abs(effort) > self.p["max_effort"]:
             self._commands_rejected += 1
             self.get_logger().warning(
-                f"rejected joint_commands effort = {effort} for {self.joint}: must be a finite torque [N*m]",
+                f"rejected joint_commands effort = {effort:g} for {self.joint}: must be a finite torque [N*m] "
+                f"with |effort| <= max_effort = {self.p['max_effort']:g}",
                 throttle_duration_sec=1.0,
             )
             effort = 0.0
