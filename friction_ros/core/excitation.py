@@ -36,6 +36,10 @@ Events: :class:`Event` (time, program, segment label, index within the program, 
 target, note), the fields of ``friction_msgs/ExperimentEvent``. A plateau START note carries
 ``settle=<s>`` so readers discard the same transient.
 
+``bias`` [N*m] is added to every torque the program commands, rests and the end included (not
+after an abort): the torque that holds a constant load such as gravity, so the ramps and cycles
+are centred on it (``friction_ros.core.joint_sizing`` sets it to minus the load).
+
 Safety (``limits``): travel from the position at the program start (``max_travel`` rad), speed
 (``max_velocity`` rad/s) and torque (``max_torque`` N*m: commands beyond it abort). A violation
 aborts the segment (ABORT event naming the reason, zero torque); ``on_limit: stop`` (default) then
@@ -78,6 +82,7 @@ DEFAULTS: dict[str, Any] = {
     "dt": 0.001,
     "sequence": ["breakaway", "plateaus", "presliding", "random", "chirp"],
     "gap": 0.5,
+    "bias": 0.0,
     "limits": {"max_travel": 100.0, "max_velocity": 40.0, "max_torque": 2.5, "on_limit": "stop"},
     "velocity_loop": {"p": 0.5, "i": 20.0, "torque_limit": 2.0, "inertia": 0.0, "remember_integral": True},
     "plateaus": {"v_min": 0.1, "v_max": 10.0, "count": 6, "settle": 0.2, "hold": 0.5, "repeats": 3},
@@ -178,6 +183,9 @@ def _validate(c: dict) -> None:
     c["sequence"] = list(seq)
     check_real("gap", c["gap"], 0.0, 60.0, unit="s")
     lim = c["limits"]
+    check_real(
+        "bias", c["bias"], -lim["max_torque"], lim["max_torque"], hi_open=True, lo_open=True, unit="N*m"
+    )
     check_real("limits.max_travel", lim["max_travel"], 0.0, lo_open=True, unit="rad", allow_inf=True)
     check_real("limits.max_velocity", lim["max_velocity"], 0.0, lo_open=True, unit="rad/s", allow_inf=True)
     check_real("limits.max_torque", lim["max_torque"], 0.0, lo_open=True, unit="N*m")
@@ -635,9 +643,10 @@ class ExcitationProgram:
             self._t0 = t
             self._pos0 = float(position) if math.isfinite(position) else 0.0
         self.t = t - self._t0
+        bias = self.config["bias"]
         if self.done:
-            self._last_torque = 0.0
-            return 0.0, events
+            self._last_torque = 0.0 if self.aborted and self.on_limit == "stop" else bias
+            return self._last_torque, events
         reason = self._check_limits(float(position), float(velocity))
         if reason is not None:
             self._abort(self.t, reason, events)
@@ -645,8 +654,8 @@ class ExcitationProgram:
             return 0.0, events
         if self._skip_until is not None:
             if self.t < self._skip_until:
-                self._last_torque = 0.0
-                return 0.0, events
+                self._last_torque = bias
+                return bias, events
             self._skip_until = None
         torque = 0.0
         while not self.done:
@@ -676,15 +685,17 @@ class ExcitationProgram:
                         self.breakaways.append((seg.label, seg.torque))
             self._finish_segment(self.t)
             torque = 0.0
-        if not math.isfinite(torque) or abs(torque) > self.max_torque:
+        if not math.isfinite(torque) or abs(torque + bias) > self.max_torque:
             self._abort(
                 self.t,
-                f"torque limit: command {torque:+.4g} N*m exceeds limits.max_torque = {self.max_torque:g} N*m",
+                f"torque limit: command {torque + bias:+.4g} N*m exceeds limits.max_torque = {self.max_torque:g} N*m",
                 events,
             )
-            torque = 0.0
-        self._last_torque = self.ctx.last_torque = torque
-        return torque, events
+            self._last_torque = self.ctx.last_torque = 0.0
+            return 0.0, events
+        self.ctx.last_torque = torque
+        self._last_torque = torque + bias
+        return torque + bias, events
 
 
 def make_program(config: Mapping[str, Any] | None = None) -> ExcitationProgram:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import yaml
 
 from friction_ros.core.friction import FrictionModel
@@ -88,6 +89,18 @@ class Preset:
         """The main (truth) friction model: load side if set, else motor side."""
         fl = self.params.friction_load
         return fl if fl.name != "none" else self.params.friction_motor
+
+    def joint_friction(self, v) -> np.ndarray:
+        """Steady-state friction seen at the joint [N*m or N] at joint velocity ``v``: load-side
+        friction, motor-side friction reflected through the gear (``r eta F_m(r v)``) and the viscous
+        damping of both sides (``(r^2 eta B_m + B_l) v``), what a plateau experiment measures."""
+        p = self.params
+        v = np.asarray(v, dtype=float)
+        r, eta = p.ratio, p.gear_efficiency
+        f = np.asarray(p.friction_load.steady_state(v), dtype=float)
+        if p.friction_motor.name != "none":
+            f = f + r * eta * np.asarray(p.friction_motor.steady_state(r * v), dtype=float)
+        return f + (r * r * eta * p.motor_damping + p.load_damping) * v
 
     @property
     def friction_motor(self) -> FrictionModel:

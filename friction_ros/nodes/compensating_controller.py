@@ -88,6 +88,7 @@ DOCS = {
     "mode": "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
     "feedforward_gain": "velocity feedforward gain (command += gain * reference velocity)",
     "inertia": "J_hat for the inertia feedforward J_hat * reference acceleration",
+    "load_feedforward": "constant torque added to the command: holds a known load such as gravity",
     "u_clamp_max": "upper torque limit",
     "u_clamp_min": "lower torque limit",
     "rate_limit": "torque rate limit",
@@ -97,6 +98,7 @@ DOCS = {
 }
 UNITS = {
     "inertia": "kg*m^2",
+    "load_feedforward": "N*m",
     "u_clamp_max": "N*m",
     "u_clamp_min": "N*m",
     "rate_limit": "N*m/s",

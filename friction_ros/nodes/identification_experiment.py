@@ -99,6 +99,15 @@ NODE_PARAMS = [
         read_only=True,
     ),
     Param(
+        "bias",
+        float(DEFAULTS["bias"]),
+        "torque added to every command of the program: holds a constant load such as gravity",
+        lo=-1e6,
+        hi=1e6,
+        unit="N*m",
+        read_only=True,
+    ),
+    Param(
         "control_period",
         0.001,
         "nominal period of the joint states",
@@ -171,6 +180,7 @@ class IdentificationExperiment(Node):
             profile=self.values["profile"],
             sequence=list(self.values["sequence"]),
             gap=self.values["gap"],
+            bias=self.values["bias"],
             dt=self.values["control_period"],
         )
         self.program = ExcitationProgram(cfg)  # ParameterError -> refuses to start

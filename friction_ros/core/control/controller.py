@@ -4,7 +4,7 @@ Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
 
     e      = theta_d - theta,   e_dot = theta_dot_d - theta_dot_hat      (derivative on measurement)
     u      = feedback(mode) + feedforward_gain theta_dot_d + J_hat theta_ddot_d
-             + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat)
+             + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat) + load_feedforward
     command = clamp(u, u_clamp, rate limit)
 
 ``theta_dot_hat`` is the measured velocity (``velocity_source = measured``) or the filtered
@@ -53,6 +53,7 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "mode": "pid",
     "feedforward_gain": 0.0,
     "inertia": 0.0,
+    "load_feedforward": 0.0,
     "u_clamp_max": math.inf,
     "u_clamp_min": -math.inf,
     "rate_limit": math.inf,
@@ -216,6 +217,7 @@ class CompensatingController:
     def _build(self, cfg: dict[str, Any]) -> None:
         mode = check_choice("controller.mode", cfg["mode"], CONTROLLER_MODES)
         ffg = check_real("controller.feedforward_gain", cfg["feedforward_gain"], 0.0, unit="N*m*s/rad")
+        self.load_feedforward = check_real("controller.load_feedforward", cfg["load_feedforward"], unit="N*m")
         inertia = check_real("controller.inertia", cfg["inertia"], 0.0, unit="kg*m^2")
         umax = check_real("controller.u_clamp_max", cfg["u_clamp_max"], allow_inf=True, unit="N*m")
         umin = check_real("controller.u_clamp_min", cfg["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
@@ -318,7 +320,7 @@ class CompensatingController:
         e = r_pos - pos
         edot = r_vel - vel
         ff_inertia = self.inertia * r_acc
-        ff_vel = self.feedforward_gain * r_vel
+        ff_vel = self.feedforward_gain * r_vel + self.load_feedforward
         f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
