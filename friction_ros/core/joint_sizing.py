@@ -15,7 +15,7 @@ With viscous damping ``B`` (friction's viscous part, back-EMF of a voltage drive
 ``-90 - atan(w_c J / B) + atan(a) - atan(w_c tau) - w_c T``. Requiring the phase margin ``PM``
 gives ``atan(w_c J/B) + atan(w_c tau) + w_c T = 90 + atan(a) - PM``, solved for ``w_c`` by
 bisection; then ``|L(j w_c)| = 1`` gives ``K_d = |B + j J w_c| / (sqrt(1 + 1/a^2) g)`` with ``g``
-the lag's gain at ``w_c``. Defaults: ``PM = 55 deg``, ``a = 4`` (zero a factor four below the crossover).
+the lag's gain at ``w_c``. Defaults: ``PM = 45 deg``, ``a = 4`` (zero a factor four below the crossover).
 The velocity loop of the experiment is the same law on the velocity error's integral (its ``p``
 is the PD's ``K_d``, its ``i`` the PD's ``K_p``), which is why it doubles as the position-loop
 gains of the plateaus.
@@ -53,7 +53,7 @@ MOTOR_SPEED_LIMIT = 300.0
 LINEAR_TRAVEL = 0.3
 #: travel of a rotary joint when none is given [rad]
 ROTARY_TRAVEL = 100.0
-DEFAULT_PHASE_MARGIN = 55.0
+DEFAULT_PHASE_MARGIN = 45.0
 ZERO_RATIO = 4.0
 
 

@@ -40,7 +40,9 @@ from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.node_utils import (
+    ERROR,
     OK,
+    RECORDED_QOS,
     SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
@@ -89,6 +91,9 @@ DOCS = {
     "feedforward_gain": "velocity feedforward gain (command += gain * reference velocity)",
     "inertia": "J_hat for the inertia feedforward J_hat * reference acceleration",
     "load_feedforward": "constant torque added to the command: holds a known load such as gravity",
+    "limit_cycle_detection": "switch friction compensation off (latched) when it causes a limit cycle",
+    "limit_cycle_min_frequency": "limit cycle: lowest oscillation frequency that counts",
+    "limit_cycle_min_amplitude": "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
     "u_clamp_max": "upper torque limit",
     "u_clamp_min": "lower torque limit",
     "rate_limit": "torque rate limit",
@@ -99,6 +104,8 @@ DOCS = {
 UNITS = {
     "inertia": "kg*m^2",
     "load_feedforward": "N*m",
+    "limit_cycle_min_frequency": "Hz",
+    "limit_cycle_min_amplitude": "rad",
     "u_clamp_max": "N*m",
     "u_clamp_min": "N*m",
     "rate_limit": "N*m/s",
@@ -191,7 +198,7 @@ class CompensatingControllerNode(Node):
         self.joint = self.values["joint_name"]
         self.dt = self.values["control_period"]
         self.commands = CommandPublisher(self, self.joint)
-        self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
+        self.state_pub = self.create_publisher(ControllerState, "controller_state", RECORDED_QOS)
         self._state_encoder = ControllerStateEncoder(self.joint)
         self._decoder = JointStateDecoder()
         self._one_joint = (self.joint,)
@@ -207,6 +214,7 @@ class CompensatingControllerNode(Node):
         self._last_ns: int | None = None
         self._last_state_wall = time.monotonic()
         self._timed_out = False
+        self._fallback_logged = False
         self.counts = {
             "cycles": 0,
             "duplicates": 0,
@@ -234,6 +242,11 @@ class CompensatingControllerNode(Node):
         cfg, ref_cfg = config_from_ros_parameters(values)
         new_ctrl = CompensatingController(cfg)  # raises ParameterError -> change rejected
         new_ref = reference_from_config(ref_cfg)
+        if self.controller.compensation_fallback:
+            self.get_logger().info(
+                "compensation fallback cleared by a parameter change: compensation active again"
+            )
+            self._fallback_logged = False
         self.controller, self.reference, self.values = new_ctrl, new_ref, values
         self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))}")
 
@@ -310,6 +323,10 @@ class CompensatingControllerNode(Node):
         self._compute_times.append(time.perf_counter() - c0)
         self._last_ns = t_ns
         self.commands.publish_stamp(msg.sec, msg.nanosec, terms.command)
+        if self.controller.compensation_fallback and not self._fallback_logged:
+            self._fallback_logged = True
+            self.get_logger().error(self.controller.fallback_reason)
+            self._publish_diagnostics()
         self.counts["cycles"] += 1
         self.counts["saturated"] += int(terms.saturated)
         if self.state_pub.get_subscription_count():  # 0.6 us; nobody listening: nothing to send
@@ -367,6 +384,9 @@ class CompensatingControllerNode(Node):
         level, text = OK, f"{self.controller.mode} running"
         if self._timed_out:
             level, text = WARN, "no joint state: commanding zero torque"
+        if self.controller.compensation_fallback:
+            level, text = ERROR, self.controller.fallback_reason
+        values["compensation_fallback"] = int(self.controller.compensation_fallback)
         self.diag.publish(level, text, values)
 
     def on_shutdown(self) -> None:

@@ -36,6 +36,7 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
+from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
 from friction_ros.core.control.pid import PID_DEFAULTS, Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
 from friction_ros.core.validation import (
@@ -60,6 +61,9 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "velocity_source": "measured",
     "velocity_filter_time_constant": 0.0,
     "position_jump_limit": math.inf,
+    "limit_cycle_detection": True,
+    "limit_cycle_min_frequency": LIMIT_CYCLE_DEFAULTS["min_frequency"],
+    "limit_cycle_min_amplitude": LIMIT_CYCLE_DEFAULTS["min_amplitude"],
     "pid": dict(PID_DEFAULTS),
     "friction": dict(COMPENSATION_DEFAULTS),
     "dnpf": dict(DNPF.DEFAULTS),
@@ -238,6 +242,15 @@ class CompensatingController:
             allow_inf=True,
             unit="rad",
         )
+        lc_on = cfg["limit_cycle_detection"]
+        if not isinstance(lc_on, bool):
+            raise ParameterError(f"controller.limit_cycle_detection = {lc_on!r} must be true or false")
+        lc_f = check_real(
+            "controller.limit_cycle_min_frequency", cfg["limit_cycle_min_frequency"], 1.0, unit="Hz"
+        )
+        lc_a = check_real(
+            "controller.limit_cycle_min_amplitude", cfg["limit_cycle_min_amplitude"], 0.0, unit="rad"
+        )
         pid = Pid(cfg["pid"], prefix="controller.pid")
         friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
         scheme = None
@@ -266,6 +279,9 @@ class CompensatingController:
         self.scheme = scheme
         self._prev_cmd: float | None = None
         self.terms = ControllerTerms(mode=mode)
+        self.limit_cycle = LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a) if lc_on else None
+        self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
+        self.fallback_reason = ""
 
     def config(self) -> dict[str, Any]:
         """The effective configuration (nested dict; round-trips through the constructor)."""
@@ -321,7 +337,10 @@ class CompensatingController:
         edot = r_vel - vel
         ff_inertia = self.inertia * r_acc
         ff_vel = self.feedforward_gain * r_vel + self.load_feedforward
-        f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
+        if self.compensation_fallback:
+            f_ff = f_fb = 0.0
+        else:
+            f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
             lower = self._prev_cmd - self.rate_limit * dt
@@ -351,6 +370,14 @@ class CompensatingController:
             cmd = min(max(unlimited, lo), hi)
             sat = cmd != unlimited
         self._prev_cmd = cmd
+        lc = self.limit_cycle
+        if lc is not None and not self.compensation_fallback and (f_ff != 0.0 or f_fb != 0.0):
+            if lc.update(t, e, cmd, r_vel, pos, dt):
+                self.compensation_fallback = True
+                self.fallback_reason = (
+                    f"compensation-induced limit cycle ({lc.frequency:.0f} Hz, error {lc.amplitude:.3g} RMS, "
+                    f"not in the reference) at t = {t:.3f} s: friction compensation switched off"
+                )
         self.terms = ControllerTerms(
             time=float(t),
             mode=self.mode,
