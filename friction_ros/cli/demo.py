@@ -168,7 +168,16 @@ def run_experiment(preset: str, profile: str, bag: Path, joint: str, seed: int |
 
 
 # -- step 2 -------------------------------------------------------------------------------------------
-def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool, preset: str, params_file: Path):
+def fit(
+    bag: Path,
+    joint: str,
+    models: list[str],
+    out_dir: Path,
+    quick: bool,
+    preset: str,
+    params_file: Path,
+    gate: dict | None = None,
+):
     from friction_ros.core.identification import fit_bag
 
     options = {"maxiter": 25} if quick else {}
@@ -180,6 +189,7 @@ def fit(bag: Path, joint: str, models: list[str], out_dir: Path, quick: bool, pr
         out_dir,
         plant_preset=preset,
         params_file=str(params_file),
+        gate=gate,
         **options,
     )
 
@@ -191,14 +201,19 @@ def controller_document(
     reference: dict,
     gains: dict,
     *,
-    override_refusal: bool = False,
+    load_feedforward: float = 0.0,
+    allow_refused: bool = False,
 ) -> dict:
     """compensating_controller parameters (README layout: ``friction`` = model, ``compensation`` = how)."""
     params: dict = {"mode": "pid", "pid": dict(gains), "reference": dict(reference)}
+    if load_feedforward:
+        params["load_feedforward"] = float(load_feedforward)
     if model_config is not None:
         params["inertia"] = float(inertia)
         params["friction"] = dict(model_config)
         params["compensation"] = {"source": scheme, "gain": 1.0, "blend": 0.5}
+        if allow_refused:  # the demo runs a refused mode on the simulated joint only to show why
+            params["compensation"]["allow_refused"] = True
     return {"compensating_controller": {"ros__parameters": params}}
 
 
@@ -379,7 +394,7 @@ def plot_friction_map(fit_result, truth, path: Path) -> None:
         vmax, vmin = 5.0, 1e-3
     grid = np.concatenate([-np.geomspace(vmax, vmin, 200), np.geomspace(vmin, vmax, 200)])
     if truth is not None:
-        ax.plot(grid, truth.steady_state(grid), "k--", lw=1, label=f"truth ({truth.name})")
+        ax.plot(grid, truth.joint_friction(grid), "k--", lw=1, label=f"truth ({truth.name})")
     for name, m in fit_result.models.items():
         try:
             ax.plot(grid, m.steady_state(grid), lw=1, label=f"fit: {name}")
@@ -430,25 +445,6 @@ def print_table(result: DemoResult) -> None:
         print(f"WARNING: {w}")
 
 
-def _gate_and_gains(preset_obj, fit_result, model_name: str, reference: dict, gains: dict) -> dict:
-    """Closed-loop safety gate of every compensation mode on the identified plant."""
-    from friction_ros.core.control.compensation_gate import gate_modes
-
-    model = fit_result.models[model_name]
-    p = preset_obj.params
-    return gate_modes(
-        model.config,
-        float(model.coefficients.get("J", p.reflected_inertia)),
-        gains=gains,
-        current_lag=p.current_time_constant,
-        delay=GRAPH_PERIOD + p.measurement_delay + p.actuation_delay,
-        period=GRAPH_PERIOD,
-        reference=reference,
-        resolution=_resolution(preset_obj),
-        modes=SCHEMES,
-    )
-
-
 def _resolution(preset_obj) -> float:
     p = preset_obj.params
     if p.encoder_cpr <= 0:
@@ -486,7 +482,20 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     t = time.monotonic()
     fit_dir = results_dir / "fit"
     params_file = results_dir / "friction_params.yaml"
-    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, preset_name, params_file)
+    p = preset.params
+    gains = tracking_gains(scale)
+    reference = tracking_reference(scale, duration=max(args.duration, 1.0))
+    res.gains, res.reference = dict(gains), dict(reference)
+    gate = {
+        "scale": scale,
+        "current_lag": p.current_time_constant if p.actuation == "current" else 0.0,
+        "delay": p.measurement_delay + p.actuation_delay,
+        "velocity_filter_hz": p.velocity_filter_hz,
+        "gains": gains,
+        "reference": reference,
+    }
+    fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, preset_name, params_file, gate)
+    res.timings["fit"] = time.monotonic() - t
     res.fit_dir = str(fit_dir)
     name = fit_result.recommended
     if name is None or fit_result.models[name].config is None:
@@ -509,31 +518,14 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             f"the recommended model {name} explains little of the measured torque (validation NMSE "
             f"{res.fit_nmse['all']:.1f} %): check the excitation, a load or gravity term, the sensor"
         )
-    inertia = float(model.coefficients.get("J", preset.params.reflected_inertia))
-    res.timings["fit"] = time.monotonic() - t
-    res.map_error = map_error_vs_truth(model.steady_state, preset.friction, fit_result.plateaus)
-
-    gains = tracking_gains(scale)
-    reference = tracking_reference(scale, duration=max(args.duration, 1.0))
-    res.gains, res.reference = dict(gains), dict(reference)
-    _say(
-        "   safety gate: every compensation mode in closed loop on the identified plant (+-20 % coefficients)"
-    )
-    t = time.monotonic()
-    verdicts = _gate_and_gains(preset, fit_result, name, reference, gains)
-    res.timings["gate"] = time.monotonic() - t
+    inertia = float(model.coefficients.get("J", 0.0) or scale.inertia)
+    res.map_error = map_error_vs_truth(model.steady_state, preset.joint_friction, fit_result.plateaus)
+    verdicts = fit_result.gate
     res.gate = {m: v.as_dict() for m, v in verdicts.items()}
-    doc = fit_result.parameter_document(name, gate=verdicts, gains=gains)
-    params_file.write_text(
-        dump_yaml(
-            doc,
-            f"# Fitted by friction-demo from {bag.name} ({name}); compensation modes checked by the safety gate.",
-        )
-    )
     res.params_file = str(params_file)
     _say(f"   recommended model: {name}; parameters -> {params_file}")
     for m, v in verdicts.items():
-        _say(f"   {m:<12} {'enabled' if v.enabled else 'REFUSED'}: {v.reason}")
+        _say(f"   {m:<12} {v.reason}")
         if not v.enabled:
             res.warnings.append(f"{m} compensation refused by the safety gate: {v.reason}")
 
@@ -546,7 +538,11 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     runs_spec = [("none", None)] + [(s, model.config) for s in SCHEMES]
     for label, cfg in runs_spec:
         f = results_dir / f"controller_{label}.yaml"
-        f.write_text(dump_yaml(controller_document(cfg, inertia, label, reference, gains)))
+        refused = label != "none" and not verdicts[label].enabled
+        doc = controller_document(
+            cfg, inertia, label, reference, gains, load_feedforward=-scale.load, allow_refused=refused
+        )
+        f.write_text(dump_yaml(doc))
         run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)
         if label != "none":
             run.enabled = bool(verdicts[label].enabled)
@@ -574,7 +570,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
 
     _say("4/4 results")
     plot_tracking(res, results_dir / "tracking_error.png")
-    plot_friction_map(fit_result, preset.friction, results_dir / "friction_map.png")
+    plot_friction_map(fit_result, preset, results_dir / "friction_map.png")
     res.timings["total"] = time.monotonic() - t_all
     res.files = [
         str(bag),
@@ -602,12 +598,12 @@ def map_error_vs_truth(fitted, truth, plateaus) -> dict:
     slide, peak = [], []
     for sign in (1.0, -1.0):
         v = sign * np.geomspace(lo, max(hi, lo * 1.0001), 200)
-        ft, ff = np.asarray(truth.steady_state(v)), np.asarray(fitted(v))
+        ft, ff = np.asarray(truth(v)), np.asarray(fitted(v))
         ok = np.abs(ft) > 0
         if ok.any():
             slide.append(float(np.max(np.abs(ff[ok] - ft[ok]) / np.abs(ft[ok]))))
         vs = sign * np.geomspace(1e-6, lo, 200)
-        pt, pf = float(np.max(np.abs(truth.steady_state(vs)))), float(np.max(np.abs(fitted(vs))))
+        pt, pf = float(np.max(np.abs(truth(vs)))), float(np.max(np.abs(fitted(vs))))
         if pt > 0:
             peak.append((pf - pt) / pt)
     if slide:

@@ -46,6 +46,11 @@ COMPENSATION_DEFAULTS: dict[str, Any] = {
     "smoothing": "none",
     "smoothing_velocity": 1e-3,
     "observer_gain": 0.0,
+    # written by the fitter's safety gate (compensation_gate): sources it refused, why, and the
+    # explicit override; asking for a refused source refuses to start unless allow_refused is true
+    "refused": None,
+    "refused_reasons": None,
+    "allow_refused": False,
 }
 
 
@@ -140,6 +145,22 @@ class FrictionCompensator:
             f"{prefix}.smoothing_velocity", cfg["smoothing_velocity"], 0.0, unit="rad/s"
         )
         self.observer_gain = check_real(f"{prefix}.observer_gain", cfg["observer_gain"], 0.0, unit="1/s")
+        self.refused = [str(x) for x in (cfg["refused"] or []) if str(x)]
+        self.refused_reasons = [str(x) for x in (cfg["refused_reasons"] or [])]
+        for i, r in enumerate(self.refused):
+            check_choice(f"{prefix}.refused[{i}]", r, SOURCES)
+        allow = cfg["allow_refused"]
+        if not isinstance(allow, bool):
+            raise ParameterError(f"{prefix}.allow_refused = {allow!r} must be true or false")
+        self.allow_refused = allow
+        if self.source in self.refused and not allow and cfg["model"] is not None:
+            i = self.refused.index(self.source)
+            why = self.refused_reasons[i] if i < len(self.refused_reasons) else "see the fit report"
+            ok = [x for x in ("feedforward", "feedback", "blended") if x not in self.refused]
+            raise ParameterError(
+                f"{prefix.rsplit('.', 1)[0]}.compensation.source = {self.source} was refused by the safety gate "
+                f"({why}): use {', '.join(ok + ['none'])}, or set compensation.allow_refused: true"
+            )
         self._install(build_model(cfg["model"], f"{prefix}.model"))
 
     # -- model management -------------------------------------------------------------------------
@@ -160,6 +181,9 @@ class FrictionCompensator:
             "smoothing": self.smoothing,
             "smoothing_velocity": self.smoothing_velocity,
             "observer_gain": self.observer_gain,
+            "refused": list(self.refused) or None,
+            "refused_reasons": list(self.refused_reasons) or None,
+            "allow_refused": self.allow_refused,
         }
 
     def set_model(self, model) -> None:
@@ -185,6 +209,34 @@ class FrictionCompensator:
                 m.reset(s)
         if self._observer is not None and obs is not None:
             self._observer.z = obs
+
+    def bound_feedback_damping(self, kd: float, fraction: float = 0.5) -> str:
+        """Stability bound of the feedback path's micro-damping; returns a note when it acted.
+
+        In feedback the model's presliding damping ``sigma1 dz/dt`` (LuGre, damped GMS) is fed
+        back from the measured velocity: in presliding ``dz/dt ~ v``, so it adds ``-g w_fb sigma1``
+        to the loop's damping ``K_d``. It is limited to ``g w_fb sigma1 <= fraction K_d`` (default
+        half of ``K_d``), so compensation never removes more than that share of the damping the
+        loop was tuned with. The feedforward path (driven by the reference) is not affected.
+        """
+        m = self._fb_model
+        _wff, wfb = self.weights
+        if m is None or wfb <= 0.0 or self.gain <= 0.0 or kd < 0.0:
+            return ""
+        cfg = m.to_config()
+        sigma1 = cfg.get("sigma1")
+        if not isinstance(sigma1, (int, float)) or sigma1 <= 0.0:
+            return ""
+        bound = fraction * kd / (self.gain * wfb)
+        if sigma1 <= bound:
+            return ""
+        self._fb_model = build_model({**cfg, "sigma1": float(bound)})
+        if self._observer is not None:
+            self._observer = LuGreObserver(self._fb_model, self.observer_gain)
+        return (
+            f"feedback micro-damping sigma1 = {sigma1:.4g} limited to {bound:.4g} N*m*s/rad "
+            f"({fraction:g} x the loop's Kd {kd:.4g} / (gain x feedback weight))"
+        )
 
     def reset(self) -> None:
         for m in (self._ff_model, self._fb_model):

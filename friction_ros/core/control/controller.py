@@ -279,6 +279,8 @@ class CompensatingController:
         self.scheme = scheme
         self._prev_cmd: float | None = None
         self.terms = ControllerTerms(mode=mode)
+        # stability bound of the feedback path (PID modes: the loop's damping is pid.d)
+        self.feedback_bound_note = friction.bound_feedback_damping(float(pid.config().get("d", 0.0)))
         self.limit_cycle = LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a) if lc_on else None
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
         self.fallback_reason = ""

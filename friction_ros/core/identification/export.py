@@ -156,12 +156,43 @@ def estimator_section(config: dict, inertia: float) -> dict:
     return out
 
 
-def parameter_document(config: dict, inertia: float, *, description: str = "", plant_preset=None) -> dict:
+def compensation_section(gate=None) -> dict:
+    """``compensation`` of compensating_controller from the safety gate's verdicts.
+
+    ``source`` is the enabled mode with the lowest RMS on the identified plant (``none`` when the
+    gate enabled nothing); ``refused``/``refused_reasons`` list what it refused and why (the node
+    will not start with a refused source unless ``allow_refused`` is set). Without a verdict the
+    file says feedforward, as before the gate existed.
+    """
+    if not gate:
+        return {"source": "feedforward", "gain": 1.0}
+    enabled = [m for m, v in gate.items() if v.enabled]
+    best = min(enabled, key=lambda m: gate[m].worst_ratio) if enabled else "none"
+    sec: dict = {"source": best, "gain": 1.0, "blend": 0.5}
+    refused = [m for m, v in gate.items() if not v.enabled]
+    if refused:
+        sec["refused"] = refused
+        sec["refused_reasons"] = [gate[m].reason for m in refused]
+    return sec
+
+
+def parameter_document(
+    config: dict,
+    inertia: float,
+    *,
+    description: str = "",
+    plant_preset=None,
+    gate=None,
+    gains: dict | None = None,
+    load_feedforward: float = 0.0,
+) -> dict:
     """The ROS parameter YAML document for the three nodes.
 
     ``plant_preset`` (name or path): the plant_simulator section starts from that preset's plant
     parameters (torque constant, encoder ...) with the identified inertia and friction; without it
-    only ``motor_inertia`` is written and the node must get the rest from its preset.
+    only ``motor_inertia`` is written and the node must get the rest from its preset. ``gate``: the
+    safety gate's verdicts (:func:`compensation_section`); ``gains``: the tracking PD written as
+    ``pid``; ``load_feedforward``: a constant load the controller holds.
     """
     plant: dict = {"motor_inertia": float(inertia)}
     if plant_preset:
@@ -176,8 +207,10 @@ def parameter_document(config: dict, inertia: float, *, description: str = "", p
         "compensating_controller": {
             "ros__parameters": {
                 "inertia": float(inertia),
+                **({"pid": {k: float(v) for k, v in gains.items()}} if gains else {}),
+                **({"load_feedforward": float(load_feedforward)} if load_feedforward else {}),
                 "friction": config,
-                "compensation": {"source": "feedforward", "gain": 1.0},
+                "compensation": compensation_section(gate),
             }
         },
         "friction_estimator": {"ros__parameters": estimator_section(config, inertia)},

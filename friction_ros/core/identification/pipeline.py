@@ -68,19 +68,23 @@ class FitResult:
     files: dict[str, str] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
+    recommendation: dict = field(default_factory=dict)
+    gate: dict = field(default_factory=dict)
 
     @property
     def inertia(self) -> float:
         m = self.models.get(self.recommended) if self.recommended else None
         return float(m.coefficients.get("J", 0.0)) if m else 0.0
 
-    def parameter_document(self, model: str | None = None) -> dict:
+    def parameter_document(self, model: str | None = None, **gate_options) -> dict:
+        """``gate_options``: ``gate`` (verdicts), ``gains``, ``load_feedforward`` (export.parameter_document)."""
         name = model or self.recommended
         m = self.models[name]
         if m.config is None:
             raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
+        opts = dict(self.options.get("gate_options") or {}, **gate_options)
         return export.parameter_document(
-            m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset")
+            m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset"), **opts
         )
 
 
@@ -505,6 +509,7 @@ def fit_bag(
     plots: bool = True,
     torque_delay: float = 0.0,
     plant_preset: str | None = None,
+    gate: dict | None = None,
     **options,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
@@ -513,7 +518,9 @@ def fit_bag(
     steady-state map), ``friction_params.yaml`` (or ``params_file``: ROS parameters of the
     recommended model for compensating_controller, friction_estimator, plant_simulator),
     ``plots/*.png`` (friction-velocity map, presliding hysteresis, time-domain validation,
-    residuals).
+    residuals). ``gate``: keyword arguments of
+    :func:`friction_ros.core.identification.gating.gate_fit`; the compensation modes of the
+    parameter file are then checked in closed loop first (refused ones written disabled).
     """
     from friction_ros.core.identification import report
 
@@ -536,6 +543,10 @@ def fit_bag(
     ]
     res = fit_records(recs, models, label=", ".join(str(p) for p in bag_paths), **options)
     res.options["plant_preset"] = plant_preset
+    if gate is not None:  # the safety gate before the parameter file enables a mode
+        from friction_ros.core.identification.gating import gate_fit
+
+        gate_fit(res, **gate)
     report.write_outputs(
         res,
         Path(out_dir),

@@ -62,8 +62,10 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
             "excitation": vars(res.excitation),
             "plateaus": [vars(p) for p in res.plateaus],
             "breakaways": [vars(b) for b in res.breakaways],
-            "options": res.options,
+            "options": {k: v for k, v in res.options.items() if k != "gate_options"},
             "recommended": res.recommended,
+            "recommendation": getattr(res, "recommendation", {}),
+            "gate": {m: v.as_dict() for m, v in (getattr(res, "gate", None) or {}).items()},
             "models": {
                 n: {
                     "method": m.method,
@@ -131,8 +133,9 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         "Seed 003 Table 1 (paper, ABB M19-S): Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
         "GMS-4 0.40 / 1.39 %, GMS-10 0.38 / 1.19 % (high / low velocity).",
         "",
-        f"**Recommended model: {res.recommended}** (lowest BIC; a smaller model within 2 % of its low-velocity NMSE "
-        "is preferred).",
+        f"**Recommended model: {res.recommended}** ({(res.recommendation or {}).get('rule') or 'lowest validation BIC'}"
+        + (f"; {res.recommendation['reason']}" if (res.recommendation or {}).get("reason") else "")
+        + ").",
         "",
         "## Coefficients",
     ]
@@ -165,6 +168,23 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             )
         for note in m.notes:
             L.append(f"- {note}")
+    if getattr(res, "gate", None):
+        L += [
+            "",
+            "## Compensation safety gate",
+            "",
+            "Each mode in closed loop on the identified plant (fitted inertia and friction, measured lag and "
+            "delay), plant friction perturbed by +-20 %; a mode worse than none or not robustly stable is "
+            "written disabled.",
+            "",
+            "| mode | state | RMS none | RMS mode | worst ratio | reason |",
+            "|---|---|---|---|---|---|",
+        ]
+        for mode, v in res.gate.items():
+            L.append(
+                f"| {mode} | {'enabled' if v.enabled else 'refused'} | {_fmt(v.rms_none, 4)} | {_fmt(v.rms_mode, 4)} "
+                f"| {_fmt(v.worst_ratio, 3)} | {v.reason} |"
+            )
     if res.plateaus:
         L += [
             "",

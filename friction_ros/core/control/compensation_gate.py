@@ -1,0 +1,214 @@
+"""Compensation safety gate: check every friction-compensation mode in closed loop before enabling it.
+
+A fitted model can make a joint worse: a feedback term that cancels the loop's damping, a model
+that over-compensates. Before a parameter file enables a mode, :func:`gate_modes` simulates the
+tracking loop (``friction_ros.core.harness.run_closed_loop``) on the *identified* plant: inertia
+``J`` from the fit, the fitted friction model as the plant's friction, the measured current-loop
+lag, velocity filter, encoder resolution and delays. The controller always keeps the nominal
+fitted model; the plant's friction is perturbed to cover identification error:
+
+* all force-level coefficients (``fc, fs, fv, sigma0, sigma1, k, ...``) x 0.8 and x 1.2;
+* the presliding dynamics alone (``sigma0``/``sigma1``, GMS ``k``/``sigma1``) x 0.8 and x 1.2.
+
+Per case the uncompensated loop runs on the same perturbed plant. A mode is **refused** when, in
+any case,
+
+* its RMS tracking error exceeds the uncompensated one by more than ``tolerance`` (2 %), or
+* it is not robustly stable: the run-time limit-cycle detector fires
+  (:mod:`friction_ros.core.control.limit_cycle`, run here without the fallback), or the error
+  grows (RMS of the last quarter above twice the uncompensated run's peak).
+
+Otherwise it is **enabled**, with the worst ratio (mode RMS / uncompensated RMS) as its figure.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from friction_ros.core.validation import check_real
+
+MODES = ("feedforward", "feedback", "blended")
+#: force-level coefficients (scaled by the perturbation); shapes (vs, delta, alpha) are kept
+FORCE_KEYS = ("fc", "fs", "fv", "fl", "sigma", "sigma0", "sigma1", "sigma2", "k", "attraction")
+DYNAMIC_KEYS = ("sigma0", "sigma1", "k", "sigma")
+
+
+@dataclass
+class Verdict:
+    """The gate's decision for one compensation mode."""
+
+    mode: str
+    enabled: bool
+    reason: str
+    rms_none: float = math.nan
+    rms_mode: float = math.nan
+    worst_ratio: float = math.nan
+    cases: list[dict] = field(default_factory=list)
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def _scale(cfg: Any, factor: float, keys: Iterable[str]) -> Any:
+    keys = tuple(keys)
+    if isinstance(cfg, Mapping):
+        out = {}
+        for k, v in cfg.items():
+            if k in keys and isinstance(v, (int, float)) and not isinstance(v, bool):
+                out[k] = float(v) * factor
+            elif k in keys and isinstance(v, (list, tuple)):
+                out[k] = [float(x) * factor for x in v]
+            elif isinstance(v, Mapping):
+                out[k] = _scale(v, factor, keys)
+            else:
+                out[k] = copy.deepcopy(v)
+        return out
+    return cfg
+
+
+def perturbations(friction_config: Mapping, perturbation: float = 0.2) -> list[tuple[str, dict]]:
+    """(label, plant friction config) cases: nominal, all forces +-p, presliding dynamics +-p."""
+    lo, hi = 1.0 - perturbation, 1.0 + perturbation
+    cases = [
+        ("nominal", copy.deepcopy(dict(friction_config))),
+        (f"forces x{lo:g}", _scale(friction_config, lo, FORCE_KEYS)),
+        (f"forces x{hi:g}", _scale(friction_config, hi, FORCE_KEYS)),
+    ]
+    text = repr(friction_config)
+    if any(f"'{k}'" in text for k in ("sigma0", "sigma1", "k")):
+        cases += [
+            (f"presliding x{lo:g}", _scale(friction_config, lo, DYNAMIC_KEYS)),
+            (f"presliding x{hi:g}", _scale(friction_config, hi, DYNAMIC_KEYS)),
+        ]
+    return cases
+
+
+def identified_plant(
+    inertia: float,
+    friction_config: Mapping | None,
+    *,
+    current_lag: float = 0.0,
+    delay: float = 0.0,
+    resolution: float = 0.0,
+    velocity_filter_hz: float = 0.0,
+):
+    """A plant with the identified J and friction (torque in N*m = current in A: unit gains)."""
+    from friction_ros.core.plant import GearheadServoPlant, PlantParams
+
+    cpr = int(round(2.0 * math.pi / resolution)) if resolution > 0 else 0
+    return GearheadServoPlant(
+        PlantParams(
+            motor_inertia=check_real("inertia", inertia, 0.0, lo_open=True, unit="kg*m^2"),
+            torque_constant=1.0,
+            actuation="current",
+            current_time_constant=current_lag,
+            encoder_cpr=cpr,
+            velocity_filter_hz=velocity_filter_hz,
+            measurement_delay=delay,
+            friction_motor=dict(friction_config) if friction_config else {"model": "none"},
+        )
+    )
+
+
+def _run(plant_args: dict, friction_cfg, controller: dict, reference: dict, duration: float, period: float):
+    from friction_ros.core.control.controller import CompensatingController
+    from friction_ros.core.harness import run_closed_loop
+
+    plant = identified_plant(friction_config=friction_cfg, **plant_args)
+    ctrl = CompensatingController(controller)
+    res = run_closed_loop(plant, ctrl, reference, duration, period, scale=1.0)
+    e = res.reference[:, 0] - res.true_position
+    return e, ctrl
+
+
+def gate_modes(
+    friction_config: Mapping,
+    inertia: float,
+    *,
+    gains: Mapping[str, float],
+    reference: Mapping[str, Any],
+    current_lag: float = 0.0,
+    delay: float = 0.0,
+    period: float = 1e-3,
+    resolution: float = 0.0,
+    velocity_filter_hz: float = 0.0,
+    load_feedforward: float = 0.0,
+    modes: Iterable[str] = MODES,
+    perturbation: float = 0.2,
+    duration: float = 4.0,
+    tolerance: float = 0.02,
+) -> dict[str, Verdict]:
+    """Verdict per compensation mode (module docstring); ``delay`` excludes the control period."""
+    modes = tuple(modes)
+    ref = dict(reference, duration=max(float(reference.get("duration", duration)), duration))
+    plant_args = {
+        "inertia": inertia,
+        "current_lag": current_lag,
+        "delay": delay,
+        "resolution": resolution,
+        "velocity_filter_hz": velocity_filter_hz,
+    }
+    base = {
+        "mode": "pid",
+        "pid": dict(gains),
+        "inertia": float(inertia),
+        "load_feedforward": load_feedforward,
+    }
+    base_nolc = dict(base, limit_cycle_detection=False)
+    cases = perturbations(friction_config, perturbation)
+    none_runs = {}
+    for label, cfg in cases:
+        e, _ = _run(plant_args, cfg, base_nolc, ref, duration, period)
+        none_runs[label] = e
+    out: dict[str, Verdict] = {}
+    for mode in modes:
+        ctrl_cfg = dict(base, friction={"model": dict(friction_config), "source": mode})
+        rows, refused = [], []
+        for label, cfg in cases:
+            e, ctrl = _run(plant_args, cfg, ctrl_cfg, ref, duration, period)
+            e0 = none_runs[label]
+            rms0 = float(np.sqrt(np.mean(e0**2)))
+            rms = float(np.sqrt(np.mean(e**2)))
+            tail = e[-max(len(e) // 4, 1) :]
+            growing = float(np.sqrt(np.mean(tail**2))) > 2.0 * float(np.max(np.abs(e0))) + 1e-12
+            lc = ctrl.limit_cycle
+            cycle = bool(ctrl.compensation_fallback)
+            ratio = rms / rms0 if rms0 > 0 else math.inf
+            rows.append(
+                {
+                    "case": label,
+                    "rms_none": rms0,
+                    "rms": rms,
+                    "ratio": ratio,
+                    "limit_cycle": cycle,
+                    "growing": growing,
+                }
+            )
+            if cycle:
+                refused.append(f"limit cycle ({lc.frequency:.0f} Hz) with plant friction {label}")
+            elif growing:
+                refused.append(f"error grows with plant friction {label}")
+            elif ratio > 1.0 + tolerance:
+                refused.append(
+                    f"{100.0 * (ratio - 1.0):.0f} % worse than no compensation with plant friction {label}"
+                )
+        worst = max(r["ratio"] for r in rows)
+        nominal = rows[0]
+        if refused:
+            reason = (
+                "refused: " + refused[0] + (f" (+{len(refused) - 1} more cases)" if len(refused) > 1 else "")
+            )
+            out[mode] = Verdict(mode, False, reason, nominal["rms_none"], nominal["rms"], worst, rows)
+        else:
+            reason = (
+                f"enabled: {100.0 * (1.0 - nominal['ratio']):.0f} % lower RMS error on the identified plant, "
+                f"worst case over +-{100 * perturbation:.0f} % coefficients {100.0 * (1.0 - worst):.0f} %"
+            )
+            out[mode] = Verdict(mode, True, reason, nominal["rms_none"], nominal["rms"], worst, rows)
+    return out
