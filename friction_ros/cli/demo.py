@@ -432,7 +432,7 @@ def print_table(result: DemoResult) -> None:
     )
     print("|---|---|---|---|---|---|---|")
     for label, run in result.runs.items():
-        state = "-" if label == "none" else ("enabled" if run.enabled else f"refused: {run.reason}")
+        state = "-" if label == "none" else ("enabled" if run.enabled else run.reason)
         print(
             f"| {label} | {state} | {run.rms * 1e3:.4f} | {run.max * 1e3:.4f} | {result.reduction(label):.1f} "
             f"| {run.metrics.get('stick_fraction', math.nan):.3f} | {run.metrics.get('hunting_reversals', 0)} |"

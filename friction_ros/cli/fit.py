@@ -84,6 +84,27 @@ def build_parser() -> argparse.ArgumentParser:
         "--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)"
     )
     p.add_argument(
+        "--train-window",
+        choices=["content", "first"],
+        default="content",
+        help="training window: the most exciting --train-seconds of each record (content, default) or "
+        "the first ones (seed 003)",
+    )
+    p.add_argument(
+        "--current-lag",
+        type=float,
+        default=0.0,
+        help="drive current-loop time constant [s] for the compensation safety gate (default 0)",
+    )
+    p.add_argument(
+        "--delay", type=float, default=0.0, help="pure measurement + actuation delay [s] for the safety gate"
+    )
+    p.add_argument(
+        "--no-gate",
+        action="store_true",
+        help="write the parameter file without checking the compensation modes in closed loop",
+    )
+    p.add_argument(
         "--optimizer",
         choices=["de", "ga"],
         default="de",
@@ -204,6 +225,8 @@ def main(argv: list[str] | None = None) -> int:
                 torque_delay=args.torque_delay,
                 plant_preset=args.plant_preset,
                 train_seconds=args.train_seconds,
+                train_window=args.train_window,
+                gate=None if args.no_gate else {"current_lag": args.current_lag, "delay": args.delay},
                 optimizer=args.optimizer,
                 maxiter=args.maxiter,
                 seed=args.seed,
@@ -235,6 +258,8 @@ def main(argv: list[str] | None = None) -> int:
     rec = getattr(res, "recommendation", None) or {}
     if rec.get("rule"):
         print(f"recommended by: {rec['rule']}" + (f" ({rec['reason']})" if rec.get("reason") else ""))
+    for mode, v in (res.gate or {}).items():
+        print(f"compensation {mode:<12} {v.reason}")
     for w in res.warnings:
         print(f"warning: {w}")
     for kind, path in res.files.items():

@@ -97,8 +97,10 @@ def identified_plant(
     delay: float = 0.0,
     resolution: float = 0.0,
     velocity_filter_hz: float = 0.0,
+    damping: float = 0.0,
 ):
-    """A plant with the identified J and friction (torque in N*m = current in A: unit gains)."""
+    """A plant with the identified J and friction (torque in N*m = current in A: unit gains);
+    ``damping`` [N*m*s/rad]: viscous damping that is not friction (a voltage drive's back-EMF)."""
     from friction_ros.core.plant import GearheadServoPlant, PlantParams
 
     cpr = int(round(2.0 * math.pi / resolution)) if resolution > 0 else 0
@@ -110,6 +112,7 @@ def identified_plant(
             current_time_constant=current_lag,
             encoder_cpr=cpr,
             velocity_filter_hz=velocity_filter_hz,
+            motor_damping=damping,
             measurement_delay=delay,
             friction_motor=dict(friction_config) if friction_config else {"model": "none"},
         )
@@ -138,6 +141,7 @@ def gate_modes(
     period: float = 1e-3,
     resolution: float = 0.0,
     velocity_filter_hz: float = 0.0,
+    damping: float = 0.0,
     load_feedforward: float = 0.0,
     modes: Iterable[str] = MODES,
     perturbation: float = 0.2,
@@ -153,6 +157,7 @@ def gate_modes(
         "delay": delay,
         "resolution": resolution,
         "velocity_filter_hz": velocity_filter_hz,
+        "damping": damping,
     }
     base = {
         "mode": "pid",

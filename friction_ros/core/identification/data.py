@@ -263,6 +263,45 @@ def split(data: JointData, train_seconds: float = 10.0) -> tuple[JointData, Join
     return data.slice(0, i), data.slice(i, data.n)
 
 
+def training_window(data: JointData, train_seconds: float = 10.0, step: float = 0.5) -> tuple[int, int]:
+    """Sample range ``[i0, i1)`` of the ``train_seconds`` window that excites the model most.
+
+    Chosen by content, not by the clock: every window (``step`` apart) is scored by its velocity
+    reversals while moving (presliding and direction changes, capped at 100) plus the share of the
+    record's speed range it covers (``max |v|`` in the window over the record's); ties go to the
+    earliest window. A standstill (before, after or between programs) scores nothing.
+    """
+    check_real("train_seconds", train_seconds, 0.0, lo_open=True, unit="s")
+    w = int(round(train_seconds / data.dt))
+    n = data.n
+    if w >= n - 10:
+        raise ExcitationError(
+            f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
+            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+        )
+    v = data.velocity
+    mv = moving_mask(v, data.resolution, data.dt)
+    sgn = np.where(mv, np.sign(v), 0.0)
+    # reversal k: the sign of the last moving sample before k differs from the sign at k
+    idx = np.nonzero(sgn)[0]
+    rev = np.zeros(n)
+    if idx.size > 1:
+        flips = idx[1:][sgn[idx[1:]] != sgn[idx[:-1]]]
+        rev[flips] = 1.0
+    crev = np.concatenate([[0.0], np.cumsum(rev)])
+    vmax_all = float(np.max(np.abs(v))) or 1.0
+    stride = max(int(round(step / data.dt)), 1)
+    best, best_i = -1.0, 0
+    absv = np.abs(v)
+    for i0 in range(0, n - w + 1, stride):
+        r = min(crev[i0 + w] - crev[i0], 100.0) / 100.0
+        cover = float(np.max(absv[i0 : i0 + w])) / vmax_all
+        score = r + cover
+        if score > best + 1e-12:
+            best, best_i = score, i0
+    return best_i, best_i + w
+
+
 # ------------------------------------------------------------------------------ velocity regimes
 def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarray:
     """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of seed 003's envelope."""
@@ -271,17 +310,36 @@ def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarr
     return np.sqrt(np.convolve(np.asarray(v) ** 2, k, mode="same"))
 
 
-def high_velocity_mask(v: np.ndarray, dt: float, threshold: float | None = None) -> tuple[np.ndarray, float]:
-    """Classify samples as high (envelope above threshold) or low velocity (seed 003 Table 1 split).
+def moving_mask(v: np.ndarray, resolution: float, dt: float) -> np.ndarray:
+    """Samples where the joint moves: |v| above the velocity noise floor.
 
-    Default threshold: geometric mean of the 5th and 95th percentiles of the 1 s velocity RMS, which
-    separates the two envelope levels of seed 003's excitation.
+    The floor is the larger of 3x the robust velocity noise (median |dv| / sqrt 2) and one encoder
+    count per 20 ms: below it a differentiated position is quantisation noise, not motion.
+    """
+    v = np.asarray(v, dtype=float)
+    noise = float(np.median(np.abs(np.diff(v)))) / math.sqrt(2.0) if v.size > 1 else 0.0
+    floor = max(3.0 * noise, resolution / 0.02 if resolution > 0 else 0.0, 1e-9)
+    return np.abs(v) > floor
+
+
+def high_velocity_mask(
+    v: np.ndarray, dt: float, threshold: float | None = None, moving: np.ndarray | None = None
+) -> tuple[np.ndarray, float]:
+    """Classify *moving* samples as high (envelope above threshold) or low velocity (seed 003 Table 1).
+
+    Default threshold: geometric mean of the 5th and 95th percentiles of the 1 s velocity RMS over
+    the moving samples only (samples at rest, e.g. a standstill before or after the experiment,
+    would otherwise pull the low percentile to the noise floor). Returns the high mask; the low set
+    is ``moving & ~high``.
     """
     env = velocity_envelope(v, dt)
+    if moving is None:
+        moving = np.ones(env.shape, bool)
     if threshold is None:
-        lo, hi = np.percentile(env, [5, 95])
+        sel = env[moving] if np.any(moving) else env
+        lo, hi = np.percentile(sel, [5, 95])
         threshold = float(math.sqrt(max(lo, 1e-9) * max(hi, 1e-9)))
-    return env > threshold, float(threshold)
+    return (env > threshold) & moving, float(threshold)
 
 
 # ------------------------------------------------------------------------------ plateaus
@@ -390,8 +448,67 @@ def find_plateaus(
     return out
 
 
+def nd_after(data: JointData) -> int:
+    """Samples looked at after a segment's end for the sliding that follows (50 ms)."""
+    return max(int(round(0.05 / data.dt)), 2)
+
+
+def _gross_sliding_onset(pos: np.ndarray, i_rest: int, i_end: int, thr: float, start: int | None = None):
+    """First sample ``j`` that is ``thr`` from ``pos[i_rest]`` and after which the joint keeps going:
+    within the next 50 samples it reaches 3 ``thr`` in the same direction (gross sliding). Presliding
+    deflection under a preload stops short of that and is skipped."""
+    i_end = min(i_end, pos.size)
+    k = i_rest if start is None else start
+    ref = pos[i_rest]
+    while k < i_end:
+        moved = np.nonzero(np.abs(pos[k:i_end] - ref) >= thr)[0]
+        if not moved.size:
+            return None
+        j = k + int(moved[0])
+        d = np.sign(pos[j] - ref)
+        ahead = pos[j : min(j + 50, pos.size)]
+        if ahead.size and np.max(d * (ahead - ref)) >= 3.0 * thr:
+            return j
+        k = j + 1
+        ref = pos[j]  # the deflection so far was presliding: count from here
+    return None
+
+
+def load_offset(plateaus: list[Plateau], rel_tol: float = 0.05) -> tuple[float, str]:
+    """A constant load torque (gravity on a vertical axis, a spring preload) seen in the plateaus.
+
+    For plateau pairs at +v and -v (speeds within ``rel_tol``), friction is odd and a constant
+    load even: ``c = mean((tau(+v) + tau(-v)) / 2)``. Asymmetric friction looks the same, so ``c``
+    is taken as a load only when it is larger than half the friction level
+    ``mean((tau(+v) - tau(-v)) / 2)`` (no plausible asymmetry does that). Returns ``(c, note)`` or
+    ``(0.0, "")``.
+    """
+    pos = [p for p in plateaus if p.velocity > 0]
+    neg = [p for p in plateaus if p.velocity < 0]
+    sums, diffs = [], []
+    for a in pos:
+        for b in neg:
+            if abs(abs(b.velocity) - a.velocity) <= rel_tol * a.velocity:
+                sums.append(0.5 * (a.torque + b.torque))
+                diffs.append(0.5 * (a.torque - b.torque))
+                break
+    if len(sums) < 2:
+        return 0.0, ""
+    c, f = float(np.mean(sums)), float(np.mean(np.abs(diffs)))
+    if abs(c) <= 0.5 * f:
+        return 0.0, ""
+    return c, (
+        f"a constant load torque of {c:+.4g} N*m (mean of the +v/-v plateau pairs, {len(sums)} pairs; "
+        f"friction level {f:.4g}) was removed before fitting and is exported as load_feedforward"
+    )
+
+
 def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> list[Breakaway]:
-    """Breakaway torques: first sample ``counts`` encoder counts away from rest (seed 004 B.3)."""
+    """Breakaway torques (seed 004 B.3): from the experiment's breakaway END events (their
+    ``target`` is the torque of the step that moved the joint ``counts`` counts), else the torque at
+    the onset of gross sliding after a dwell at rest: ``counts`` encoder counts from rest *and*
+    still moving on (3x that within 50 samples), so the elastic deflection under a preload
+    (presliding) is not taken for motion."""
     q = data.resolution if data.resolution > 0 else 1e-4
     thr = counts * q * 0.999
     pos, tau, dt = data.position, data.torque, data.dt
@@ -401,11 +518,15 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
         for s, e in pairs:
             i0 = int(np.searchsorted(data.t, s.time))
             i1 = int(np.searchsorted(data.t, e.time))
+            if math.isfinite(e.target) and e.target != 0.0:
+                # the experiment measured it (motion counted per ramp step, after the preload)
+                j = min(max(i1, 0), data.n - 1)
+                out.append(Breakaway(float(e.time), float(e.target), int(np.sign(e.target)), "events"))
+                continue
             if i1 - i0 < 2:
                 continue
-            moved = np.nonzero(np.abs(pos[i0:i1] - pos[i0]) >= thr)[0]
-            if moved.size:
-                j = i0 + int(moved[0])
+            j = _gross_sliding_onset(pos, i0, i1 + nd_after(data), thr)
+            if j is not None:
                 out.append(
                     Breakaway(float(data.t[j]), float(tau[j]), int(np.sign(pos[j] - pos[i0])), "events")
                 )
@@ -419,10 +540,9 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
         if np.ptp(seg) < q * 0.999:
             j0 = i + nd
             ref = pos[i]
-            moved = np.nonzero(np.abs(pos[j0:] - ref) >= thr)[0]
-            if not moved.size:
+            j = _gross_sliding_onset(pos, i, n, thr, start=j0)
+            if j is None:
                 break
-            j = j0 + int(moved[0])
             # only a ramp-driven breakaway: torque rising in magnitude towards j
             pre = tau[max(i, j - nd) : j + 1]
             if pre.size > 3 and abs(pre[-1]) > abs(pre[0]):
@@ -446,12 +566,13 @@ class Excitation:
     n_plateaus_pos: int
     n_plateaus_neg: int
     plateau_decades: float
+    motion_floor: float = 1e-3
 
 
 def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
     v = data.velocity
-    noise = float(np.median(np.abs(np.diff(v)))) + 1e-9
-    moving = np.abs(v) > max(5 * noise, 1e-4)
+    moving = moving_mask(v, data.resolution, data.dt)
+    floor = float(np.min(np.abs(v[moving]))) if moving.any() else 1e-9
     sv = np.sign(v[moving])
     rev = int(np.sum(sv[1:] != sv[:-1])) if sv.size > 1 else 0
     pv = [abs(p.velocity) for p in plateaus if abs(p.velocity) > 0]
@@ -465,13 +586,14 @@ def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
         sum(p.velocity > 0 for p in plateaus),
         sum(p.velocity < 0 for p in plateaus),
         dec,
+        floor,
     )
 
 
 def check_motion(data: JointData, label: str) -> None:
     """Raise ExcitationError if the joint never moved."""
     q = data.resolution if data.resolution > 0 else 1e-6
-    if np.ptp(data.position) < 3 * q or np.max(np.abs(data.velocity)) < 1e-4:
+    if np.ptp(data.position) < 3 * q or not np.any(moving_mask(data.velocity, data.resolution, data.dt)):
         raise ExcitationError(
             f"{label}: no motion (position range {np.ptp(data.position):.3g} rad, max |v| "
             f"{np.max(np.abs(data.velocity)):.3g} rad/s); the joint must move: record the 'plateaus' "
@@ -483,8 +605,9 @@ def check_motion(data: JointData, label: str) -> None:
 def check_excitation(ex: Excitation, *, dynamic: bool, static_from_plateaus: bool, label: str) -> None:
     """Raise ExcitationError naming what is missing and the experiment that provides it."""
     missing = []
-    if ex.max_speed_pos < 1e-3 or ex.max_speed_neg < 1e-3:
-        d = "positive" if ex.max_speed_pos < 1e-3 else "negative"
+    floor = 2.0 * ex.motion_floor  # above what the encoder resolves, in the record's own units
+    if ex.max_speed_pos < floor or ex.max_speed_neg < floor:
+        d = "positive" if ex.max_speed_pos < floor else "negative"
         missing.append(f"motion in the {d} direction (run 'plateaus' in both directions)")
     if static_from_plateaus and (ex.n_plateaus_pos + ex.n_plateaus_neg) < 3:
         missing.append(

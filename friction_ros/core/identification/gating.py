@@ -69,6 +69,7 @@ def gate_fit(
                     period=rec.dt,
                     current_lag=lag,
                     delay=delay,
+                    load=-float(res.options.get("load_offset", 0.0) or 0.0),
                 )
             else:
                 from dataclasses import replace
@@ -86,6 +87,7 @@ def gate_fit(
                 period=scale.period,
                 resolution=resolution,
                 velocity_filter_hz=velocity_filter_hz,
+                damping=max(scale.damping - scale.viscous, 0.0),
                 load_feedforward=-scale.load,
             )
             res.options["gate_options"] = {"gate": verdicts, "gains": gains, "load_feedforward": -scale.load}

@@ -67,7 +67,9 @@ def analyse(
             ci[nme] = None
         else:
             ci[nme] = [float(values[i] - 1.96 * se[i]), float(values[i] + 1.96 * se[i])]
+    useless = useless_intervals(ci, dict(zip(names, (float(v) for v in values))))
     return {
+        "useless_ci": useless,
         "condition_number": float(smax / s[-1]) if s.size and s[-1] > 0 else float("inf"),
         "not_identifiable": sorted(unident),
         "collinear_groups": flagged,
@@ -75,6 +77,19 @@ def analyse(
         "ci95": ci,
         "stderr": {nme: (None if nme in unident else float(se[i])) for i, nme in enumerate(names)},
     }
+
+
+def useless_intervals(ci: dict, values: dict) -> list[str]:
+    """Coefficients whose 95 % interval says nothing: missing, not finite, or wider than the value
+    itself (half-width > |value|, i.e. the data cannot even tell the sign or the order of magnitude)."""
+    out = []
+    for name, iv in ci.items():
+        v = values.get(name, float("nan"))
+        if iv is None or not all(np.isfinite(iv)) or not np.isfinite(v):
+            out.append(name)
+        elif 0.5 * (iv[1] - iv[0]) > abs(v):
+            out.append(name)
+    return sorted(out)
 
 
 def time_domain_jacobian(fit, records, rel_step: float = 1e-4):

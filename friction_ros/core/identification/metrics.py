@@ -7,8 +7,10 @@
   torque, ``(max e - min e) / rms(y)``.
 * AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N (Gaussian errors; k = parameter count
   including J), on the validation samples.
-* Recommended model: lowest BIC; among models within 2 % (relative) of the best low-velocity NMSE,
-  the one with fewer parameters (seed 003: GMS-10 is "not worth the extra 12 parameters").
+* Recommended model (:func:`recommend_with_rule`): lowest validation BIC; a model with fewer
+  parameters replaces it when its validation NMSE is within 5 % (relative) of it, overall and at
+  low velocity (seed 003: GMS-10 is "not worth the extra 12 parameters"). Unavailable metrics (a
+  subset without signal above the noise) never decide.
 """
 
 from __future__ import annotations
@@ -45,35 +47,106 @@ def information_criteria(y_hat, y, k: int) -> tuple[float, float]:
     return ll + 2 * k, ll + k * math.log(n)
 
 
-def compare(y_hat, y, high_mask, k: int) -> dict:
-    """All metrics of one model on validation data."""
+def _subset_metric(y_hat, y, mask, noise_var: float, min_samples: int = 200) -> tuple[float, float, str]:
+    """(NMSE %, peak error, note) on a subset; NaN with the reason when it carries no signal."""
+    n = int(np.sum(mask))
+    if n < min_samples:
+        return math.nan, math.nan, f"{n} samples in this subset (need {min_samples})"
+    var = float(np.var(y[mask]))
+    if not var > 4.0 * noise_var:
+        return (
+            math.nan,
+            math.nan,
+            f"the measured torque varies no more than its noise there (variance {var:.3g} vs noise {noise_var:.3g})",
+        )
+    return nmse_percent(y_hat[mask], y[mask]), peak_error(y_hat[mask], y[mask]), ""
+
+
+def torque_noise_variance(y) -> float:
+    """Variance of the torque noise from first differences (robust: median absolute difference)."""
+    y = np.asarray(y, dtype=float)
+    if y.size < 3:
+        return 0.0
+    s = float(np.median(np.abs(np.diff(y)))) / (math.sqrt(2.0) * 0.6745)
+    return s * s
+
+
+def compare(y_hat, y, high_mask, k: int, low_mask=None, noise_var: float | None = None) -> dict:
+    """All metrics of one model on validation data.
+
+    ``high_mask``/``low_mask``: the high- and low-velocity *moving* samples (default low = not
+    high). A subset with fewer than 200 samples or whose measured torque does not vary more than
+    its noise has NaN metrics and a ``*_note`` saying why, never a huge number.
+    """
     y_hat = np.asarray(y_hat, dtype=float)
     y = np.asarray(y, dtype=float)
     hm = np.asarray(high_mask, bool)
+    lm = ~hm if low_mask is None else np.asarray(low_mask, bool)
+    nv = torque_noise_variance(y) if noise_var is None else float(noise_var)
     aic, bic = information_criteria(y_hat, y, k)
-    return {
+    nh, mh, note_h = _subset_metric(y_hat, y, hm, nv)
+    nl, ml, note_l = _subset_metric(y_hat, y, lm, nv)
+    out = {
         "nmse_percent": nmse_percent(y_hat, y),
-        "nmse_high_percent": nmse_percent(y_hat[hm], y[hm]) if hm.any() else math.nan,
-        "nmse_low_percent": nmse_percent(y_hat[~hm], y[~hm]) if (~hm).any() else math.nan,
-        "max_error_high": peak_error(y_hat[hm], y[hm]) if hm.any() else math.nan,
-        "max_error_low": peak_error(y_hat[~hm], y[~hm]) if (~hm).any() else math.nan,
+        "nmse_high_percent": nh,
+        "nmse_low_percent": nl,
+        "max_error_high": mh,
+        "max_error_low": ml,
         "rmse": float(np.sqrt(np.mean((y_hat - y) ** 2))),
         "n_params": int(k),
         "aic": aic,
         "bic": bic,
         "n_samples": int(y.size),
+        "n_high": int(np.sum(hm)),
+        "n_low": int(np.sum(lm)),
     }
+    if note_h:
+        out["nmse_high_note"] = note_h
+    if note_l:
+        out["nmse_low_note"] = note_l
+    return out
 
 
-def recommend(metrics: dict[str, dict], margin: float = 0.02) -> str | None:
-    """Lowest BIC; then prefer a smaller model whose low-velocity NMSE is within ``margin`` (relative)."""
+#: a smaller model is preferred when its validation NMSE is within this relative tolerance of the best
+RECOMMEND_TOLERANCE = 0.05
+
+
+def recommend_with_rule(metrics: dict[str, dict], tolerance: float = RECOMMEND_TOLERANCE) -> dict:
+    """The recommended model and the rule that decided.
+
+    Rule (out-of-sample error with a complexity penalty): the model with the lowest BIC on the
+    validation samples (``N ln(SSE/N) + k ln N``) is the reference; a model with fewer parameters
+    replaces it only if its validation NMSE over all samples is within ``tolerance`` (relative) of
+    the reference's AND, when both have it, its low-velocity NMSE is within ``tolerance`` too. A
+    metric that is not available never decides.
+    """
     ok = {m: v for m, v in metrics.items() if v and math.isfinite(v.get("bic", math.nan))}
     if not ok:
-        return None
+        return {"model": None, "rule": "no model has a finite validation BIC", "reason": ""}
     best = min(ok, key=lambda m: ok[m]["bic"])
-    key = "nmse_low_percent" if math.isfinite(ok[best].get("nmse_low_percent", math.nan)) else "nmse_percent"
-    ref = ok[best][key]
-    for m in sorted(ok, key=lambda m: ok[m]["n_params"]):
-        if ok[m]["n_params"] < ok[best]["n_params"] and ok[m][key] <= ref * (1 + margin) + 1e-9:
-            return m
-    return best
+    rule = (
+        f"lowest validation BIC (N ln(SSE/N) + k ln N); a model with fewer parameters is preferred when its "
+        f"validation NMSE is within {100 * tolerance:g} % (relative) of it, overall and at low velocity"
+    )
+    ref = ok[best]
+
+    def close(m: str, key: str) -> bool:
+        a, b = ok[m].get(key, math.nan), ref.get(key, math.nan)
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return key != "nmse_percent"  # an unavailable subset metric neither helps nor blocks
+        return a <= b * (1.0 + tolerance) + 1e-12
+
+    for m in sorted(ok, key=lambda m: (ok[m]["n_params"], ok[m]["bic"])):
+        if ok[m]["n_params"] < ref["n_params"] and close(m, "nmse_percent") and close(m, "nmse_low_percent"):
+            return {
+                "model": m,
+                "rule": rule,
+                "reason": f"{m} ({ok[m]['n_params']} parameters) is within {100 * tolerance:g} % of {best} "
+                f"({ref['n_params']} parameters, lowest BIC)",
+            }
+    return {"model": best, "rule": rule, "reason": f"{best} has the lowest validation BIC"}
+
+
+def recommend(metrics: dict[str, dict], margin: float = RECOMMEND_TOLERANCE) -> str | None:
+    """The recommended model's name (:func:`recommend_with_rule`)."""
+    return recommend_with_rule(metrics, margin)["model"]

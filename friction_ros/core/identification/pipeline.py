@@ -11,6 +11,7 @@ Public entry points (stable signatures):
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -83,6 +84,7 @@ class FitResult:
         if m.config is None:
             raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
         opts = dict(self.options.get("gate_options") or {}, **gate_options)
+        opts.setdefault("load_feedforward", float(self.options.get("load_offset", 0.0) or 0.0))
         return export.parameter_document(
             m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset"), **opts
         )
@@ -203,6 +205,7 @@ def fit_records(
     models=DEFAULT_MODELS,
     *,
     train_seconds: float = 10.0,
+    train_window: str = "content",
     optimizer: str = "de",
     maxiter: int | dict | None = None,
     popsize: int = 12,
@@ -222,26 +225,38 @@ def fit_records(
         raise ParameterError("records = []: need at least one record")
     for r in records:
         D.check_motion(r, r.meta.get("source", label))
+    load, load_note = D.load_offset([p for r in records for p in D.find_plateaus(r)])
+    if load:
+        records = [dataclasses.replace(r, torque=r.torque - load) for r in records]
     train, val, val_from = [], [], []
+    windows = []
     for r in records:
         if r.duration > train_seconds + 1.0:
-            a, b = D.split(r, train_seconds)
-            train.append(a)
-            val.append(b)
-            val_from.append((r, a.n))
+            if train_window == "first":
+                i0, i1 = 0, D.split(r, train_seconds)[0].n
+            else:
+                i0, i1 = D.training_window(r, train_seconds)
+            keep = np.ones(r.n, bool)
+            keep[i0:i1] = False
+            train.append(r.slice(i0, i1))
+            val.append(_concat([r.slice(0, i0), r.slice(i1, r.n)]) if i0 > 0 else r.slice(i1, r.n))
+            val_from.append((r, keep))
+            windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
     if not val:  # records too short to split: validate on the training data (reported)
         train = list(records)
         val = list(records)
-        val_from = [(r, 0) for r in records]
+        val_from = [(r, np.ones(r.n, bool)) for r in records]
         warnings_pre = [
             f"records shorter than train_seconds + 1 s ({train_seconds:g} s): validated on training data"
         ]
     else:
         warnings_pre = []
+    if load:
+        warnings_pre.append(load_note)
 
     def predict_val(model) -> np.ndarray:
-        # dynamic states run on from the training part into the validation part (one simulation)
-        return np.concatenate([model.predict(full)[i0:] for full, i0 in val_from])
+        # dynamic states run through the whole record (one simulation); validation = outside the window
+        return np.concatenate([model.predict(full)[keep] for full, keep in val_from])
 
     plateaus = [p for r in records for p in D.find_plateaus(r)]
     breakaways = [b for r in records for b in D.find_breakaways(r)]
@@ -258,7 +273,9 @@ def fit_records(
                 "'random' excitation, or lower/raise --train-seconds)"
             )
     vall = _concat(val)
-    hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold)
+    mv = D.moving_mask(vall.velocity, vall.resolution, vall.dt)
+    hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
+    lm = mv & ~hm
     results: dict[str, ModelResult] = {}
     warnings: list[str] = list(warnings_pre)
     grid = _grid(records)
@@ -309,7 +326,7 @@ def fit_records(
             )
             res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, train)
         yhat = predict_val(res)
-        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params)
+        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm)
         res.extra["validation_prediction"] = yhat
         results[name] = res
     for name in [n for n in names if n in LEARNED]:
@@ -326,7 +343,7 @@ def fit_records(
             f"learned ({src})",
             {"J": J, **dm.params()},
             None,
-            metrics.compare(yhat, vall.torque, hm, k + 1),
+            metrics.compare(yhat, vall.torque, hm, k + 1, low_mask=lm),
             {},
             time.perf_counter() - t0,
             dm.steady_state,
@@ -337,7 +354,10 @@ def fit_records(
         results[name] = res
         if progress:
             progress(name, 1.0)
-    rec = metrics.recommend({n: r.metrics for n, r in results.items() if r.config is not None})
+    recommendation = metrics.recommend_with_rule(
+        {n: r.metrics for n, r in results.items() if r.config is not None}
+    )
+    rec = recommendation["model"]
     for r in results.values():
         r.extra["steady_state_grid"] = {
             "velocity": grid.tolist(),
@@ -352,9 +372,19 @@ def fit_records(
         breakaways,
         ex,
         thr,
-        {"train_seconds": train_seconds, "optimizer": optimizer, "seed": seed, "eps": eps, "models": names},
+        {
+            "train_seconds": train_seconds,
+            "load_offset": load,
+            "train_window": train_window,
+            "train_windows_s": windows,
+            "optimizer": optimizer,
+            "seed": seed,
+            "eps": eps,
+            "models": names,
+        },
         warnings=warnings,
         seconds=time.perf_counter() - t_start,
+        recommendation=recommendation,
     )
 
 
@@ -425,12 +455,19 @@ def _fit_static_plateaus(name, plateaus, train, eps) -> ModelResult:
     notes = [f"fitted to {sf.n_points} plateau means (robust soft-L1 least squares), rms {sf.rms:.3g} N*m"]
     if sf.asymmetric:
         notes.append("directions differ significantly: asymmetric model exported")
+    ci95 = {k: [coefs[k] - 1.96 * s, coefs[k] + 1.96 * s] for k, s in sf.stderr.items()}
     ident = {
         "stderr": sf.stderr,
-        "ci95": {k: [coefs[k] - 1.96 * s, coefs[k] + 1.96 * s] for k, s in sf.stderr.items()},
+        "ci95": ci95,
         "not_identifiable": [],
+        "useless_ci": identifiability.useless_intervals(ci95, coefs),
         "per_direction": sf.per_direction,
     }
+    if ident["useless_ci"]:
+        notes.append(
+            "95 % confidence interval wider than the value (the data do not determine it): "
+            + ", ".join(ident["useless_ci"])
+        )
     m = ModelResult(name, "plateaus", coefs, cfg, {}, ident, sf.seconds, ss, _static_predictor(ss, J), notes)
     m.extra["train_mse"] = float(np.mean((J * a + ss(r.velocity) - r.torque) ** 2))
     return m
@@ -472,6 +509,12 @@ def _wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> Model
             notes.append(f"identifiability analysis failed: {exc}")
     if ident.get("not_identifiable"):
         notes.append("not separately identifiable from these data: " + ", ".join(ident["not_identifiable"]))
+    useless = [n for n in ident.get("useless_ci", []) if n not in ident.get("not_identifiable", [])]
+    if useless:
+        notes.append(
+            "95 % confidence interval wider than the value (the data do not determine it): "
+            + ", ".join(useless)
+        )
     m = ModelResult(
         name,
         f"time-domain output error ({fit.optimizer} + Nelder-Mead)"

@@ -108,8 +108,15 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         "## Data",
         f"- training: {sum(r.n for r in tr)} samples, validation: {sum(r.n for r in va)} samples, "
         f"dt = {tr[0].dt * 1e3:.3g} ms, encoder resolution {tr[0].resolution:.3g} rad",
-        f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
-        "(seed 003 A.3)",
+        (
+            f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
+            "(seed 003 A.3)"
+            if res.options.get("train_window") == "first"
+            else f"- split: the {res.options['train_seconds']:g} s window of each record with the most velocity reversals "
+            "and speed range for training (chosen by content: "
+            + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in res.options.get("train_windows_s", []))
+            + "), everything else for validation"
+        ),
         "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)",
         f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
         f"{len(res.plateaus)} plateaus, {len(res.breakaways)} breakaway events",
