@@ -57,7 +57,7 @@ def test_the_known_bad_case_is_refused_with_a_reason(abb):
     seconds = time.perf_counter() - t0
     assert not v["feedback"].enabled
     assert v["feedback"].reason.startswith("refused: ")
-    assert "limit cycle" in v["feedback"].reason or "worse than no compensation" in v["feedback"].reason
+    assert any(w in v["feedback"].reason for w in ("limit cycle", "worse than no compensation", "unstable"))
     assert seconds < 10.0  # measured ~1.3 s for 3 modes x 5 cases on the development VM
 
 

@@ -22,12 +22,12 @@ gains of the plateaus.
 
 **Experiment rule** (seed 004 B.3 procedures, seed 003 A.3 excitation, scaled):
 
-* torque ceiling ``max_torque = min(torque_limit, 3 F_b + |load|)``;
+* torque ceiling ``max_torque = min(torque_limit, 4 F_b + |load| + 2 J v_max / settle + 1.5 B v_max)``;
 * plateau speeds log-spaced from ``v_min`` to ``v_max``: ``v_min`` is the larger of what the
   encoder resolves (``20`` counts over the hold) and a fifth of the Stribeck velocity when it is
   known (so the lowest plateaus lie below it); ``v_max = min(0.4 v_limit, travel / (2 (settle +
   hold)))``; hold long enough for ``v_min`` to cover 20 counts (at most 2 s);
-* breakaway ramp: preload ``0.5 F_b``, up to ``min(2.5 F_b, max_torque)``, steps from ``F_b / 200``
+* breakaway ramp: preload ``0.5 F_b``, up to ``min(3 F_b, max_torque)``, steps from ``F_b / 200``
   (coarser if the ramp would exceed its time budget) held long enough that the joint, once it
   slides, moves 2 counts within one step (``(step / J) t^2 / 2 >= 2 resolution``);
 * presliding and chirp torques as fractions of ``F_b`` (0.4/0.8, and 1.2 -> 0.5);
@@ -293,8 +293,11 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     v_cap = 0.4 * scale.speed_limit
     if scale.damping > 0:  # the speed the actuator can hold against viscous damping, with margin
         v_cap = min(v_cap, 0.4 * max(scale.torque_limit - abs(load) - Fb, 0.0) / scale.damping)
-    # ramps to 3x breakaway, plus what accelerates the inertia to the fastest plateau within the settle time
-    t_max = min(scale.torque_limit, 3.0 * Fb + abs(load) + 2.0 * scale.inertia * v_cap / settle)
+    # ramps to 3x breakaway (4x ceiling), plus what accelerates the inertia to the fastest plateau within the settle time
+    t_max = min(
+        scale.torque_limit,
+        4.0 * Fb + abs(load) + 2.0 * scale.inertia * v_cap / settle + 1.5 * scale.damping * v_cap,
+    )
     # velocity (= position) loop
     g = tracking_gains(scale)
     c["dt"] = scale.period
@@ -320,7 +323,7 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     b = c["breakaway"]
     counts = 2
     thr = counts * scale.resolution
-    b_max = min(2.5 * Fb, t_max - abs(load))
+    b_max = min(3.0 * Fb, t_max - abs(load))
     start = 0.5 * Fb
     budget = 8.0 if quick else 20.0  # seconds per ramp
     t_min = max(0.008, 8.0 * scale.period, 4.0 * (scale.current_lag + scale.loop_delay))

@@ -15,8 +15,9 @@ any case,
 
 * its RMS tracking error exceeds the uncompensated one by more than ``tolerance`` (2 %), or
 * it is not robustly stable: the run-time limit-cycle detector fires
-  (:mod:`friction_ros.core.control.limit_cycle`, run here without the fallback), or the error
-  grows (RMS of the last quarter above twice the uncompensated run's peak).
+  (:mod:`friction_ros.core.control.limit_cycle`) while the uncompensated loop on the same plant
+  does not oscillate (the oscillation is compensation-induced), or the error grows (RMS of the
+  last quarter above twice the uncompensated run's peak).
 
 Otherwise it is **enabled**, with the worst ratio (mode RMS / uncompensated RMS) as its figure.
 """
@@ -127,7 +128,19 @@ def _run(plant_args: dict, friction_cfg, controller: dict, reference: dict, dura
     ctrl = CompensatingController(controller)
     res = run_closed_loop(plant, ctrl, reference, duration, period, scale=1.0)
     e = res.reference[:, 0] - res.true_position
-    return e, ctrl
+    return e, ctrl, res
+
+
+def _oscillates(res, period: float):
+    """The run-time limit-cycle detector run over a recorded loop; returns it when it fired."""
+    from friction_ros.core.control.limit_cycle import LimitCycleDetector
+
+    det = LimitCycleDetector()
+    e = res.reference[:, 0] - res.position
+    for k in range(e.size):
+        if det.update(res.t[k], e[k], res.command[k], res.reference[k, 1], res.position[k], period):
+            return det
+    return None
 
 
 def gate_modes(
@@ -167,23 +180,27 @@ def gate_modes(
     }
     base_nolc = dict(base, limit_cycle_detection=False)
     cases = perturbations(friction_config, perturbation)
-    none_runs = {}
+    none_runs, none_oscillates = {}, {}
     for label, cfg in cases:
-        e, _ = _run(plant_args, cfg, base_nolc, ref, duration, period)
+        e, _, r0 = _run(plant_args, cfg, base_nolc, ref, duration, period)
         none_runs[label] = e
+        none_oscillates[label] = _oscillates(r0, period) is not None
     out: dict[str, Verdict] = {}
     for mode in modes:
-        ctrl_cfg = dict(base, friction={"model": dict(friction_config), "source": mode})
+        # no run-time fallback here: the gate judges what the mode does, the detector only watches
+        ctrl_cfg = dict(base_nolc, friction={"model": dict(friction_config), "source": mode})
         rows, refused = [], []
         for label, cfg in cases:
-            e, ctrl = _run(plant_args, cfg, ctrl_cfg, ref, duration, period)
+            e, ctrl, r1 = _run(plant_args, cfg, ctrl_cfg, ref, duration, period)
             e0 = none_runs[label]
             rms0 = float(np.sqrt(np.mean(e0**2)))
-            rms = float(np.sqrt(np.mean(e**2)))
+            with np.errstate(all="ignore"):
+                rms = float(np.sqrt(np.mean(e**2)))
+            rms = rms if math.isfinite(rms) else math.inf
             tail = e[-max(len(e) // 4, 1) :]
             growing = float(np.sqrt(np.mean(tail**2))) > 2.0 * float(np.max(np.abs(e0))) + 1e-12
-            lc = ctrl.limit_cycle
-            cycle = bool(ctrl.compensation_fallback)
+            lc = _oscillates(r1, period)
+            cycle = lc is not None and not none_oscillates[label]
             ratio = rms / rms0 if rms0 > 0 else math.inf
             rows.append(
                 {
@@ -197,12 +214,14 @@ def gate_modes(
             )
             if cycle:
                 refused.append(f"limit cycle ({lc.frequency:.0f} Hz) with plant friction {label}")
-            elif growing:
-                refused.append(f"error grows with plant friction {label}")
+            elif not math.isfinite(ratio) or ratio > 10.0:
+                refused.append(f"unstable: the error grows without bound with plant friction {label}")
             elif ratio > 1.0 + tolerance:
                 refused.append(
                     f"{100.0 * (ratio - 1.0):.0f} % worse than no compensation with plant friction {label}"
                 )
+            elif growing:
+                refused.append(f"error grows with plant friction {label}")
         worst = max(r["ratio"] for r in rows)
         nominal = rows[0]
         if refused:
