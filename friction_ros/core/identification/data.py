@@ -505,10 +505,10 @@ def load_offset(plateaus: list[Plateau], rel_tol: float = 0.05) -> tuple[float, 
 
 def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> list[Breakaway]:
     """Breakaway torques (seed 004 B.3): from the experiment's breakaway END events (their
-    ``target`` is the torque of the step that moved the joint ``counts`` counts), else the torque at
-    the onset of gross sliding after a dwell at rest: ``counts`` encoder counts from rest *and*
-    still moving on (3x that within 50 samples), so the elastic deflection under a preload
-    (presliding) is not taken for motion."""
+    ``target`` is the torque of the step that moved the joint ``counts`` counts), else the peak
+    torque of a rising ramp (``dwell`` seconds without sliding before) at the onset of gross
+    sliding: more than 30 encoder counts within 50 ms, which the elastic creep under a preload
+    (presliding, often tens of counts over the ramp) never reaches."""
     q = data.resolution if data.resolution > 0 else 1e-4
     thr = counts * q * 0.999
     pos, tau, dt = data.position, data.torque, data.dt
@@ -531,25 +531,31 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
                     Breakaway(float(data.t[j]), float(tau[j]), int(np.sign(pos[j] - pos[i0])), "events")
                 )
         return out
+    # without events: a torque ramp under which the joint creeps (presliding) or rests, then gross
+    # sliding: more than 30 counts within 50 ms, which presliding under a slow ramp never does
     nd = max(int(round(dwell / dt)), 2)
-    i = 0
+    w = max(int(round(0.05 / dt)), 2)
     n = data.n
-    while i < n - nd:
-        # at rest for `dwell`: position within one count
-        seg = pos[i : i + nd]
-        if np.ptp(seg) < q * 0.999:
-            j0 = i + nd
-            ref = pos[i]
-            j = _gross_sliding_onset(pos, i, n, thr, start=j0)
-            if j is None:
-                break
-            # only a ramp-driven breakaway: torque rising in magnitude towards j
-            pre = tau[max(i, j - nd) : j + 1]
-            if pre.size > 3 and abs(pre[-1]) > abs(pre[0]):
-                out.append(Breakaway(float(data.t[j]), float(tau[j]), int(np.sign(pos[j] - ref))))
-            i = j + nd
-        else:
-            i += max(nd // 4, 1)
+    slide = np.zeros(n, bool)
+    slide[w:] = np.abs(pos[w:] - pos[:-w]) > 30.0 * q
+    i = nd
+    while i < n:
+        hits = np.nonzero(slide[i:])[0]
+        if not hits.size:
+            break
+        j = i + int(hits[0])
+        pre = tau[j - nd : j + 1]
+        quiet = not np.any(slide[j - nd + w : j])  # no sliding in the ramp window before
+        rising = abs(pre[-w:]).max() > abs(pre[:w]).mean() + 0.02 * abs(pre).max()
+        if quiet and rising:
+            # onset: the first sample of that 50 ms window that moved more than 2 counts from its start
+            k0 = j - w
+            moved = np.nonzero(np.abs(pos[k0 : j + 1] - pos[k0]) >= thr)[0]
+            k = k0 + int(moved[0]) if moved.size else j
+            base = max(k - w, 0)
+            peak = base + int(np.argmax(np.abs(tau[base : k + 1])))
+            out.append(Breakaway(float(data.t[k]), float(tau[peak]), int(np.sign(pos[j] - pos[k0]))))
+        i = j + nd
     return out
 
 
