@@ -12,9 +12,10 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ORDER = ["demo", "models", "compensation", "fitting", "loop", "can", "bags"]
+ORDER = ["demo", "robustness", "models", "compensation", "fitting", "loop", "can", "bags"]
 TITLES = {
     "demo": "Main job: identify and compensate the simulated ABB M19-S joint (issue 9)",
+    "robustness": "Main job on every preset x 3 experiment seeds (issue 14)",
     "models": "Friction models and plant speed (issue 3)",
     "compensation": "Compensation experiments of the seeds (issue 4)",
     "fitting": "Offline identification (issue 8)",
@@ -25,16 +26,35 @@ TITLES = {
 BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"
 
 
+def _sections(block: str) -> dict[str, str]:
+    """The block's ``### title`` sections (title -> text), so a benchmark not run keeps its figures."""
+    out: dict[str, str] = {}
+    for chunk in block.split("\n### ")[1:]:
+        title = chunk.split("\n", 1)[0].strip()
+        out[title] = "### " + chunk.rstrip() + "\n"
+    return out
+
+
 def main() -> int:
     results = {
         p.stem: json.loads(p.read_text())
         for p in sorted((ROOT / "bench" / "results").glob("*.json"))
         if not p.stem.endswith("_quick")  # smoke runs (--quick) are not results
     }
+    readme = ROOT / "README.md"
+    text = readme.read_text()
+    if BEGIN not in text or END not in text:
+        print("README.md has no BENCH markers", file=sys.stderr)
+        return 1
+    kept = _sections(text.split(BEGIN, 1)[1].split(END, 1)[0])
     parts = []
     for name in ORDER + sorted(set(results) - set(ORDER)):
         r = results.get(name)
         if r is None or not r.get("tables"):
+            # no new figures for this benchmark here: keep the section README already has
+            old = kept.get(TITLES.get(name, name))
+            if old:
+                parts.append(old)
             continue
         m = r.get("machine", {})
         parts.append(f"### {TITLES.get(name, name)}\n")
@@ -43,11 +63,6 @@ def main() -> int:
             f"Python {m.get('python', '?')})\n"
         )
         parts += [t + "\n" for t in r["tables"]]
-    readme = ROOT / "README.md"
-    text = readme.read_text()
-    if BEGIN not in text or END not in text:
-        print("README.md has no BENCH markers", file=sys.stderr)
-        return 1
     head, rest = text.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
     readme.write_text(head + BEGIN + "\n\n" + "\n".join(parts) + "\n" + END + tail)

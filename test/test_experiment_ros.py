@@ -27,6 +27,8 @@ def quick_bag(tmp_path_factory):
             "lockstep",
             "--preset",
             "abb_m19s",
+            "--sizing",
+            "profile",  # the profile's program as written (the sized one is tested in test_joint_sizing)
             "--diagnostics",
             "-o",
             str(out),
