@@ -94,6 +94,8 @@ DOCS = {
     "limit_cycle_detection": "switch friction compensation off (latched) when it causes a limit cycle",
     "limit_cycle_min_frequency": "limit cycle: lowest oscillation frequency that counts",
     "limit_cycle_min_amplitude": "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
+    "limit_cycle_window": "limit cycle: averaging time constant of the detector",
+    "limit_cycle_hold": "limit cycle: how long the oscillation must hold before the fallback",
     "u_clamp_max": "upper torque limit",
     "u_clamp_min": "lower torque limit",
     "rate_limit": "torque rate limit",
@@ -106,6 +108,8 @@ UNITS = {
     "load_feedforward": "N*m",
     "limit_cycle_min_frequency": "Hz",
     "limit_cycle_min_amplitude": "rad",
+    "limit_cycle_window": "s",
+    "limit_cycle_hold": "s",
     "u_clamp_max": "N*m",
     "u_clamp_min": "N*m",
     "rate_limit": "N*m/s",
@@ -119,8 +123,10 @@ DEFAULT_REFERENCE = {"type": "constant"}
 
 # ControllerTerms fields copied into friction_msgs/ControllerState every period (hot path: no asdict)
 _STATE_FIELDS = tuple(
-    f.name for f in dataclasses.fields(ControllerTerms) if f.name not in ("time", "mode", "saturated")
-)
+    f.name
+    for f in dataclasses.fields(ControllerTerms)
+    if f.name not in ("time", "mode", "saturated", "compensation_fallback")
+)  # compensation_fallback is not in friction_msgs/ControllerState: diagnostics and the log carry it
 assert set(_STATE_FIELDS) == set(
     "reference_position reference_velocity reference_acceleration position velocity error error_dot "
     "p_term i_term d_term velocity_feedforward inertia_feedforward friction_feedforward "
@@ -231,6 +237,8 @@ class CompensatingControllerNode(Node):
             f"{self.controller.friction.model.name if self.controller.friction.model else 'none'}, "
             f"reference {self.reference.config().get('type', '?')}"
         )
+        if self.controller.feedback_bound_note:
+            self.get_logger().warning(self.controller.feedback_bound_note)
 
     # -- parameters -------------------------------------------------------------------------------
     def _apply(self, changes: dict) -> None:
@@ -247,8 +255,11 @@ class CompensatingControllerNode(Node):
                 "compensation fallback cleared by a parameter change: compensation active again"
             )
             self._fallback_logged = False
+        note_changed = new_ctrl.feedback_bound_note != self.controller.feedback_bound_note
         self.controller, self.reference, self.values = new_ctrl, new_ref, values
         self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))}")
+        if note_changed and new_ctrl.feedback_bound_note:
+            self.get_logger().warning(new_ctrl.feedback_bound_note)
 
     # -- inputs -----------------------------------------------------------------------------------
     def _on_trajectory(self, msg: JointTrajectory) -> None:
@@ -387,6 +398,9 @@ class CompensatingControllerNode(Node):
         if self.controller.compensation_fallback:
             level, text = ERROR, self.controller.fallback_reason
         values["compensation_fallback"] = int(self.controller.compensation_fallback)
+        values["feedback_bound_limited"] = int(bool(self.controller.feedback_bound_note))
+        if self.controller.feedback_bound_note:
+            values["feedback_bound"] = self.controller.feedback_bound_note
         self.diag.publish(level, text, values)
 
     def on_shutdown(self) -> None:

@@ -46,6 +46,9 @@ COMPENSATION_DEFAULTS: dict[str, Any] = {
     "smoothing": "none",
     "smoothing_velocity": 1e-3,
     "observer_gain": 0.0,
+    # stability bound of the feedback path (FrictionCompensator.bound_feedback): the presliding
+    # damping / stiffness fed back may remove at most this share of the loop's Kd / Kp
+    "feedback_bound": 0.5,
     # written by the fitter's safety gate (compensation_gate): sources it refused, why, and the
     # explicit override; asking for a refused source refuses to start unless allow_refused is true
     "refused": None,
@@ -145,6 +148,9 @@ class FrictionCompensator:
             f"{prefix}.smoothing_velocity", cfg["smoothing_velocity"], 0.0, unit="rad/s"
         )
         self.observer_gain = check_real(f"{prefix}.observer_gain", cfg["observer_gain"], 0.0, unit="1/s")
+        self.feedback_bound = check_real(
+            f"{prefix}.feedback_bound", cfg["feedback_bound"], 0.0, 1.0, lo_open=True
+        )
         self.refused = [str(x) for x in (cfg["refused"] or []) if str(x)]
         self.refused_reasons = [str(x) for x in (cfg["refused_reasons"] or [])]
         for i, r in enumerate(self.refused):
@@ -171,6 +177,9 @@ class FrictionCompensator:
         self._observer = None
         if model is not None and self.source == "observer" and model.name == "lugre":
             self._observer = LuGreObserver(self._fb_model, self.observer_gain)
+        self.bound_note = ""
+        if getattr(self, "_loop_gains", None) is not None:
+            self.bound_note = self._apply_bound(*self._loop_gains)
 
     def config(self) -> dict[str, Any]:
         return {
@@ -181,6 +190,7 @@ class FrictionCompensator:
             "smoothing": self.smoothing,
             "smoothing_velocity": self.smoothing_velocity,
             "observer_gain": self.observer_gain,
+            "feedback_bound": self.feedback_bound,
             "refused": list(self.refused) or None,
             "refused_reasons": list(self.refused_reasons) or None,
             "allow_refused": self.allow_refused,
@@ -210,32 +220,64 @@ class FrictionCompensator:
         if self._observer is not None and obs is not None:
             self._observer.z = obs
 
-    def bound_feedback_damping(self, kd: float, fraction: float = 0.5) -> str:
-        """Stability bound of the feedback path's micro-damping; returns a note when it acted.
+    def bound_feedback(self, kp: float, kd: float) -> str:
+        """Apply (and keep applying after model changes) the feedback-path bound for the loop gains
+        ``kp`` [N*m/rad], ``kd`` [N*m*s/rad]; returns ``bound_note`` (see :meth:`_apply_bound`)."""
+        self._loop_gains = (float(kp), float(kd))
+        self._install(self.model)
+        return self.bound_note
 
-        In feedback the model's presliding damping ``sigma1 dz/dt`` (LuGre, damped GMS) is fed
-        back from the measured velocity: in presliding ``dz/dt ~ v``, so it adds ``-g w_fb sigma1``
-        to the loop's damping ``K_d``. It is limited to ``g w_fb sigma1 <= fraction K_d`` (default
-        half of ``K_d``), so compensation never removes more than that share of the damping the
-        loop was tuned with. The feedforward path (driven by the reference) is not affected.
+    def _apply_bound(self, kp: float, kd: float) -> str:
+        """Stability bound of the feedback path; returns a note when it limited the model ('' if not).
+
+        Derivation (loop ``J s^2 x = -(K_d s + K_p) x + tau_fb - F_plant``): in presliding a dynamic
+        model driven by the measured motion is linear, ``F_hat ~ k_hat x + d_hat v`` with stiffness
+        ``k_hat`` = LuGre ``sigma0``, GMS ``sum k_i``, Dahl ``sigma`` and damping ``d_hat`` =
+        ``sigma1`` (``dz/dt ~ v``). Fed back with weight ``g w_fb`` it turns the loop into
+        ``J s^2 + (K_d + d_p - g w_fb d_hat) s + (K_p + k_p - g w_fb k_hat)`` where ``d_p, k_p`` are
+        the plant's own presliding damping and stiffness. Those are poorly identified (a LuGre fit
+        can return sigma0 = 1e5 for a joint whose bristles are ~600 N*m/rad) and lag the command by
+        the current loop and the period, so the loop is only guaranteed to keep its tuning if the
+        compensation alone removes no more than a share ``f`` (``feedback_bound``, default 0.5)::
+
+            g w_fb d_hat <= f K_d        g w_fb k_hat <= f K_p
+
+        Beyond that the feedback model's presliding damping/stiffness is scaled down to the bound
+        (the presliding range ``g(v)/sigma0`` grows accordingly; the sliding levels fc, fs, fv are
+        unchanged). The feedforward path (driven by the reference) is not affected. Static models
+        have no presliding terms: nothing to bound here, the safety gate judges them.
         """
         m = self._fb_model
         _wff, wfb = self.weights
-        if m is None or wfb <= 0.0 or self.gain <= 0.0 or kd < 0.0:
+        w = self.gain * wfb
+        if m is None or w <= 0.0 or not m.is_dynamic:
             return ""
         cfg = m.to_config()
-        sigma1 = cfg.get("sigma1")
-        if not isinstance(sigma1, (int, float)) or sigma1 <= 0.0:
+        f = self.feedback_bound
+        changes, notes = {}, []
+        s1 = cfg.get("sigma1")
+        if isinstance(s1, (int, float)) and s1 > 0.0 and w * s1 > f * kd:
+            changes["sigma1"] = f * max(kd, 0.0) / w
+            notes.append(f"sigma1 {s1:.4g} -> {changes['sigma1']:.4g} N*m*s/rad (<= {f:g} Kd {kd:.4g})")
+        stiff_key = {"lugre": "sigma0", "gms": "k", "dahl": "sigma"}.get(m.name)
+        k = cfg.get(stiff_key) if stiff_key else None
+        if k is not None:
+            k_sum = float(sum(k)) if isinstance(k, (list, tuple)) else float(k)
+            if k_sum > 0.0 and w * k_sum > f * kp:
+                # a stiffness must stay > 0 for the model to validate: a loop without Kp keeps 1e-9
+                scale = max(f * kp / w, 1e-9) / k_sum
+                changes[stiff_key] = [x * scale for x in k] if isinstance(k, (list, tuple)) else k * scale
+                notes.append(
+                    f"presliding stiffness {k_sum:.4g} -> {k_sum * scale:.4g} N*m/rad (<= {f:g} Kp {kp:.4g})"
+                )
+        if not changes:
             return ""
-        bound = fraction * kd / (self.gain * wfb)
-        if sigma1 <= bound:
-            return ""
-        self._fb_model = build_model({**cfg, "sigma1": float(bound)})
+        self._fb_model = build_model({**cfg, **changes})
         if self._observer is not None:
             self._observer = LuGreObserver(self._fb_model, self.observer_gain)
         return (
-            f"feedback micro-damping sigma1 = {sigma1:.4g} limited to {bound:.4g} N*m*s/rad "
-            f"({fraction:g} x the loop's Kd {kd:.4g} / (gain x feedback weight))"
+            f"feedback path of {m.name} limited for loop stability: {'; '.join(notes)} "
+            f"(gain x feedback weight {w:.3g})"
         )
 
     def reset(self) -> None:

@@ -64,6 +64,8 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "limit_cycle_detection": True,
     "limit_cycle_min_frequency": LIMIT_CYCLE_DEFAULTS["min_frequency"],
     "limit_cycle_min_amplitude": LIMIT_CYCLE_DEFAULTS["min_amplitude"],
+    "limit_cycle_window": LIMIT_CYCLE_DEFAULTS["window"],
+    "limit_cycle_hold": LIMIT_CYCLE_DEFAULTS["hold"],
     "pid": dict(PID_DEFAULTS),
     "friction": dict(COMPENSATION_DEFAULTS),
     "dnpf": dict(DNPF.DEFAULTS),
@@ -97,6 +99,8 @@ class ControllerTerms:
     command_unlimited: float = 0.0
     command: float = 0.0
     saturated: bool = False
+    #: friction compensation switched off (latched) by the run-time limit-cycle detector
+    compensation_fallback: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -148,6 +152,21 @@ def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any
     comp["model"] = model if model.get("model", "none") not in ("none", "", None) else None
     cfg["friction"] = comp
     return cfg, dict(values.get("reference") or {"type": "constant"})
+
+
+def loop_gains(mode: str, pid: Pid, scheme) -> tuple[float, float]:
+    """(K_p, K_d) of the loop's linear feedback ``u = K_p e + K_d e_dot + ...`` per mode [N*m/rad,
+    N*m*s/rad]: pid ``p, d``; dnpf / gain_scheduling ``kp, kd`` (the configured baseline);
+    cascade ``kp_velocity kp_position, kp_velocity``; sliding_mode ``k_s lambda, k_s`` (its
+    relay adds no linear stiffness). Used by the feedback-path stability bound."""
+    if scheme is None:
+        c = pid.config()
+        return float(c.get("p", 0.0)), float(c.get("d", 0.0))
+    if isinstance(scheme, Cascade):
+        return scheme.kp_velocity * scheme.kp_position, scheme.kp_velocity
+    if isinstance(scheme, SlidingMode):
+        return scheme.k_s * scheme.lam, scheme.k_s
+    return float(scheme.kp), float(scheme.kd)
 
 
 def default_config() -> dict[str, Any]:
@@ -251,6 +270,13 @@ class CompensatingController:
         lc_a = check_real(
             "controller.limit_cycle_min_amplitude", cfg["limit_cycle_min_amplitude"], 0.0, unit="rad"
         )
+        lc_w = check_real("controller.limit_cycle_window", cfg["limit_cycle_window"], 0.005, 1.0, unit="s")
+        lc_h = check_real("controller.limit_cycle_hold", cfg["limit_cycle_hold"], 0.0, 1.0, unit="s")
+        if lc_w + lc_h > 0.1:
+            raise ParameterError(
+                f"controller.limit_cycle_window + limit_cycle_hold = {lc_w + lc_h:g} is out of range: "
+                "must be <= 0.1 [s] (the fallback must come within 0.1 s of an established limit cycle)"
+            )
         pid = Pid(cfg["pid"], prefix="controller.pid")
         friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
         scheme = None
@@ -279,9 +305,14 @@ class CompensatingController:
         self.scheme = scheme
         self._prev_cmd: float | None = None
         self.terms = ControllerTerms(mode=mode)
-        # stability bound of the feedback path (PID modes: the loop's damping is pid.d)
-        self.feedback_bound_note = friction.bound_feedback_damping(float(pid.config().get("d", 0.0)))
-        self.limit_cycle = LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a) if lc_on else None
+        # stability bound of the feedback path against the loop's linear gains (loop_gains)
+        self.loop_stiffness, self.loop_damping = loop_gains(mode, pid, scheme)
+        self.feedback_bound_note = friction.bound_feedback(self.loop_stiffness, self.loop_damping)
+        self.limit_cycle = (
+            LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a, window=lc_w, hold=lc_h)
+            if lc_on
+            else None
+        )
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
         self.fallback_reason = ""
 
@@ -309,6 +340,7 @@ class CompensatingController:
             self.friction.set_model(dict(coefficients))
         else:
             self.friction.set_coefficients(**coefficients)
+        self.feedback_bound_note = self.friction.bound_note
         self._cfg["friction"]["model"] = (
             None if self.friction.model is None else self.friction.model.to_config()
         )
@@ -316,6 +348,9 @@ class CompensatingController:
     def set_pid_gains(self, **gains: Any) -> None:
         """Change PID parameters at run time (control_toolbox names), validated."""
         self.pid.set_gains(**gains)
+        if self.scheme is None:  # the feedback-path bound follows the loop gains
+            self.loop_stiffness, self.loop_damping = loop_gains(self.mode, self.pid, None)
+            self.feedback_bound_note = self.friction.bound_feedback(self.loop_stiffness, self.loop_damping)
 
     def reset(self) -> None:
         """Clear integrators, filters, observer and dynamic-model states."""
@@ -400,6 +435,7 @@ class CompensatingController:
             command_unlimited=unlimited,
             command=cmd,
             saturated=bool(sat),
+            compensation_fallback=self.compensation_fallback,
         )
         return self.terms
 
