@@ -12,7 +12,10 @@ before the run; a breakaway ramp counts with its longest possible duration):
 ``plateaus``   seed 004 B.3 exp. 2: constant-velocity plateaus at ``count`` log-spaced speeds in
                [v_min, v_max], both directions (+v then -v at each speed, so the joint returns), each
                ``settle`` (transient, discarded: seed 004 0.2 s) + ``hold`` s, ``repeats`` times
-               (seed 004: 5). Tracked by the internal velocity PI (``velocity_loop``).
+               (seed 004: 5). Tracked by the internal velocity PI (``velocity_loop``). A plateau at
+               speed ``v`` settles at least ``settle_travel / v`` and holds at least ``hold_travel / v``
+               seconds (default 0: fixed times), so slow plateaus cover a distance: enough encoder
+               counts, and several stick-slip cycles below the Stribeck velocity.
 ``breakaway``  seed 004 B.3 exp. 1: open-loop torque ramp, first a preload to ``start`` (ramped over 60 % of
                ``preload_time``, held for the rest so the joint comes to rest), then steps of ``step`` N*m every ``step_time`` s until the joint moves
                ``counts`` encoder counts (``resolution`` rad per count) within one step, then release
@@ -85,7 +88,16 @@ DEFAULTS: dict[str, Any] = {
     "bias": 0.0,
     "limits": {"max_travel": 100.0, "max_velocity": 40.0, "max_torque": 2.5, "on_limit": "stop"},
     "velocity_loop": {"p": 0.5, "i": 20.0, "torque_limit": 2.0, "inertia": 0.0, "remember_integral": True},
-    "plateaus": {"v_min": 0.1, "v_max": 10.0, "count": 6, "settle": 0.2, "hold": 0.5, "repeats": 3},
+    "plateaus": {
+        "v_min": 0.1,
+        "v_max": 10.0,
+        "count": 6,
+        "settle": 0.2,
+        "hold": 0.5,
+        "repeats": 3,
+        "settle_travel": 0.0,
+        "hold_travel": 0.0,
+    },
     "breakaway": {
         "start": 0.6,
         "step": 0.002,
@@ -205,6 +217,8 @@ def _validate(c: dict) -> None:
     check_real("plateaus.settle", p["settle"], 0.0, 60.0, unit="s")
     check_real("plateaus.hold", p["hold"], 0.0, 600.0, lo_open=True, unit="s")
     check_int("plateaus.repeats", p["repeats"], 1, 1000)
+    check_real("plateaus.settle_travel", p["settle_travel"], 0.0, unit="rad")
+    check_real("plateaus.hold_travel", p["hold_travel"], 0.0, unit="rad")
     if p["v_max"] >= lim["max_velocity"]:
         raise ParameterError(
             f"plateaus.v_max = {p['v_max']:g} is out of range: must be < limits.max_velocity "
@@ -422,8 +436,10 @@ def _plateau_segments(c: dict) -> list[Segment]:
     i = 0
     for _ in range(p["repeats"]):
         for s in speeds:  # high to low: the remembered integral follows the friction curve
+            settle = max(p["settle"], p["settle_travel"] / float(s))
+            hold = max(p["hold"], p["hold_travel"] / float(s))
             for sgn in (1.0, -1.0):
-                segs.append(Plateau(i, sgn * float(s), p["settle"], p["hold"]))
+                segs.append(Plateau(i, sgn * float(s), settle, hold))
                 i += 1
     return segs
 

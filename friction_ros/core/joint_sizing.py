@@ -16,24 +16,35 @@ With viscous damping ``B`` (friction's viscous part, back-EMF of a voltage drive
 gives ``atan(w_c J/B) + atan(w_c tau) + w_c T = 90 + atan(a) - PM``, solved for ``w_c`` by
 bisection; then ``|L(j w_c)| = 1`` gives ``K_d = |B + j J w_c| / (sqrt(1 + 1/a^2) g)`` with ``g``
 the lag's gain at ``w_c``. Defaults: ``PM = 45 deg``, ``a = 4`` (zero a factor four below the crossover).
-The velocity loop of the experiment is the same law on the velocity error's integral (its ``p``
-is the PD's ``K_d``, its ``i`` the PD's ``K_p``), which is why it doubles as the position-loop
-gains of the plateaus.
+Encoder bound: one count reads as ``count_velocity = resolution / max(filter, period)`` in
+the measured velocity; ``K_d count_velocity <= (torque_limit - |load|) / 2``, else both gains are
+scaled down (same zero, lower crossover). The velocity loop of the experiment is the same law on
+the velocity error's integral (its ``p`` is the PD's ``K_d``, its ``i`` the PD's ``K_p``), which is
+why it doubles as the position-loop gains of the plateaus.
 
-**Experiment rule** (seed 004 B.3 procedures, seed 003 A.3 excitation, scaled):
+**Experiment rule** (seed 004 B.3 procedures, seed 003 A.3 excitation, scaled), ``F_b`` the
+breakaway estimate, ``F_c`` the Coulomb level, ``v_s`` the Stribeck velocity (1/e of the drop):
 
+* control period = the joint's (the preset's ``control_period``);
+* plateau settle ``max(0.2 s, 10 tau, 50 T, 10 / w_c)``; fastest plateau
+  ``v_max = min(0.4 v_limit, T_a / (2 (B + 2 J / settle)), travel / (2 (settle + hold)))`` with
+  ``T_a = torque_limit - |load| - F_b`` (reached within half the settle, held against damping);
+* below ``v_s`` the joint sticks until the loop's integral has risen by ``F_b - F_c``: the
+  reference runs ahead by ``d = (F_b - F_c) / K_p`` and stick-slip repeats about every ``d``.
+  Every plateau settles over at least ``1.5 d`` and holds over at least ``max(5 d, 10 counts)``
+  (``settle_travel``/``hold_travel``), so its mean speed is within ~20 % even when it stick-slips;
+  lowest plateau ``v_min = max(v_s / 2, min(v_d, 0.8 v_s))`` with ``v_d`` the speed covering that
+  distance in 8 s (quick) / 16 s (default); ``max(v_d, 1e-3 v_limit)`` when ``v_s`` is unknown;
+  5 (quick) / 8 (default) log-spaced speeds, both directions, so the joint returns;
 * torque ceiling ``max_torque = min(torque_limit, 4 F_b + |load| + 2 J v_max / settle + 1.5 B v_max)``;
-* plateau speeds log-spaced from ``v_min`` to ``v_max``: ``v_min`` is the larger of what the
-  encoder resolves (``20`` counts over the hold) and a fifth of the Stribeck velocity when it is
-  known (so the lowest plateaus lie below it); ``v_max = min(0.4 v_limit, travel / (2 (settle +
-  hold)))``; hold long enough for ``v_min`` to cover 20 counts (at most 2 s);
-* breakaway ramp: preload ``0.5 F_b``, up to ``min(3 F_b, max_torque)``, steps from ``F_b / 200``
+* breakaway ramp: preload ``0.5 F_b``, up to ``min(3 F_b, max_torque - |load|)``, steps from ``F_b / 200``
   (coarser if the ramp would exceed its time budget) held long enough that the joint, once it
   slides, moves 2 counts within one step (``(step / J) t^2 / 2 >= 2 resolution``);
-* presliding and chirp torques as fractions of ``F_b`` (0.4/0.8, and 1.2 -> 0.5);
-* the random velocity's RMS amplitude ``min(v_max / 2, ...)``;
+* presliding and chirp torques as fractions of ``F_b`` (0.4/0.8 or 0.3/0.6/0.85, and 1.3 -> 0.5);
+* the random velocity's RMS amplitude ``min(v_max / 2, max(3 v_min, v_max / 10))``;
+* limits: travel, speed (at least 1.5 counts per period), the torque ceiling;
 * a constant load (gravity) is added to every open-loop torque (``bias``) so the ramps and cycles
-  are centred on the torque that holds the joint.
+  are centred on the torque that holds the joint; the velocity loop's integral holds it too.
 """
 
 from __future__ import annotations
@@ -54,6 +65,8 @@ LINEAR_TRAVEL = 0.3
 #: travel of a rotary joint when none is given [rad]
 ROTARY_TRAVEL = 100.0
 DEFAULT_PHASE_MARGIN = 45.0
+#: share of the available torque one encoder count may command through the derivative gain
+ENCODER_TORQUE_SHARE = 0.5
 ZERO_RATIO = 4.0
 
 
@@ -75,6 +88,7 @@ class JointScale:
     coulomb: float = math.nan
     viscous: float = 0.0
     damping: float = math.nan
+    velocity_filter: float = 0.0
 
     def __post_init__(self) -> None:
         check_real("breakaway", self.breakaway, 0.0, lo_open=True, unit="N*m")
@@ -86,6 +100,7 @@ class JointScale:
         check_real("period", self.period, 1e-5, 0.1, unit="s")
         check_real("current_lag", self.current_lag, 0.0, unit="s")
         check_real("delay", self.delay, 0.0, unit="s")
+        check_real("velocity_filter", self.velocity_filter, 0.0, unit="s")
         check_real("load", self.load, None, unit="N*m")
         if not math.isfinite(self.damping):
             object.__setattr__(self, "damping", float(self.viscous))
@@ -118,8 +133,13 @@ class JointScale:
         )
 
     @classmethod
-    def from_preset(cls, preset, period: float = 1e-3, **overrides: Any) -> JointScale:
-        """A simulated joint: the scale a probe would measure on ``preset`` (a loaded Preset)."""
+    def from_preset(cls, preset, period: float | None = None, **overrides: Any) -> JointScale:
+        """A simulated joint: the scale a probe would measure on ``preset`` (a loaded Preset).
+
+        ``period``: the control period [s], by default the preset's ``control_period`` (the plant
+        node steps at it, so the program and the loops run at it too)."""
+        if period is None:
+            period = float(getattr(preset, "control_period", 0.0) or 1e-3)
         p = preset.params
         r = p.ratio
         eta = p.gear_efficiency
@@ -164,8 +184,8 @@ class JointScale:
         lag = p.current_time_constant if p.actuation == "current" else 0.0
         if p.actuation == "voltage" and p.resistance > 0:
             lag = p.inductance / p.resistance
-        if p.velocity_filter_hz > 0:
-            lag += 1.0 / (2.0 * math.pi * p.velocity_filter_hz)
+        v_filter = 1.0 / (2.0 * math.pi * p.velocity_filter_hz) if p.velocity_filter_hz > 0 else 0.0
+        lag += v_filter
         J = p.reflected_inertia * r * r * eta
         scale = cls(
             breakaway=breakaway,
@@ -182,8 +202,15 @@ class JointScale:
             coulomb=coulomb,
             viscous=viscous,
             damping=damping,
+            velocity_filter=v_filter,
         )
         return replace(scale, **overrides) if overrides else scale
+
+    @property
+    def count_velocity(self) -> float:
+        """Velocity read when the encoder steps by one count [rad/s or m/s]: ``resolution /
+        max(velocity_filter, period)`` (a differenced count, smoothed by the velocity filter)."""
+        return self.resolution / max(self.velocity_filter, self.period)
 
     @property
     def loop_delay(self) -> float:
@@ -221,42 +248,76 @@ def crossover(
     return lo
 
 
-def tracking_gains(
-    scale: JointScale, phase_margin_deg: float = DEFAULT_PHASE_MARGIN, a: float = ZERO_RATIO
-) -> dict[str, float]:
-    """PD gains for position tracking on ``J s^2`` with lag and delay (module docstring's rule)."""
+def _pd_design(scale: JointScale, phase_margin_deg: float, a: float) -> tuple[float, float, float]:
+    """``(K_p, K_d, w_c)`` of the phase-margin rule with the encoder bound (see tracking_gains)."""
     ratio = scale.inertia / scale.damping if scale.damping > 0 else math.inf
     wc = crossover(scale.current_lag, scale.loop_delay, phase_margin_deg, a, ratio)
     lag_gain = 1.0 / math.sqrt(1.0 + (wc * scale.current_lag) ** 2)
     # |C(j w_c)| |P(j w_c)| g = 1 with |C| = K_d w_c sqrt(1 + 1/a^2), |P| = 1 / (w_c |B + j J w_c|)
     plant = math.hypot(scale.damping, scale.inertia * wc)
     kd = plant / (math.sqrt(1.0 + 1.0 / (a * a)) * lag_gain)
-    return {"p": kd * wc / a, "d": kd}
+    kp = kd * wc / a
+    k = ENCODER_TORQUE_SHARE * (scale.torque_limit - abs(scale.load)) / (kd * scale.count_velocity)
+    if k >= 1.0:
+        return kp, kd, wc
+    # lower gains, same zero w_z = w_c / a: the crossover falls to w_c' where
+    # K_d' |j w_c' + w_z| = w_c' |B + j J w_c'| (the lag and delay phase only shrink)
+    kd_b, wz = kd * k, wc / a
+    lo, hi = 0.0, wc
+    for _ in range(100):
+        w = 0.5 * (lo + hi)
+        gain = kd_b * math.hypot(w, wz) / (w * math.hypot(scale.damping, scale.inertia * w))
+        lo, hi = (w, hi) if gain > 1.0 else (lo, w)
+    return kd_b * wz, kd_b, lo
+
+
+def tracking_gains(
+    scale: JointScale, phase_margin_deg: float = DEFAULT_PHASE_MARGIN, a: float = ZERO_RATIO
+) -> dict[str, float]:
+    """PD gains ``{"p": K_p, "d": K_d}`` for position tracking (module docstring's phase-margin rule).
+
+    Encoder bound: the derivative acts on the measured velocity, in which one encoder count reads
+    as ``count_velocity``; ``K_d count_velocity <= (torque_limit - |load|) / 2`` keeps a single count
+    from saturating the drive (a coarse encoder otherwise drives a count-sized limit cycle). When it
+    binds, both gains are scaled down together (same zero, lower crossover, more phase margin).
+    """
+    kp, kd, _ = _pd_design(scale, phase_margin_deg, a)
+    return {"p": kp, "d": kd}
+
+
+def tracking_crossover(scale: JointScale, phase_margin_deg: float = DEFAULT_PHASE_MARGIN) -> float:
+    """Crossover [rad/s] of the loop closed with :func:`tracking_gains` (encoder bound included)."""
+    return _pd_design(scale, phase_margin_deg, ZERO_RATIO)[2]
 
 
 def tracking_reference(scale: JointScale, duration: float = 20.0, seed: int = 1) -> dict[str, Any]:
-    """Band-limited random position reference sized to the joint.
+    """Band-limited random position reference sized to the joint (``references`` config format).
 
-    Amplitude: the RMS speed of a band-limited random signal of amplitude ``A`` and cut-off ``f_c``
-    is about ``A 2 pi f_c / sqrt(3)``; ``f_c`` = 1 Hz or a decade below the tracking loop's
-    crossover, whichever is lower, and ``A`` so that the RMS speed is a few
-    Stribeck velocities (or 0.2 of the plateau range), within a fifth of the travel and a tenth of
-    the speed limit: the joint reverses often and spends its time where friction dominates.
+    The RMS speed of a band-limited random signal of amplitude ``A`` and cut-off ``f_c`` is about
+    ``A 2 pi f_c / sqrt(3)``. ``f_c`` = 1 Hz or a decade below the crossover of
+    :func:`tracking_gains`, whichever is lower; ``A`` so that the RMS speed is three Stribeck
+    velocities (2 % of the speed limit when unknown, at least 30 counts/s), and at least three times
+    the PD's dead band ``F_b / K_p`` (a smaller reference would leave the joint stuck); within a fifth
+    of the travel; ``f_c`` lowered if the RMS speed would exceed a tenth of the speed limit. The
+    joint then reverses about ``2 f_c`` times a second and spends its time at friction-dominated
+    speeds.
     """
-    ratio = scale.inertia / scale.damping if scale.damping > 0 else math.inf
-    wc = crossover(scale.current_lag, scale.loop_delay, damping_ratio=ratio)
-    cutoff = min(1.0, wc / (2.0 * math.pi) / 10.0)  # a decade below the tracking loop's crossover
+    kp, _, wc = _pd_design(scale, DEFAULT_PHASE_MARGIN, ZERO_RATIO)
+    cutoff = min(1.0, wc / (2.0 * math.pi) / 10.0)
     v_target = (
         3.0 * scale.stribeck_velocity if math.isfinite(scale.stribeck_velocity) else 0.02 * scale.speed_limit
     )
     v_target = min(v_target, 0.1 * scale.speed_limit)
     v_target = max(v_target, 30.0 * scale.resolution)  # 30 counts per second at least
     amp = v_target * math.sqrt(3.0) / (2.0 * math.pi * cutoff)
-    amp = min(amp, 0.2 * scale.travel)
+    amp = min(max(amp, 3.0 * scale.breakaway / kp), 0.2 * scale.travel)
+    v_rms = amp * 2.0 * math.pi * cutoff / math.sqrt(3.0)
+    if v_rms > 0.1 * scale.speed_limit:
+        cutoff *= 0.1 * scale.speed_limit / v_rms
     return {
         "type": "band_limited_random",
         "amplitude": float(amp),
-        "cutoff": cutoff,
+        "cutoff": float(cutoff),
         "duration": float(duration),
         "seed": int(seed),
     }
@@ -289,39 +350,57 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     quick = profile == "quick"
     Fb = scale.breakaway
     load = scale.load
-    settle = max(0.2, 10.0 * scale.current_lag, 50.0 * scale.loop_delay)
-    v_cap = 0.4 * scale.speed_limit
-    if scale.damping > 0:  # the speed the actuator can hold against viscous damping, with margin
-        v_cap = min(v_cap, 0.4 * max(scale.torque_limit - abs(load) - Fb, 0.0) / scale.damping)
-    # ramps to 3x breakaway (4x ceiling), plus what accelerates the inertia to the fastest plateau within the settle time
-    t_max = min(
-        scale.torque_limit,
-        4.0 * Fb + abs(load) + 2.0 * scale.inertia * v_cap / settle + 1.5 * scale.damping * v_cap,
-    )
-    # velocity (= position) loop
-    g = tracking_gains(scale)
-    c["dt"] = scale.period
-    c["velocity_loop"].update(
-        p=float(g["d"]), i=float(g["p"]), torque_limit=float(t_max - abs(load)), inertia=float(scale.inertia)
-    )
-    # plateaus
-    p = c["plateaus"]
-    v_enc = 20.0 * scale.resolution / 1.0
+    J, B = scale.inertia, scale.damping
+    g = tracking_gains(scale)  # the velocity loop is the same law: p = K_d, i = K_p
+    ki = float(g["p"])
+    wc = tracking_crossover(scale)
+    counts = 10  # counts a plateau hold must cover: the hold's mean speed is then within 10 %
+    low_time = 8.0 if quick else 16.0  # settle + hold of the lowest plateau at most [s]
+    settle = max(0.2, 10.0 * scale.current_lag, 50.0 * scale.loop_delay, 10.0 / wc)
+    # below the Stribeck velocity the joint sticks until the loop's integral (K_p times the position
+    # error) has risen from the Coulomb level to the breakaway torque: the reference runs ahead by
+    # d = (F_b - F_c) / K_p, whatever the speed, and stick-slip repeats about every d of travel.
+    # A plateau settles over 1.5 d and holds over 5 d (and `counts` counts), so its mean is within
+    # about 20 % even when it stick-slips; the lowest speed keeps that within `low_time`.
+    drop = max(Fb - scale.coulomb, 0.0) if math.isfinite(scale.coulomb) else 0.0
+    d_stick = drop / ki
+    settle_travel = 1.5 * d_stick
+    hold_travel = max(counts * scale.resolution, 5.0 * d_stick)
+    v_time = (settle_travel + hold_travel) / low_time
     vs = scale.stribeck_velocity
-    v_min = max(v_enc, vs / 5.0) if math.isfinite(vs) else max(v_enc, 1e-3 * scale.speed_limit)
-    hold = min(max(0.5, 20.0 * scale.resolution / v_min), 2.0)
+    if math.isfinite(vs):
+        v_min = max(0.5 * vs, min(v_time, 0.8 * vs))
+    else:
+        v_min = max(v_time, 1e-3 * scale.speed_limit)
+    hold = 0.5
+    # fastest plateau: a fraction of the speed limit that the torque left after load and breakaway
+    # can reach within half the settle (inertia) and hold (damping): v (B + 2 J / settle) <= T_a / 2
+    t_avail = max(scale.torque_limit - abs(load) - Fb, 0.0)
+    v_cap = min(0.4 * scale.speed_limit, 0.5 * t_avail / (B + 2.0 * J / settle))
+    # ramps to 3x breakaway (4x ceiling), plus what accelerates the inertia to the fastest plateau
+    t_max = min(scale.torque_limit, 4.0 * Fb + abs(load) + 2.0 * J * v_cap / settle + 1.5 * B * v_cap)
+    c["dt"] = scale.period
+    c["velocity_loop"].update(p=float(g["d"]), i=ki, torque_limit=float(t_max - abs(load)), inertia=float(J))
+    p = c["plateaus"]
     v_max = min(v_cap, 0.5 * scale.travel / (settle + hold))
     if v_max <= v_min * 1.5:
         v_min = v_max / 10.0
-        hold = min(max(0.5, 20.0 * scale.resolution / v_min), 2.0)
     count = 5 if quick else 8
-    p.update(v_min=float(v_min), v_max=float(v_max), count=count, settle=float(settle), hold=float(hold))
+    p.update(
+        v_min=float(v_min),
+        v_max=float(v_max),
+        count=count,
+        settle=float(settle),
+        hold=float(hold),
+        settle_travel=float(settle_travel),
+        hold_travel=float(hold_travel),
+    )
     p["repeats"] = 1 if quick else 2
     # breakaway ramps: a step must move the joint `counts` counts within one step once it breaks
     # away, x = (step / J) t^2 / 2 >= counts * resolution, so the step time follows from the step;
     # the ramp from 0.5 F_b to 2.5 F_b must fit the time budget (coarse steps for a coarse encoder)
     b = c["breakaway"]
-    counts = 2
+    counts = 2  # seed 004 B.3: "moves" = at least 2 encoder counts
     thr = counts * scale.resolution
     b_max = min(3.0 * Fb, t_max - abs(load))
     start = 0.5 * Fb
