@@ -144,7 +144,9 @@ def _oscillates(res, period: float):
     det = LimitCycleDetector()
     e = res.reference[:, 0] - res.position
     for k in range(e.size):
-        if det.update(res.t[k], e[k], res.command[k], res.reference[k, 1], res.position[k], period):
+        if det.update(
+            res.t[k], e[k], res.command[k], res.reference[k, 1], res.position[k], period, res.reference[k, 0]
+        ):
             return det
     return None
 

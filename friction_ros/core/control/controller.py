@@ -314,6 +314,9 @@ class CompensatingController:
             else None
         )
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
+        # only a feedback path puts the compensation inside the loop: a feedforward term is a function
+        # of the reference and cannot make the loop oscillate by itself (so it is not watched)
+        self._watch = friction.model is not None and friction.gain > 0.0 and friction.weights[1] > 0.0
         self.fallback_reason = ""
 
     def config(self) -> dict[str, Any]:
@@ -408,8 +411,8 @@ class CompensatingController:
             sat = cmd != unlimited
         self._prev_cmd = cmd
         lc = self.limit_cycle
-        if lc is not None and not self.compensation_fallback and (f_ff != 0.0 or f_fb != 0.0):
-            if lc.update(t, e, cmd, r_vel, pos, dt):
+        if lc is not None and not self.compensation_fallback and self._watch:
+            if lc.update(t, e, cmd, r_vel, pos, dt, r_pos):
                 self.compensation_fallback = True
                 self.fallback_reason = (
                     f"compensation-induced limit cycle ({lc.frequency:.0f} Hz, error {lc.amplitude:.3g} RMS, "
