@@ -460,7 +460,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early
-    scale = JointScale.from_preset(preset)
+    scale = JointScale.from_preset(preset, period=GRAPH_PERIOD)  # the ROS graph runs at 1 kHz
     res = DemoResult(preset=preset_name)
     results_dir.mkdir(parents=True, exist_ok=True)
     stamp = time.strftime("%Y%m%d_%H%M%S")

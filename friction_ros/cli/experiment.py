@@ -176,6 +176,8 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
     return "\n".join(lines)
 
 
+# the control period of the experiment node and the plant in the ROS graph (their default)
+NODE_PERIOD = 1e-3
 PROBE = ("breakaway", "inertia", "torque_limit", "speed_limit", "travel", "resolution")
 
 
@@ -192,7 +194,7 @@ def sized_config(args, preset) -> dict:
             )
         return {}
     if preset is not None:
-        scale = JointScale.from_preset(preset, **given)
+        scale = JointScale.from_preset(preset, period=NODE_PERIOD, **given)
     else:
         missing = [k for k in PROBE if k not in given]
         if missing:
@@ -201,7 +203,7 @@ def sized_config(args, preset) -> dict:
                 + ", ".join("--" + k.replace("_", "-") for k in missing)
                 + " (or --sizing profile)"
             )
-        scale = JointScale.from_probe(**given)
+        scale = JointScale.from_probe(**given, period=NODE_PERIOD)
     return experiment_config(scale, args.profile)
 
 
