@@ -111,16 +111,17 @@ def test_a_good_model_is_enabled_and_the_file_carries_the_verdicts(abb):
     preset, scale = abb
     truth = preset.friction.to_config()
     v = _gate(truth, tracking_gains(scale), scale)
-    assert all(x.enabled for x in v.values()), {m: x.reason for m, x in v.items()}
     assert all(len(x.cases) == 5 for x in v.values())  # nominal + forces +-20 % + presliding +-20 %
-    # the soft tuned loop (Kp 11.4): feed-forward 80 % lower; the feedback path's stiffness is bounded
-    # to Kp/2 = 5.7 N*m/rad (truth 617.5), which leaves it harmless but useless (measured ratio 1.00;
-    # 0.64 without the bound): the file recommends feed-forward
-    assert v["feedforward"].worst_ratio < 0.8 and v["feedback"].worst_ratio <= 1.02
+    # the soft tuned loop (Kp ~11 N*m/rad): feed-forward is enabled and helps in every case; the
+    # feedback path's stiffness is bounded to Kp/2 (truth 617.5 N*m/rad), which leaves pure feedback
+    # without benefit (measured 0.93-1.07 of the uncompensated RMS: refused when above 1.02)
+    assert v["feedforward"].enabled and v["feedforward"].worst_ratio < 0.8, _summary(v)
+    assert v["feedback"].worst_ratio > 0.9 and "limited for loop stability" in v["feedback"].reason
     assert compensation_section(v)["source"] == "feedforward"
     # the stiffer seed 003 PD: every mode helps in every case (measured worst 0.58, 0.72, 0.36)
     v = _gate(truth, SEED003_PD, scale, reference=REF)
     assert all(x.enabled and x.worst_ratio < 0.8 for x in v.values()), _summary(v)
+    assert compensation_section(v)["source"] == "blended" and "refused" not in compensation_section(v)
     bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
     sec = compensation_section(bad)
     refused = [m for m, x in bad.items() if not x.enabled]

@@ -246,12 +246,12 @@ def gate_modes(
                     "peak_command": u_peak,
                 }
             )
-            if cycle:
+            if not math.isfinite(ratio) or ratio > 10.0:
+                refused.append(f"unstable: the error grows without bound with plant friction {label}")
+            elif cycle:
                 refused.append(
                     f"limit cycle ({lc.frequency:.0f} Hz, not in the reference) with plant friction {label}"
                 )
-            elif not math.isfinite(ratio) or ratio > 10.0:
-                refused.append(f"unstable: the error grows without bound with plant friction {label}")
             elif u_peak > command_limit:
                 refused.append(
                     f"saturates: peak command {u_peak:.3g} above the limit {command_limit:g} "
