@@ -190,3 +190,35 @@ def test_the_feedback_path_bound_limits_damping_and_stiffness():
         assert CompensatingController({"pid": pd, "friction": f}).feedback_bound_note == ""
     with pytest.raises(ParameterError, match="feedback_bound"):
         CompensatingController({"friction": {"model": BAD_LUGRE, "feedback_bound": 1.5}})
+
+
+@pytest.mark.ros
+def test_the_node_refuses_a_refused_source_from_the_fitted_file(tmp_path, abb):
+    import subprocess
+    import sys
+
+    from friction_ros.core.identification.export import dump_yaml
+
+    _, scale = abb
+    bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
+    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD)
+    sec = doc["compensating_controller"]["ros__parameters"]
+    assert "feedback" in sec["compensation"]["refused"]
+
+    def start(source, allow):
+        sec["compensation"] = {**sec["compensation"], "source": source, "allow_refused": allow}
+        path = tmp_path / f"{source}_{allow}.yaml"
+        path.write_text(dump_yaml(doc))  # what friction-fit writes
+        cmd = [sys.executable, "-m", "friction_ros.nodes.compensating_controller", "--ros-args"]
+        try:
+            return subprocess.run(
+                [*cmd, "--params-file", str(path)], capture_output=True, text=True, timeout=8
+            )
+        except subprocess.TimeoutExpired as exc:  # started and kept running
+            return exc
+
+    out = start("feedback", False)
+    assert out.returncode == 2 and "Traceback" not in out.stderr, out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if "refused by the safety gate" in ln]
+    assert len(lines) == 1 and "allow_refused" in lines[0]
+    assert isinstance(start("feedback", True), subprocess.TimeoutExpired)  # explicit override: runs
