@@ -23,6 +23,16 @@ Modes (``mode``):
 ``sliding_mode``    seed 000 sliding mode / relay (section ``sliding_mode``).
 
 Friction compensation (section ``friction``, :mod:`.compensation`) is added in every mode.
+Safety (feedback paths only, i.e. sources feedback / blended / observer):
+
+* stability bound (:meth:`.compensation.FrictionCompensator.bound_feedback`, ``friction.feedback_bound``
+  f = 0.5): the presliding stiffness and damping fed back satisfy ``g w_fb k_hat <= f K_p`` and
+  ``g w_fb sigma1 <= f K_d`` with (K_p, K_d) from :func:`loop_gains`; ``feedback_bound_note`` says
+  what was limited ('' when nothing);
+* run-time limit-cycle detector (:mod:`.limit_cycle`, ``limit_cycle_*`` keys): when it fires, friction
+  compensation is switched off and latched (``compensation_fallback``, ``fallback_reason``, also in
+  :class:`ControllerTerms`) until the controller is rebuilt or reconfigured.
+
 The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`` and ``terms``
 (a :class:`ControllerTerms`, the fields of friction_msgs/ControllerState).
 """
