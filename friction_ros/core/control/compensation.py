@@ -15,6 +15,10 @@ Terms (N*m, added to the command; friction opposes motion so compensation has th
   estimate while the joint lags the reference). For non-LuGre models ``observer`` falls back to
   ``feedback``.
 
+Feedback-path stability bound (``feedback_bound`` f, default 0.5; :meth:`FrictionCompensator.bound_feedback`):
+the presliding stiffness/damping of a dynamic model fed back from measured motion is limited to
+``g w_fb k_hat <= f K_p`` and ``g w_fb sigma1 <= f K_d`` of the loop's gains.
+
 ``g_c`` is the compensation gain (seed 001 used 0.95 so that a slightly over-estimating model does
 not act as negative friction, extract section 6.1 / 9 item 9).
 
@@ -246,6 +250,12 @@ class FrictionCompensator:
         (the presliding range ``g(v)/sigma0`` grows accordingly; the sliding levels fc, fs, fv are
         unchanged). The feedforward path (driven by the reference) is not affected. Static models
         have no presliding terms: nothing to bound here, the safety gate judges them.
+
+        Measured (abb_m19s, PD 200/0.15, fitted LuGre sigma0 = 1e5, sigma1 = 0.9 in feedback, 10 s
+        band-limited random): unbounded 29.0 mrad RMS (56 Hz limit cycle; none 3.28); the sigma1
+        bound alone 29.0 (the stiff bristles switch the full Coulomb level within 10 urad while the
+        joint's build up over mrad); both bounds 1.36. Cost: in a soft loop (K_p ~ 11 N*m/rad) the
+        bounded presliding stiffness leaves pure feedback compensation without benefit.
         """
         m = self._fb_model
         _wff, wfb = self.weights
