@@ -174,8 +174,8 @@ def test_nmse_definition_and_recommendation():
     assert abs(metrics.nmse_percent(np.full_like(y, y.mean()), y) - 100.0) < 1e-9
     assert metrics.nmse_percent(y, y) == 0.0
     m = {
-        "a": {"bic": -100.0, "nmse_low_percent": 1.0, "n_params": 15},
-        "b": {"bic": -99.0, "nmse_low_percent": 1.01, "n_params": 9},
+        "a": {"bic": -100.0, "nmse_percent": 1.0, "nmse_low_percent": 1.0, "n_params": 15},
+        "b": {"bic": -99.0, "nmse_percent": 1.01, "nmse_low_percent": 1.01, "n_params": 9},
     }
     assert metrics.recommend(m) == "b"
 

@@ -317,9 +317,14 @@ def moving_mask(v: np.ndarray, resolution: float, dt: float) -> np.ndarray:
     count per 20 ms: below it a differentiated position is quantisation noise, not motion.
     """
     v = np.asarray(v, dtype=float)
+    return np.abs(v) > motion_floor(v, resolution)
+
+
+def motion_floor(v: np.ndarray, resolution: float) -> float:
+    """The speed below which a differentiated position is noise (see :func:`moving_mask`)."""
+    v = np.asarray(v, dtype=float)
     noise = float(np.median(np.abs(np.diff(v)))) / math.sqrt(2.0) if v.size > 1 else 0.0
-    floor = max(3.0 * noise, resolution / 0.02 if resolution > 0 else 0.0, 1e-9)
-    return np.abs(v) > floor
+    return max(3.0 * noise, resolution / 0.02 if resolution > 0 else 0.0, 1e-9)
 
 
 def high_velocity_mask(
@@ -577,8 +582,8 @@ class Excitation:
 
 def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
     v = data.velocity
-    moving = moving_mask(v, data.resolution, data.dt)
-    floor = float(np.min(np.abs(v[moving]))) if moving.any() else 1e-9
+    floor = motion_floor(v, data.resolution)
+    moving = np.abs(v) > floor
     sv = np.sign(v[moving])
     rev = int(np.sum(sv[1:] != sv[:-1])) if sv.size > 1 else 0
     pv = [abs(p.velocity) for p in plateaus if abs(p.velocity) > 0]
