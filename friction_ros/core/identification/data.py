@@ -327,6 +327,24 @@ def motion_floor(v: np.ndarray, resolution: float) -> float:
     return max(3.0 * noise, resolution / 0.02 if resolution > 0 else 0.0, 1e-9)
 
 
+def standstill_mask(v: np.ndarray, resolution: float, dt: float, dwell: float = 0.5) -> np.ndarray:
+    """Samples of a standstill: a run at rest (not :func:`moving_mask`) longer than ``dwell`` s.
+
+    At rest the friction equals whatever torque holds the joint (anywhere within +-fs, seed 004
+    B.3; a drive switched off at the end of a log holds 0), so a standstill before, between or
+    after the experiments carries no information an output-error model can be scored on; the
+    whole run is left out. Shorter stops (reversals, pauses between plateaus) are kept.
+    """
+    v = np.asarray(v, dtype=float)
+    rest = ~moving_mask(v, resolution, dt)
+    out = np.zeros(v.shape, bool)
+    skip = max(int(round(dwell / dt)), 1)
+    for i0, i1 in _runs(rest):
+        if i1 - i0 > skip:
+            out[i0:i1] = True
+    return out
+
+
 def high_velocity_mask(
     v: np.ndarray, dt: float, threshold: float | None = None, moving: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:

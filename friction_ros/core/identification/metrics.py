@@ -71,17 +71,24 @@ def torque_noise_variance(y) -> float:
     return s * s
 
 
-def compare(y_hat, y, high_mask, k: int, low_mask=None, noise_var: float | None = None) -> dict:
+def compare(y_hat, y, high_mask, k: int, low_mask=None, noise_var: float | None = None, scored=None) -> dict:
     """All metrics of one model on validation data.
 
     ``high_mask``/``low_mask``: the high- and low-velocity *moving* samples (default low = not
     high). A subset with fewer than 200 samples or whose measured torque does not vary more than
-    its noise has NaN metrics and a ``*_note`` saying why, never a huge number.
+    its noise has NaN metrics and a ``*_note`` saying why, never a huge number. ``scored``: the
+    samples every metric (NMSE, AIC/BIC too) is computed on, default all; the pipeline leaves out
+    long standstills (:func:`~friction_ros.core.identification.data.standstill_mask`), where the
+    friction is whatever torque holds the joint and no model can be scored
+    (``n_rest_excluded`` counts them).
     """
     y_hat = np.asarray(y_hat, dtype=float)
     y = np.asarray(y, dtype=float)
     hm = np.asarray(high_mask, bool)
     lm = ~hm if low_mask is None else np.asarray(low_mask, bool)
+    sc = np.ones(y.shape, bool) if scored is None else np.asarray(scored, bool)
+    n_rest = int(np.sum(~sc))
+    y_hat, y, hm, lm = y_hat[sc], y[sc], hm[sc], lm[sc]
     nv = torque_noise_variance(y) if noise_var is None else float(noise_var)
     aic, bic = information_criteria(y_hat, y, k)
     nh, mh, note_h = _subset_metric(y_hat, y, hm, nv)
@@ -99,6 +106,7 @@ def compare(y_hat, y, high_mask, k: int, low_mask=None, noise_var: float | None 
         "n_samples": int(y.size),
         "n_high": int(np.sum(hm)),
         "n_low": int(np.sum(lm)),
+        "n_rest_excluded": n_rest,
     }
     if note_h:
         out["nmse_high_note"] = note_h

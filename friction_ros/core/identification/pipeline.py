@@ -276,6 +276,10 @@ def fit_records(
     mv = D.moving_mask(vall.velocity, vall.resolution, vall.dt)
     hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
     lm = mv & ~hm
+    # long standstills are not scored: at rest the friction is whatever torque holds the joint
+    scored = ~np.concatenate(
+        [D.standstill_mask(full.velocity, full.resolution, full.dt)[keep] for full, keep in val_from]
+    )
     results: dict[str, ModelResult] = {}
     warnings: list[str] = list(warnings_pre)
     grid = _grid(records)
@@ -326,7 +330,7 @@ def fit_records(
             )
             res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, train)
         yhat = predict_val(res)
-        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm)
+        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm, scored=scored)
         res.extra["validation_prediction"] = yhat
         results[name] = res
     for name in [n for n in names if n in LEARNED]:
@@ -343,7 +347,7 @@ def fit_records(
             f"learned ({src})",
             {"J": J, **dm.params()},
             None,
-            metrics.compare(yhat, vall.torque, hm, k + 1, low_mask=lm),
+            metrics.compare(yhat, vall.torque, hm, k + 1, low_mask=lm, scored=scored),
             {},
             time.perf_counter() - t0,
             dm.steady_state,

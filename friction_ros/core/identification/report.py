@@ -98,6 +98,10 @@ def _fmt(x, nd=4):
     return "nan" if not math.isfinite(f) else f"{f:.{nd}g}"
 
 
+def _n_rest(res) -> int:
+    return max((int(m.metrics.get("n_rest_excluded", 0)) for m in res.models.values()), default=0)
+
+
 def markdown(res, sources=None, plots: dict | None = None) -> str:
     L = ["# Friction identification report", ""]
     if sources:
@@ -120,7 +124,11 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)",
         f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
         f"{len(res.plateaus)} plateaus, {len(res.breakaways)} breakaway events",
-        f"- high/low velocity split: 1 s velocity RMS above/below {res.high_threshold:.3g} rad/s",
+        f"- high/low velocity split: 1 s velocity RMS of the *moving* samples above/below {res.high_threshold:.3g} rad/s "
+        "(samples at rest are in neither)",
+        f"- scored: every validation sample except standstills (at rest for more than 0.5 s: the friction there is "
+        f"whatever torque holds the joint; {_n_rest(res)} samples left out); a subset metric whose measured torque "
+        "varies no more than its noise, or with fewer than 200 samples, is n/a",
         "",
         "## Model comparison (validation data; seed 003 Table 1 analogue)",
         "",
@@ -140,6 +148,17 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         "Seed 003 Table 1 (paper, ABB M19-S): Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
         "GMS-4 0.40 / 1.39 %, GMS-10 0.38 / 1.19 % (high / low velocity).",
         "",
+    ]
+    na = sorted(
+        {
+            f"{k.split('_')[1]} velocity: {v}"
+            for m in res.models.values()
+            for k, v in m.metrics.items()
+            if k.endswith("_note")
+        }
+    )
+    L += [f"- n/a: {x}" for x in na] + ([""] if na else [])
+    L += [
         f"**Recommended model: {res.recommended}** ({(res.recommendation or {}).get('rule') or 'lowest validation BIC'}"
         + (f"; {res.recommendation['reason']}" if (res.recommendation or {}).get("reason") else "")
         + ").",
