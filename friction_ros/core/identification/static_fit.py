@@ -52,8 +52,13 @@ def stribeck_map(v: np.ndarray, c: dict) -> np.ndarray:
     return (fc + (fs - fc) * np.exp(-((av / vs) ** delta))) * np.sign(v) + fv * v
 
 
-def _fit_magnitude(av: np.ndarray, af: np.ndarray, model: str) -> tuple[dict, dict, float]:
-    """Fit |F| against |v| > 0 for one direction or both (mirrored)."""
+def _fit_magnitude(
+    av: np.ndarray, af: np.ndarray, model: str, fs_fixed: float | None = None
+) -> tuple[dict, dict, float]:
+    """Fit |F| against |v| > 0 for one direction or both (mirrored); ``fs_fixed``: the static level
+    measured by breakaway ramps (the Stribeck peak is then not extrapolated from the plateaus)."""
+    if model == "stribeck" and fs_fixed is not None:
+        return _fit_stribeck_fixed_peak(av, af, float(fs_fixed))
     if model == "coulomb":
         fc = float(np.median(af))
         s = float(np.std(af - fc, ddof=1) / np.sqrt(len(af))) if len(af) > 1 else 0.0
@@ -101,13 +106,53 @@ def _fit_magnitude(av: np.ndarray, af: np.ndarray, model: str) -> tuple[dict, di
     return coefs, dict(zip(names, map(float, se))), float(np.sqrt(np.mean(resid**2)))
 
 
+def _fit_stribeck_fixed_peak(av: np.ndarray, af: np.ndarray, fs: float) -> tuple[dict, dict, float]:
+    """Stribeck curve with F_S fixed: ``|F| - F_S e = F_C (1 - e) + F_v |v|``, ``e = exp(-|v/v_S|^delta)``."""
+    best = None
+    for vs in np.geomspace(max(av.min() / 30, 1e-6), av.max(), 50):
+        for delta in (0.5, 1.0, 1.5, 2.0, 3.0):
+            e = np.exp(-((av / vs) ** delta))
+            A = np.column_stack([1.0 - e, av])
+            x, rn = nnls(A, af - fs * e)
+            if best is None or rn < best[0]:
+                best = (rn, [x[0], vs, delta, x[1]])
+
+    def res(p):
+        fc, vs, delta, fv = p
+        return fc + (fs - fc) * np.exp(-((av / vs) ** delta)) + fv * av - af
+
+    lo = [0.0, 1e-6, 0.2, 0.0]
+    hi = [np.inf, 10.0, 5.0, np.inf]
+    x0 = np.clip(np.array(best[1]), np.array(lo) + 1e-12, hi)
+    r = least_squares(res, x0, bounds=(lo, hi), loss="soft_l1", f_scale=_scale(res(x0)), x_scale="jac")
+    fc, vs, delta, fv = map(float, r.x)
+    dof = max(len(af) - 4, 1)
+    s2 = float(np.sum(r.fun**2) / dof)
+    try:
+        se = np.sqrt(np.maximum(np.diag(s2 * np.linalg.pinv(r.jac.T @ r.jac)), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(4, np.nan)
+    coefs = {"fc": min(fc, fs), "fs": fs, "vs": vs, "delta": delta, "fv": fv}
+    stderr = {"fc": float(se[0]), "fs": 0.0, "vs": float(se[1]), "delta": float(se[2]), "fv": float(se[3])}
+    return coefs, stderr, float(np.sqrt(np.mean(r.fun**2)))
+
+
 def _scale(r: np.ndarray) -> float:
     mad = float(np.median(np.abs(r - np.median(r)))) * 1.4826
     return max(mad, 1e-3 * max(float(np.max(np.abs(r))), 1e-9), 1e-9)
 
 
-def fit_plateaus(plateaus: list[Plateau], model: str = "stribeck") -> StaticFit:
-    """Fit a static model to plateau means, per direction and jointly (see module docstring)."""
+def fit_plateaus(
+    plateaus: list[Plateau], model: str = "stribeck", breakaway: dict[int, float] | None = None
+) -> StaticFit:
+    """Fit a static model to plateau means, per direction and jointly (see module docstring).
+
+    ``breakaway``: measured breakaway torque magnitudes per direction (``{+1: ..., -1: ...}``, seed
+    004 B.3 experiment 1). With them the Stribeck peak ``F_S`` is the breakaway level and only
+    ``F_C, v_S, delta, F_v`` come from the plateaus: plateaus that do not reach below the Stribeck
+    velocity (the joint sticks and slips there under a velocity loop) say nothing about the peak,
+    and a free ``F_S`` is then an extrapolation.
+    """
     t0 = time.perf_counter()
     v = np.array([p.velocity for p in plateaus])
     f = np.array([p.torque for p in plateaus])
@@ -118,13 +163,15 @@ def fit_plateaus(plateaus: list[Plateau], model: str = "stribeck") -> StaticFit:
             "experiment (log-spaced speeds in both directions)"
         )
     av, af = np.abs(v), f * np.sign(v)
-    coefs, se, rms = _fit_magnitude(av, af, model)
+    brk = {d: float(x) for d, x in (breakaway or {}).items() if x and np.isfinite(x)}
+    fs_all = float(np.mean(list(brk.values()))) if brk else None
+    coefs, se, rms = _fit_magnitude(av, af, model, fs_all)
     per = {}
     asym = False
     pos, neg = v > 0, v < 0
     if pos.sum() > need and neg.sum() > need:
-        cp, sp, _ = _fit_magnitude(av[pos], af[pos], model)
-        cn, sn, _ = _fit_magnitude(av[neg], af[neg], model)
+        cp, sp, _ = _fit_magnitude(av[pos], af[pos], model, brk.get(1, fs_all))
+        cn, sn, _ = _fit_magnitude(av[neg], af[neg], model, brk.get(-1, fs_all))
         per = {"positive": cp, "negative": cn, "positive_stderr": sp, "negative_stderr": sn}
         for k in ("fc", "fs"):
             if k in cp:
