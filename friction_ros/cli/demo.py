@@ -567,6 +567,12 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             )
     if res.best == "none":
         res.warnings.append("no compensation mode is enabled: the parameter file compensates nothing")
+    elif res.reduction(res.best) < 10.0:
+        res.warnings.append(
+            f"friction compensation barely changes the tracking error on this joint (best {res.best}: "
+            f"{res.reduction(res.best):.1f} %): friction is a small part of it (loop bandwidth, backlash, "
+            "encoder resolution or an unmodelled effect dominate), or the fitted model explains little"
+        )
 
     _say("4/4 results")
     plot_tracking(res, results_dir / "tracking_error.png")
