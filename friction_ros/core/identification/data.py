@@ -302,6 +302,67 @@ def training_window(data: JointData, train_seconds: float = 10.0, step: float = 
     return best_i, best_i + w
 
 
+def training_segments(
+    data: JointData, train_seconds: float = 10.0, chunk: float | None = None
+) -> list[tuple[int, int]]:
+    """Sample ranges ``[i0, i1)`` for training, stratified by content so that training and
+    validation both see reversals, high and low speeds.
+
+    Rule (systematic stratified sampling): the record is cut into chunks at the experiment's
+    START events (one segment of the program each) and every ``chunk`` seconds (default
+    ``train_seconds / 4``, >= 1 s) within them; chunks mostly at rest (< 20 % moving) go to
+    validation. The others are sorted by (has a velocity reversal, RMS speed while moving) and
+    ``k`` evenly spaced ones in that order train, ``k`` the chunks needed for ``train_seconds``
+    but at most half of them, so both sets span the speed range, with and without reversals.
+    Adjacent training chunks are merged (dynamic states restart once per range).
+    """
+    check_real("train_seconds", train_seconds, 0.0, lo_open=True, unit="s")
+    n, dt = data.n, data.dt
+    if int(round(train_seconds / dt)) >= n - 10:
+        raise ExcitationError(
+            f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
+            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+        )
+    L = max(int(round((chunk or max(train_seconds / 4.0, 1.0)) / dt)), 2)
+    cuts = {0, n}
+    for e in data.events:
+        if e.event == START:
+            cuts.add(int(np.clip(np.searchsorted(data.t, e.time), 0, n)))
+    bounds = sorted(cuts)
+    chunks = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        k = max(int(round((b - a) / L)), 1)
+        edges = np.linspace(a, b, k + 1).round().astype(int)
+        chunks += [(int(x), int(y)) for x, y in zip(edges[:-1], edges[1:]) if y > x]
+    v = data.velocity
+    mv = moving_mask(v, data.resolution, dt)
+    feats = []
+    for a, b in chunks:
+        m = mv[a:b]
+        if np.mean(m) < 0.2:
+            continue
+        sv = np.sign(v[a:b][m])
+        rms = float(np.sqrt(np.mean(v[a:b][m] ** 2)))
+        feats.append((bool(np.any(sv[1:] != sv[:-1])), math.log(max(rms, 1e-12)), a, b))
+    feats.sort()
+    m = len(feats)
+    mean_len = float(np.mean([f[3] - f[2] for f in feats])) if m else 1.0
+    k = min(int(math.ceil(int(round(train_seconds / dt)) / mean_len)), int(math.ceil(m / 2)))
+    picked = (
+        [(feats[j][2], feats[j][3]) for j in sorted({int((i + 0.5) * m / k) for i in range(k)})] if k else []
+    )
+    if not picked:  # nothing moves in chunks: the most varied window
+        return [training_window(data, train_seconds)]
+    picked.sort()
+    merged = [list(picked[0])]
+    for a, b in picked[1:]:
+        if a <= merged[-1][1]:
+            merged[-1][1] = max(merged[-1][1], b)
+        else:
+            merged.append([a, b])
+    return [(a, b) for a, b in merged]
+
+
 # ------------------------------------------------------------------------------ velocity regimes
 def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarray:
     """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of seed 003's envelope."""
@@ -567,17 +628,19 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
         if not hits.size:
             break
         j = i + int(hits[0])
-        pre = tau[j - nd : j + 1]
         quiet = not np.any(slide[j - nd + w : j])  # no sliding in the ramp window before
-        rising = abs(pre[-w:]).max() > abs(pre[:w]).mean() + 0.02 * abs(pre).max()
-        if quiet and rising:
-            # onset: the first sample of that 50 ms window that moved more than 2 counts from its start
-            k0 = j - w
-            moved = np.nonzero(np.abs(pos[k0 : j + 1] - pos[k0]) >= thr)[0]
-            k = k0 + int(moved[0]) if moved.size else j
-            base = max(k - w, 0)
-            peak = base + int(np.argmax(np.abs(tau[base : k + 1])))
-            out.append(Breakaway(float(data.t[k]), float(tau[peak]), int(np.sign(pos[j] - pos[k0]))))
+        # onset: the first sample of that 50 ms window that moved more than 2 counts from its start
+        k0 = j - w
+        moved = np.nonzero(np.abs(pos[k0 : j + 1] - pos[k0]) >= thr)[0]
+        k = k0 + int(moved[0]) if moved.size else j
+        d = int(np.sign(pos[j] - pos[k0]))
+        # the torque pushed towards the motion and rose during the dwell (a ramp, not a release)
+        pre = d * tau[j - nd : j + 1]
+        rising = pre[-w:].max() > pre[:w].mean() + 0.02 * abs(pre).max()
+        base = max(k - w, 0)
+        peak = base + int(np.argmax(d * tau[base : k + 1]))
+        if quiet and rising and d != 0 and d * tau[peak] > 0:
+            out.append(Breakaway(float(data.t[k]), float(tau[peak]), d))
         i = j + nd
     return out
 

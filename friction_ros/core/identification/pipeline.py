@@ -31,7 +31,7 @@ from friction_ros.core.identification.models import (
     spec_for,
 )
 from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus, stribeck_map
-from friction_ros.core.validation import ParameterError
+from friction_ros.core.validation import ParameterError, check_choice
 
 DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
 
@@ -217,7 +217,15 @@ def fit_records(
     progress: Callable[[str, float], None] | None = None,
     label: str = "data",
 ) -> FitResult:
-    """Fit ``models`` to prepared records (see module and package docstrings)."""
+    """Fit ``models`` to prepared records (see module and package docstrings).
+
+    ``train_window``: ``"content"`` (default) trains on chunks stratified by content
+    (:func:`~friction_ros.core.identification.data.training_segments`, about ``train_seconds``
+    in all) and validates on the rest; ``"window"`` on the single most exciting ``train_seconds``
+    window (:func:`~friction_ros.core.identification.data.training_window`); ``"first"`` on the
+    first ``train_seconds`` (seed 003 A.3).
+    """
+    check_choice("train_window", train_window, ["content", "window", "first"])
     t_start = time.perf_counter()
     records = [records] if isinstance(records, D.JointData) else list(records)
     names = check_model_names(models)
@@ -233,15 +241,18 @@ def fit_records(
     for r in records:
         if r.duration > train_seconds + 1.0:
             if train_window == "first":
-                i0, i1 = 0, D.split(r, train_seconds)[0].n
+                segs = [(0, D.split(r, train_seconds)[0].n)]
+            elif train_window == "window":
+                segs = [D.training_window(r, train_seconds)]
             else:
-                i0, i1 = D.training_window(r, train_seconds)
+                segs = D.training_segments(r, train_seconds)
             keep = np.ones(r.n, bool)
-            keep[i0:i1] = False
-            train.append(r.slice(i0, i1))
-            val.append(_concat([r.slice(0, i0), r.slice(i1, r.n)]) if i0 > 0 else r.slice(i1, r.n))
+            for i0, i1 in segs:
+                keep[i0:i1] = False
+                train.append(r.slice(i0, i1))
+                windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
+            val.append(_concat([r.slice(a, b) for a, b in D._runs(keep)]))
             val_from.append((r, keep))
-            windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
     if not val:  # records too short to split: validate on the training data (reported)
         train = list(records)
         val = list(records)

@@ -120,6 +120,13 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             "and speed range for training (chosen by content: "
             + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in res.options.get("train_windows_s", []))
             + "), everything else for validation"
+            if res.options.get("train_window") == "window"
+            else f"- split: about {res.options['train_seconds']:g} s of each record for training, chosen by content: the "
+            "record is cut into chunks (at the experiment's START events and every train_seconds/4), the moving chunks are "
+            "sorted by (has a velocity reversal, RMS speed) and evenly spaced ones in that order train (at most half), so "
+            "training and validation both span the speed range with and without reversals; training: "
+            + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in res.options.get("train_windows_s", []))
+            + "; everything else validates"
         ),
         "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)",
         f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
