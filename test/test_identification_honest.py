@@ -194,3 +194,35 @@ def test_breakaway_on_a_compliant_joint_is_within_5_percent(with_events):
     assert {b.direction for b in brk} == {1, -1}
     for b in brk:
         assert abs(abs(b.torque) - fs) / fs < 0.05, (with_events, b, fs)
+
+
+def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
+    from friction_ros.core.identification import synthetic
+
+    rec = synthetic.seed003_experiment(40.0)
+    d = D.prepare(rec.t, rec.position, None, rec.effort)
+    segs = D.training_segments(d, 10.0)
+    train = np.zeros(d.n, bool)
+    for a, b in segs:
+        train[a:b] = True
+    assert 9.0 <= train.sum() * d.dt <= 15.0  # about train_seconds
+    speed = np.abs(d.velocity)
+    for part in (train, ~train):  # each set holds the slowest and the fastest tenth of the record
+        assert np.any(part & (speed > np.percentile(speed, 95)))
+        mv = D.moving_mask(d.velocity, d.resolution, d.dt) & part
+        assert np.percentile(speed[mv], 10) < 1.5 * np.percentile(
+            speed[D.moving_mask(d.velocity, d.resolution, d.dt)], 10
+        )
+        s = np.sign(d.velocity[mv])
+        assert np.sum(s[1:] != s[:-1]) >= 4  # reversals
+    # the first 10 s alone would be one phase of the 10 s envelope; the chosen chunks are spread out
+    assert max(b for _, b in segs) * d.dt > 20.0
+
+
+def test_a_standstill_is_not_scored():
+    v = np.concatenate([np.sin(np.linspace(0, 20, 3000)), np.zeros(2000), np.sin(np.linspace(0, 5, 500))])
+    st = D.standstill_mask(v, 1e-4, 1e-3)
+    assert st[3200:4900].all() and not st[:2900].any() and not st[-400:].any()
+    y = np.concatenate([np.ones(100), np.zeros(100)]) + 0.01
+    m = metrics.compare(np.zeros(200) + 0.01, y, np.ones(200, bool), 2, scored=np.arange(200) >= 100)
+    assert m["n_rest_excluded"] == 100 and m["rmse"] == 0.0
