@@ -85,10 +85,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--train-window",
-        choices=["content", "first"],
+        choices=["content", "window", "first"],
         default="content",
-        help="training window: the most exciting --train-seconds of each record (content, default) or "
-        "the first ones (seed 003)",
+        help="training data: chunks chosen by content so training and validation both hold reversals, high "
+        "and low speeds (content, default), the single most exciting --train-seconds window (window), or "
+        "the first --train-seconds (first, seed 003)",
     )
     p.add_argument(
         "--current-lag",

@@ -301,7 +301,7 @@ def fit_records(
     for name in [n for n in names if n not in LEARNED]:
         spec = spec_for(name, eps)
         if not spec.dynamic and static_from_plateaus:
-            res = _fit_static_plateaus(name, plateaus, train, eps)
+            res = _fit_static_plateaus(name, plateaus, train, eps, breakaways)
             if progress:
                 progress(name, 1.0)
         else:
@@ -448,8 +448,25 @@ def _learning_data(plateaus, train, J, eps):
     )
 
 
-def _fit_static_plateaus(name, plateaus, train, eps) -> ModelResult:
-    sf: StaticFit = fit_plateaus(plateaus, name)
+def _breakaway_levels(breakaways) -> dict[int, float]:
+    """Median breakaway torque magnitude per direction (the static friction level), from the
+    experiment's breakaway ramps only (``source == "events"``): a breakaway detected in an arbitrary
+    log (a plateau start, a reversal) is not a slow ramp from rest and would mislead the fit."""
+    out = {}
+    for d in (1, -1):
+        x = [
+            abs(b.torque)
+            for b in breakaways
+            if b.direction == d and b.source == "events" and np.isfinite(b.torque)
+        ]
+        if x:
+            out[d] = float(np.median(x))
+    return out
+
+
+def _fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResult:
+    levels = _breakaway_levels(breakaways)
+    sf: StaticFit = fit_plateaus(plateaus, name, breakaway=levels or None)
     per = sf.per_direction if sf.asymmetric else None
     coefs = dict(sf.coefficients)
 
@@ -468,6 +485,12 @@ def _fit_static_plateaus(name, plateaus, train, eps) -> ModelResult:
     cfg = export.library_config(name, coefs, eps=0.0, per_direction=per)
     _validate_config(cfg)
     notes = [f"fitted to {sf.n_points} plateau means (robust soft-L1 least squares), rms {sf.rms:.3g} N*m"]
+    if levels and name == "stribeck":
+        notes.append(
+            "static level fs from the breakaway ramps ("
+            + ", ".join(f"{'+' if d > 0 else '-'}{x:.4g}" for d, x in levels.items())
+            + " N*m), the rest of the curve from the plateaus"
+        )
     if sf.asymmetric:
         notes.append("directions differ significantly: asymmetric model exported")
     ci95 = {k: [coefs[k] - 1.96 * s, coefs[k] + 1.96 * s] for k, s in sf.stderr.items()}
