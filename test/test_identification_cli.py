@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import subprocess
 import sys
@@ -257,3 +258,51 @@ def test_damped_gms_fit_kernel_matches_the_library_and_exports_sigma1():
     )
     undamped = spec_for("gms2").coefficients(theta[:-1], np.array([*beta, 0.01, 0.0012]))
     assert "sigma1" not in undamped and "sigma1" not in library_config("gms2", undamped)
+
+
+def test_a_truncated_bag_is_fitted_with_a_warning(small_bag, tmp_path, capsys):
+    """What `friction-bag info` warns about, friction-fit says too (issue 15, item 9)."""
+    import shutil
+
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    src = next(small_bag.glob("*.mcap"))
+    data = src.read_bytes()
+    (cut / src.name).write_bytes(data[: int(len(data) * 0.8)])
+    shutil.copy(small_bag / "metadata.yaml", cut / "metadata.yaml")
+    before = (cut / src.name).read_bytes()
+    rc = main([str(cut), "--joint", "joint1", "--models", "coulomb", "--out", str(tmp_path / "f")])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "warning:" in text and "truncated" in text, text
+    report = (tmp_path / "f" / "report.md").read_text()
+    assert report.index("## Warnings") < report.index("## Data") and "truncated" in report
+    assert (cut / src.name).read_bytes() == before  # the input is left alone
+
+
+def test_positions_all_nan_are_fitted_from_the_velocity_field_and_said_so(tmp_path, capsys):
+    """The report names the velocity source it used and knows no encoder resolution (item 10)."""
+    rec = synthetic.seed003_experiment(12.0, low=0.05)
+    rec = dataclasses.replace(rec, position=np.full_like(rec.position, np.nan))
+    bag = synthetic.write_bag(tmp_path / "nanpos", rec, extra_joint=None)
+    rc = main([str(bag), "--models", "coulomb", "--out", str(tmp_path / "f"), "--no-plots", "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "no finite position" in text
+    report = (tmp_path / "f" / "report.md").read_text()
+    assert "velocity field" in report and "resolution unknown" in report
+    assert "differentiation of the position" not in report
+
+
+def test_a_model_that_explains_little_is_not_recommended_silently(tmp_path, capsys):
+    """Torque that is pure noise: whatever wins says it explains little (validation NMSE > 30 %)."""
+    rec = synthetic.seed003_experiment(12.0, low=0.05)
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0.0, 1.0, rec.effort.shape)
+    rec = dataclasses.replace(rec, effort=noise)
+    bag = synthetic.write_bag(tmp_path / "noise", rec, extra_joint=None)
+    rc = main([str(bag), "--models", "coulomb", "--out", str(tmp_path / "f"), "--no-plots", "--quiet"])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert "explains little" in text, text
+    assert "explains little" in (tmp_path / "f" / "report.md").read_text()

@@ -52,3 +52,17 @@ def test_pin_latency_chain_puts_plant_and_controller_on_one_cpu():
     multi = specs_from_config(str(PARAMS / "bringup_cartesian_xyz.yaml"))
     assert not pin_latency_chain(multi, cpus=[0, 1])
     assert all("cpu_affinity" not in s.overrides for s in multi)
+
+
+def test_a_fitted_parameter_file_without_a_plant_preset_is_a_whole_plant():
+    """friction-fit without --plant-preset: the plant_simulator section runs as it is (issue 15)."""
+    from friction_ros.core.identification.export import parameter_document
+    from friction_ros.core.presets import resolve_preset
+
+    cfg = {"model": "coulomb_viscous", "fc": 0.3, "fv": 0.01}
+    sec = parameter_document(cfg, 0.002)["plant_simulator"]["ros__parameters"]
+    preset = resolve_preset(sec["preset"], {k: sec[k] for k in ("plant", "friction_motor")})
+    plant = preset.make_plant()
+    assert preset.params.motor_inertia == 0.002 and preset.params.torque_constant == 1.0
+    m = plant.step(1.0, 0.1)  # 1 N*m against 0.3 N*m of Coulomb friction: the joint moves forward
+    assert m.position > 0.1 and m.velocity > 1.0

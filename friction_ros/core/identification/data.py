@@ -209,6 +209,7 @@ def prepare(
     ok = np.isfinite(eff)
     tau = np.interp(grid + torque_delay, ts[ok], eff[ok])
     resolution = 0.0
+    notes: list[str] = []
     if pos is not None and np.any(np.isfinite(pos)):
         p = interp(pos)
         resolution = estimate_resolution(pos[np.isfinite(pos)])
@@ -220,7 +221,19 @@ def prepare(
         else:
             v = np.gradient(p, dt)
             a = np.gradient(v, dt)
+        velocity_source = "Savitzky-Golay differentiation of the position"
+        if np.mean(np.isfinite(pos)) < 0.9:
+            notes.append(
+                f"{100 * np.mean(~np.isfinite(pos)):.0f} % of the positions are not finite: interpolated over"
+            )
     else:
+        if vel is None or not np.any(np.isfinite(vel)):
+            raise ExcitationError("motion: every position and velocity sample is missing or not finite")
+        velocity_source = "the messages' velocity field (no finite position)"
+        notes.append(
+            "the joint states carry no finite position: velocity is the messages' velocity field, position "
+            "is its integral, and no encoder resolution is known"
+        )
         v = interp(vel)
         p = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
         wa = _window(acceleration_window, dt, 3)
@@ -239,6 +252,8 @@ def prepare(
         float(ts[0]),
         {
             "source": source,
+            "velocity_source": velocity_source,
+            "warnings": notes,
             "velocity_window_s": velocity_window,
             "acceleration_window_s": acceleration_window,
         },

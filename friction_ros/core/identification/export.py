@@ -190,11 +190,13 @@ def parameter_document(
 
     ``plant_preset`` (name or path): the plant_simulator section starts from that preset's plant
     parameters (torque constant, encoder ...) with the identified inertia and friction; without it
-    only ``motor_inertia`` is written and the node must get the rest from its preset. ``gate``: the
+    the section is a whole plant of its own: the identified joint as a direct-drive, torque-commanded
+    joint (``torque_constant`` 1 N*m/A, gear ratio 1, ideal sensing), which the node runs as it is.
+    ``gate``: the
     safety gate's verdicts (:func:`compensation_section`); ``gains``: the tracking PD written as
     ``pid``; ``load_feedforward``: a constant load the controller holds.
     """
-    plant: dict = {"motor_inertia": float(inertia)}
+    plant: dict = {"actuation": "torque", "motor_inertia": float(inertia), "torque_constant": 1.0}
     if plant_preset:
         from friction_ros.core.presets import load_preset
 

@@ -34,6 +34,7 @@ from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus,
 from friction_ros.core.validation import ParameterError, check_choice
 
 DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
+EXPLAINS_LITTLE_NMSE = 30.0  # [%] validation NMSE above which a recommendation comes with a warning
 
 
 @dataclass
@@ -115,6 +116,9 @@ def load_bag(
         bag = read_bag(path, topics=None)
     except BagError as exc:
         raise D.ExcitationError(f"bag {path}: {exc}") from None
+    bag_warnings = [str(w) for w in getattr(bag, "warnings", [])]
+    if getattr(bag, "truncated", False) and not bag_warnings:
+        bag_warnings.append(f"bag {path} is truncated: the messages after the cut are lost")
     if topic not in bag:
         have = ", ".join(sorted(bag.topics)) if hasattr(bag, "topics") else "?"
         raise D.ExcitationError(
@@ -173,7 +177,7 @@ def load_bag(
             f"bag {path}: joint {joint!r} on {topic} has no effort: pass the motor current with "
             "--current-topic/--current-field plus --torque-constant and --gear-ratio"
         )
-    return D.prepare(
+    data = D.prepare(
         stamps,
         series.position,
         series.velocity,
@@ -188,6 +192,8 @@ def load_bag(
         torque_delay=torque_delay,
         source=str(path),
     )
+    data.meta["warnings"] = bag_warnings + data.meta.get("warnings", [])
+    return data
 
 
 # ------------------------------------------------------------------------------------ fitting
@@ -262,6 +268,8 @@ def fit_records(
         ]
     else:
         warnings_pre = []
+    for r in records:  # what reading the data found: a truncated bag, missing positions ...
+        warnings_pre += [f"{r.meta.get('source', label)}: {w}" for w in r.meta.get("warnings", [])]
     if load:
         warnings_pre.append(load_note)
 
@@ -373,6 +381,14 @@ def fit_records(
         {n: r.metrics for n, r in results.items() if r.config is not None}
     )
     rec = recommendation["model"]
+    if rec is not None:
+        nm = float(results[rec].metrics.get("nmse_percent", math.nan))
+        if math.isfinite(nm) and nm > EXPLAINS_LITTLE_NMSE:
+            warnings.append(
+                f"the recommended model {rec} explains little of the measured torque (validation NMSE {nm:.1f} % "
+                f"> {EXPLAINS_LITTLE_NMSE:g} %): a load or gravity term, more excitation or a sensor problem is "
+                "missing; do not compensate with it before checking"
+            )
     for r in results.values():
         r.extra["steady_state_grid"] = {
             "velocity": grid.tolist(),

@@ -106,12 +106,15 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
     L = ["# Friction identification report", ""]
     if sources:
         L += ["Sources: " + ", ".join(f"`{s}`" for s in sources), ""]
+    if res.warnings:  # first, so that nobody reads a figure without them
+        L += ["## Warnings", ""] + [f"- {w}" for w in res.warnings] + [""]
     tr, va = res.train, res.validation
     ex = res.excitation
     L += [
         "## Data",
         f"- training: {sum(r.n for r in tr)} samples, validation: {sum(r.n for r in va)} samples, "
-        f"dt = {tr[0].dt * 1e3:.3g} ms, encoder resolution {tr[0].resolution:.3g} rad",
+        f"dt = {tr[0].dt * 1e3:.3g} ms, encoder resolution "
+        + (f"{tr[0].resolution:.3g} rad" if tr[0].resolution > 0 else "unknown (no position)"),
         (
             f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
             "(seed 003 A.3)"
@@ -128,7 +131,11 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             + ", ".join(f"{a:.1f}-{b:.1f} s" for a, b in res.options.get("train_windows_s", []))
             + "; everything else validates"
         ),
-        "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)",
+        (
+            "- velocity/acceleration: Savitzky-Golay differentiation of the position (order 3, 21 ms / 41 ms, zero phase)"
+            if tr[0].meta.get("velocity_source", "").startswith("Savitzky")
+            else f"- velocity: {tr[0].meta.get('velocity_source', 'given')}; acceleration: its Savitzky-Golay derivative"
+        ),
         f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
         f"{len(res.plateaus)} plateaus, {len(res.breakaways)} breakaway events",
         f"- high/low velocity split: 1 s velocity RMS of the *moving* samples above/below {res.high_threshold:.3g} rad/s "
@@ -236,8 +243,6 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         L += ["", "## Plots", ""]
         for title, rel in plots.items():
             L += [f"### {title}", "", f"![{title}]({rel})", ""]
-    if res.warnings:
-        L += ["", "## Warnings"] + [f"- {w}" for w in res.warnings]
     return "\n".join(L) + "\n"
 
 
