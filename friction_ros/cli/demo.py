@@ -513,11 +513,6 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         if not math.isfinite(res.fit_nmse[key]):
             note = model.metrics.get(f"nmse_{key}_note", "no signal above the noise in that subset")
             res.warnings.append(f"{text} NMSE not available: {note}")
-    if math.isfinite(res.fit_nmse["all"]) and res.fit_nmse["all"] > 30.0:
-        res.warnings.append(
-            f"the recommended model {name} explains little of the measured torque (validation NMSE "
-            f"{res.fit_nmse['all']:.1f} %): check the excitation, a load or gravity term, the sensor"
-        )
     inertia = float(model.coefficients.get("J", 0.0) or scale.inertia)
     res.map_error = map_error_vs_truth(model.steady_state, preset.joint_friction, fit_result.plateaus)
     verdicts = fit_result.gate
