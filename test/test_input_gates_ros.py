@@ -46,7 +46,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
         "pid": PID,
         "reference": {"type": "constant", "offset": OFFSET},
         "state_timeout": 0.2,
-        "diagnostics_period": 0.2,
+        "diagnostics_period": 0.1,
         "input_gate": {"max_velocity": 100.0},
     }
     est = {
@@ -54,7 +54,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
         "model": "coulomb_viscous",
         "inertia": 0.0012,
         "publish_every": 1,
-        "diagnostics_period": 0.2,
+        "diagnostics_period": 0.1,
         "input_gate": {"max_velocity": 100.0},
     }
     params = write_params(
@@ -101,45 +101,61 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
                 run_valid(10)
             assert states and estimates, "controller/estimator did not answer valid joint states"
             run_valid(100)
+
+            def counted(reason: str, n: int) -> None:
+                """Nothing else is sent until both nodes counted the bad sample: it cannot be pushed
+                out of their keep-last readers by later samples, so the counts below are exact."""
+                ok = lis.wait_for(
+                    lambda: all(
+                        int(_status(diags, node).get(f"rejected.{reason}", -1)) >= n
+                        for node in ("compensating_controller", "friction_estimator")
+                    ),
+                    20,
+                    g,
+                )
+                assert ok, f"{reason} not counted"
+                run_valid(20)
+
             # one of each bad kind, each followed by valid samples
+            t_first = time.monotonic()
             send(time.time_ns() + 1000 * 10**9, good=False)  # future stamp (+1000 s)
-            run_valid(20)
+            counted("future_stamp", 1)
             send(time.time_ns() - 10 * 10**9, good=False)  # old stamp (-10 s)
-            run_valid(20)
+            counted("old_stamp", 1)
             for _ in range(20):  # unstamped: each one is a new sample at its receive time
                 send(0)
-                time.sleep(0.002)
+                p = 1e-5 * k[0]
+                assert lis.wait_for(lambda p=p: states[-1].position == p, 20, g)
             run_valid(20)
             send(p=1e300, good=False)  # absurd finite position
-            run_valid(20)
+            counted("out_of_range", 1)
             send(p=math.nan, good=False)
-            run_valid(20)
+            counted("not_finite", 1)
             send(v=math.inf, good=False)
-            run_valid(20)
+            counted("not_finite", 2)
             send(p=5.0, good=False)  # 5 rad jump in 2 ms (allowed: 100 rad/s x 2 ms)
-            run_valid(20)
+            counted("jump", 1)
             wrong = JointState(name=["other"], position=[0.0], velocity=[0.0], effort=[0.0])
             wrong.header.stamp.sec = int(time.time())
             msg_pub.publish(wrong)
-            run_valid(20)
+            counted("wrong_joint", 1)
             for n in (0, 2):  # wrong lengths
                 m = JointState(name=["joint1"], position=[0.0] * n, velocity=[], effort=[])
                 m.header.stamp.sec = int(time.time())
                 msg_pub.publish(m)
-                run_valid(20)
-            # only bad samples for 0.4 s: zero torque after state_timeout, logged once, and once cleared
+                counted("wrong_length", 1 if n == 0 else 2)
+            # only bad samples for 0.8 s: zero torque after state_timeout, logged once, and once cleared
             n_cmd = len(commands)
-            t_end = time.monotonic() + 0.4
+            t_end = time.monotonic() + 0.8
             while time.monotonic() < t_end:
                 send(p=math.nan, good=False)
                 time.sleep(0.002)
             zero_seen = any(c.effort[0] == 0.0 for c in commands[n_cmd:])
             run_valid(50)
             # a 10k burst of absurd samples as fast as this process can publish
-            t_burst = time.monotonic()
             for _ in range(10_000):
                 send(p=1e300, good=False)
-            burst_s = time.monotonic() - t_burst
+            span = time.monotonic() - t_first  # first to last rejection of each kind
             n_cmd = len(commands)
             run_valid(100)
             assert lis.wait_for(lambda: len(commands) > n_cmd + 50, 10, g), "no commands after the burst"
@@ -172,19 +188,19 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
         assert counts["rejected.wrong_joint"] == 1
         assert counts["rejected.wrong_length"] == 2
         assert counts["rejected.out_of_range"] >= 2  # 1e300 once + at least one of the burst
-        assert counts["rejected.not_finite"] >= 2 + 50  # NaN, inf, and the 0.4 s of NaN at 500 Hz
+        assert counts["rejected.not_finite"] >= 2 + 10  # NaN, inf, and the 0.8 s of NaN
         assert int(values["rejected_states"]) == sum(counts.values())
         assert int(values["unstamped_states"]) == 20 and int(values["resyncs"]) == 0
         for reason in counts:
             assert _lines(log, f"[{reason[9:]}]"), f"no log line for {reason}:\n{log}"
         # rate-limited: at most one line per reason per second (log_period 1 s)
-        assert len(_lines(log, "[out_of_range]")) <= 2 + burst_s
-        assert len(_lines(log, "[not_finite]")) <= 3
-    # zero torque logged once when it starts (the NaN phase, the burst if it lasted > 0.2 s, the end
-    # of the test) and once when it clears
+        for reason in ("out_of_range", "not_finite"):
+            assert len(_lines(log, f"[{reason}]")) <= 1 + span, log
+    # zero torque logged once when it starts (the NaN phase; the burst if it lasted > 0.2 s, the end
+    # of the test, a stall of this process) and once when it clears
     timeouts = _lines(log_c, "no valid joint state for 0.2 s (")
-    assert "last reason not_finite" in timeouts[0]
-    assert len(timeouts) == len(_lines(log_c, "joint states valid again")) + 1 <= 3, log_c
+    assert any("last reason not_finite" in ln for ln in timeouts), log_c
+    assert len(timeouts) - len(_lines(log_c, "joint states valid again")) in (0, 1), log_c
     assert all(math.isfinite(e.friction_torque) for e in estimates)
 
 
