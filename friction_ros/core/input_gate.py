@@ -298,7 +298,7 @@ class JointInputGate:
                 now_ns,
                 now_wall,
             )
-        if stamp_ns == 0:
+        if stamp_ns == 0 and now_ns:  # (clock 0 too: lockstep's first state at simulated time 0)
             self.counts["unstamped"] += 1
             stamp_ns = now_ns
         last = self._last_stamp
