@@ -54,6 +54,7 @@ class Listener:
         self.rclpy = rclpy
         self.node = rclpy.create_node(name)
         self.msgs: dict[str, list] = {}
+        self.subs: dict[str, object] = {}
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
         self._stop = threading.Event()
@@ -64,8 +65,12 @@ class Listener:
 
         box: list = []
         self.msgs[topic] = box
-        self.node.create_subscription(msg_type, topic, box.append, qos or STATE_QOS)
+        self.subs[topic] = self.node.create_subscription(msg_type, topic, box.append, qos or STATE_QOS)
         return box
+
+    def matched(self, topic: str) -> int:
+        """Publishers matched with this listener's subscription of ``topic`` (reader side)."""
+        return self.subs[topic].get_publisher_count()
 
     def publisher(self, msg_type, topic: str, qos=None):
         from friction_ros.nodes.node_utils import STATE_QOS

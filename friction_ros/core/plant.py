@@ -20,6 +20,10 @@ eqs. (2)-(4)):
   filtered difference, current noise/offset, measurement and actuation delays, all seeded.
 
 The inner loop (sub-steps inside one control period) runs in one compiled numba call.
+
+Commands are plausibility-checked: a NaN/inf command or one with ``|command| >``
+:data:`MAX_COMMAND` (1e9 A, V or N*m: no amplifier reaches it) raises ParameterError and leaves the
+plant unchanged, so a finite but absurd command (1e308) cannot overflow the state to inf/NaN.
 """
 
 from __future__ import annotations
@@ -45,6 +49,9 @@ from friction_ros.core.validation import (
 )
 
 ACTUATION_MODES = ("current", "torque", "voltage")
+_COMMAND_UNITS = {"current": "A", "torque": "N*m", "voltage": "V"}
+#: Largest |command| the plant accepts (its own unit: A, N*m or V); see the module docstring.
+MAX_COMMAND = 1.0e9
 ENCODER_LOCATIONS = ("motor", "joint")
 
 # seed 004 eq. (13): I_s = 7.8555 V_s - 19.6544
@@ -602,7 +609,13 @@ class GearheadServoPlant:
             self._last_dt = dt
             self._da = round(self.params.actuation_delay / dt)
             self._dmeas = round(self.params.measurement_delay / dt)
-        c = self._current_ref(float(command))
+        command = float(command)
+        if not abs(command) <= MAX_COMMAND:
+            raise ParameterError(
+                f"plant command = {command:g} is out of range: must be finite with |command| <= {MAX_COMMAND:g} "
+                f"[{_COMMAND_UNITS[self.params.actuation]}]"
+            )
+        c = self._current_ref(command)
         if self._da:
             self._cmd_q.append(c)
             c = self._cmd_q.popleft() if len(self._cmd_q) > self._da else 0.0
@@ -628,7 +641,10 @@ class GearheadServoPlant:
         if p.encoder_cpr > 0:
             shaft = thm if p.encoder_location == "motor" else q
             cnt_per_rad = p.encoder_cpr * p.encoder_ratio / (2.0 * math.pi)
-            shaft_q = math.floor(shaft * cnt_per_rad) / cnt_per_rad
+            x = shaft * cnt_per_rad
+            shaft_q = (
+                math.floor(x) / cnt_per_rad if math.isfinite(x) else shaft
+            )  # no crash on a diverged state
             pos = shaft_q / r if p.encoder_location == "motor" else shaft_q
         else:
             pos = q
@@ -686,7 +702,13 @@ class GearheadServoPlant:
         Returns an (n, 7) array: motor angle, motor velocity, joint position, joint velocity, current,
         motor-side friction, load-side friction (true values at the end of each control period).
         """
-        cmds = np.ascontiguousarray([self._current_ref(c) for c in np.asarray(commands, dtype=float).ravel()])
+        raw = np.asarray(commands, dtype=float).ravel()
+        if raw.size and not np.max(np.abs(raw)) <= MAX_COMMAND:
+            raise ParameterError(
+                f"plant commands = {raw[~(np.abs(raw) <= MAX_COMMAND)][0]:g} is out of range: must be finite "
+                f"with |command| <= {MAX_COMMAND:g} [{_COMMAND_UNITS[self.params.actuation]}]"
+            )
+        cmds = np.ascontiguousarray([self._current_ref(c) for c in raw])
         n_sub, h = self.substeps(dt)
         out = np.empty((cmds.size, 7))
         self._run(cmds, n_sub, h, out)

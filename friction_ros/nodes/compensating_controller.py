@@ -36,6 +36,12 @@ from friction_ros.core.control.controller import (
     ControllerTerms,
     config_from_ros_parameters,
 )
+from friction_ros.core.input_gate import (
+    DUPLICATE,
+    REJECTED,
+    RESYNC,
+    JointInputGate,
+)
 from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
@@ -53,10 +59,10 @@ from friction_ros.nodes.node_utils import (
     add_runtime_validation,
     apply_scheduling,
     declare,
+    gate_params,
     override_values,
     run_node,
     section_specs,
-    select_joint,
     stamp_to_ns,
     unflatten,
 )
@@ -82,6 +88,7 @@ NODE_PARAMS = [
         unit="s",
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    *gate_params(),
     *SCHEDULING_PARAMS,
 ]
 # Core controller keys that are plain values (not sections).
@@ -203,11 +210,14 @@ class CompensatingControllerNode(Node):
 
         self.joint = self.values["joint_name"]
         self.dt = self.values["control_period"]
+        # plausibility gate of the joint states (stamps, jumps, magnitudes): bad samples never
+        # reach the controller's state (integrator, filters, observers, limit-cycle detector)
+        self.gate = JointInputGate(self.joint, self.values.get("input_gate"), period=self.dt)
+        self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         self.commands = CommandPublisher(self, self.joint)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", RECORDED_QOS)
         self._state_encoder = ControllerStateEncoder(self.joint)
         self._decoder = JointStateDecoder()
-        self._one_joint = (self.joint,)
         # raw: joint states decoded by node_utils' JointState codec (no message object per period)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
@@ -218,13 +228,14 @@ class CompensatingControllerNode(Node):
 
         self._t0_ns: int | None = None
         self._last_ns: int | None = None
+        self._last_t = 0.0
+        self._diag_rejected = 0
         self._last_state_wall = time.monotonic()
         self._timed_out = False
         self._fallback_logged = False
         self.counts = {
             "cycles": 0,
             "duplicates": 0,
-            "rejected_states": 0,
             "rejected_references": 0,
             "saturated": 0,
             "adopted": 0,
@@ -294,45 +305,44 @@ class CompensatingControllerNode(Node):
             self.counts["rejected_estimates"] += 1
             self.get_logger().warning(f"estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0)
 
+    def _now_ns(self) -> int:
+        if self._sim_clock:
+            return self.get_clock().now().nanoseconds
+        return time.time_ns()  # = the ROS system clock, without an rclpy Time object per period
+
     def _on_state(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
-        if msg.name == self._one_joint and len(msg.position) == 1:  # the usual single-joint state
-            v = msg.velocity
-            sel = (msg.position[0], v[0] if v else None, None)
-        else:
-            sel = select_joint(msg, self.joint)
-        if sel is None:
-            self.counts["rejected_states"] += 1
-            self.get_logger().warning(
-                f"joint_states without joint {self.joint!r} (names: {list(msg.name)}): check joint_name",
-                throttle_duration_sec=5.0,
-            )
-            return
-        pos, vel, _effort = sel
-        t_ns = msg.stamp_ns
-        if self._last_ns is not None and t_ns <= self._last_ns:
-            if t_ns == self._last_ns and self.commands.last is not None:
-                self.counts["duplicates"] += 1
-                self.commands.republish()  # lockstep re-send: same answer, no recompute
-            return
-        if not (math.isfinite(pos) and (vel is None or math.isfinite(vel))):
-            self.counts["rejected_states"] += 1
-            self.get_logger().error(
-                f"joint state of {self.joint} is not finite: commanding zero torque",
-                throttle_duration_sec=1.0,
-            )
-            self.commands.publish_stamp(msg.sec, msg.nanosec, 0.0)
-            return
+        gate = self.gate
+        status = gate.admit(msg, self._now_ns())
+        if status >= DUPLICATE:
+            if status == REJECTED:
+                if gate.log_line:
+                    self.get_logger().warning(f"{gate.log_line}; sample ignored, holding the last command")
+                return
+            if status == DUPLICATE:
+                if self.commands.last is not None:
+                    self.counts["duplicates"] += 1
+                    self.commands.republish()  # lockstep re-send: same answer, no recompute
+                return
+            if status == RESYNC:
+                self._resync()
+        elif gate.log_line:
+            self.get_logger().info(gate.log_line)
+        pos, vel = gate.position, gate.velocity
+        t_ns = gate.stamp_ns
         if self._t0_ns is None:
             self._t0_ns = t_ns
         t = (t_ns - self._t0_ns) * 1e-9
         self._last_state_wall = time.monotonic()
-        self._timed_out = False
+        if self._timed_out:
+            self._timed_out = False
+            self.get_logger().info("joint states valid again: controlling")
         ref = self.trajectory.sample(t) if self.trajectory is not None else self.reference.sample(t)
         c0 = time.perf_counter()
         terms = self.controller.compute(t, ref, (pos, vel), self.dt)
         self._compute_times.append(time.perf_counter() - c0)
         self._last_ns = t_ns
+        self._last_t = t
         self.commands.publish_stamp(msg.sec, msg.nanosec, terms.command)
         if self.controller.compensation_fallback and not self._fallback_logged:
             self._fallback_logged = True
@@ -369,6 +379,14 @@ class CompensatingControllerNode(Node):
                 )
             )
 
+    def _resync(self) -> None:
+        """The gate adopted a new reference after a run of consistent rejected samples."""
+        self.get_logger().warning(self.gate.log_line or "joint state reference re-synchronised")
+        if self.gate.resync_reason != "jump" and self._t0_ns is not None:
+            # a new time base: the controller's time continues one period after the last accepted
+            self._t0_ns = self.gate.stamp_ns - int(round((self._last_t + self.dt) * 1e9))
+        self.controller.velocity.reset()  # no difference across the discontinuity
+
     def _publish_command(self, stamp, torque: float) -> None:
         self.commands.publish(stamp, torque)
 
@@ -380,8 +398,14 @@ class CompensatingControllerNode(Node):
             return  # lockstep: time only moves with the plant; nothing to time out
         if time.monotonic() - self._last_state_wall > self.values["state_timeout"]:
             self._timed_out = True
+            log = self.gate.log
+            why = (
+                f" ({log.total} rejected so far, last reason {log.last_reason}: see the rejection lines)"
+                if log.total
+                else ""
+            )
             self.get_logger().warning(
-                f"no joint state for {self.values['state_timeout']:g} s: commanding zero torque"
+                f"no valid joint state for {self.values['state_timeout']:g} s{why}: commanding zero torque"
             )
             self._publish_command(self.get_clock().now().to_msg(), 0.0)
 
@@ -389,10 +413,21 @@ class CompensatingControllerNode(Node):
         ct = sorted(self._compute_times[-5000:])
         self._compute_times = self._compute_times[-5000:]
         values = dict(self.counts)
+        gate = self.gate
+        values["rejected_states"] = gate.log.total
+        values.update(gate.log.values())
+        values.update(unstamped_states=gate.counts["unstamped"], resyncs=gate.counts["resyncs"])
+        new_rejections = gate.log.total - self._diag_rejected
+        self._diag_rejected = gate.log.total
         if ct:
             values["compute_p50_s"] = ct[len(ct) // 2]
             values["compute_p99_s"] = ct[min(len(ct) - 1, int(len(ct) * 0.99))]
         level, text = OK, f"{self.controller.mode} running"
+        if new_rejections:
+            level = WARN
+            text = (
+                f"{new_rejections} joint states rejected since the last status (last: {gate.log.last_reason})"
+            )
         if self._timed_out:
             level, text = WARN, "no joint state: commanding zero torque"
         if self.controller.compensation_fallback:

@@ -14,6 +14,7 @@ a restart when its ``adopt_estimator_coefficients`` parameter is true.
 from __future__ import annotations
 
 import math
+import time
 
 from friction_msgs.msg import FrictionEstimate
 from rclpy.node import Node
@@ -21,6 +22,7 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
+from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.nodes.node_utils import (
     OK,
     RECORDED_QOS,
@@ -33,10 +35,10 @@ from friction_ros.nodes.node_utils import (
     add_runtime_validation,
     apply_scheduling,
     declare,
+    gate_params,
     override_values,
     run_node,
     section_specs,
-    select_joint,
     unflatten,
 )
 
@@ -59,6 +61,7 @@ NODE_PARAMS = [
         hi=100000,
     ),
     Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    *gate_params(),
     *SCHEDULING_PARAMS,
 ]
 DOCS = {
@@ -113,14 +116,23 @@ class FrictionEstimatorNode(Node):
         self.joint = self.values["joint_name"]
         self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", RECORDED_QOS)
         self._decoder = JointStateDecoder()
-        self._one_joint = (self.joint,)
+        # the controller's plausibility gate: bad samples never reach the estimator's filters
+        self.gate = JointInputGate(
+            self.joint,
+            self.values.get("input_gate"),
+            period=self.values["control_period"],
+            need_velocity=True,
+            need_effort=True,
+        )
+        self._sim_clock = bool(self.get_parameter("use_sim_time").value)
+        self._diag_rejected = 0
         # raw: joint states decoded by node_utils' JointState codec (no message object per sample)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.diag = DiagnosticsPublisher(self, "friction_estimator", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self._last_ns: int | None = None
         self._n = 0
-        self.counts = {"samples": 0, "excited_samples": 0, "rejected_states": 0, "published": 0}
+        self.counts = {"samples": 0, "excited_samples": 0, "published": 0}
         self._publish_every = self.values["publish_every"]
         apply_scheduling(self, self.values)
 
@@ -138,27 +150,25 @@ class FrictionEstimatorNode(Node):
 
     def _on_state(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
-        if msg.name == self._one_joint and len(msg.position) == len(msg.velocity) == len(msg.effort) == 1:
-            pos, vel, eff = msg.position[0], msg.velocity[0], msg.effort[0]  # the usual single joint
-        else:
-            sel = select_joint(msg, self.joint)
-            if sel is None or sel[1] is None or sel[2] is None:
-                self.counts["rejected_states"] += 1
-                return
-            pos, vel, eff = sel
-        if not (math.isfinite(pos) and math.isfinite(vel) and math.isfinite(eff)):
-            self.counts["rejected_states"] += 1
+        gate = self.gate
+        now = self.get_clock().now().nanoseconds if self._sim_clock else time.time_ns()
+        status = gate.admit(msg, now)
+        if status == REJECTED:
+            if gate.log_line:
+                self.get_logger().warning(f"{gate.log_line}; sample ignored")
             return
-        t_ns = msg.stamp_ns
-        if self._last_ns is not None and t_ns < self._last_ns:
-            self.estimator.reset()  # time went backwards (bag loop): start over
+        if status == DUPLICATE:
+            return  # lockstep re-send
+        if gate.log_line:
+            log = self.get_logger().warning if status == RESYNC else self.get_logger().info
+            log(gate.log_line)
+        t_ns = gate.stamp_ns
+        if status == RESYNC:
+            self.estimator.reset()  # new time base or position reference (a bag loop): start over
             self._last_ns = None
-        dt = (t_ns - self._last_ns) * 1e-9 if self._last_ns is not None else 0.0
-        if dt <= 0.0:
-            if self._last_ns is not None:
-                return  # duplicate (lockstep re-send)
-            dt = self.values["control_period"]
+        dt = (t_ns - self._last_ns) * 1e-9 if self._last_ns is not None else self.values["control_period"]
         self._last_ns = t_ns
+        pos, vel, eff = gate.position, gate.velocity, gate.effort
         e = self.estimator.update(t_ns * 1e-9, pos, vel, eff, dt)
         self.counts["samples"] += 1
         self.counts["excited_samples"] += int(e.excitation_ok)
@@ -185,9 +195,19 @@ class FrictionEstimatorNode(Node):
 
     def _publish_diagnostics(self) -> None:
         values = dict(self.counts)
+        log = self.gate.log
+        values["rejected_states"] = log.total
+        values.update(log.values())
+        values.update(unstamped_states=self.gate.counts["unstamped"], resyncs=self.gate.counts["resyncs"])
+        new_rejections, self._diag_rejected = log.total - self._diag_rejected, log.total
         values.update({f"coef.{k}": v for k, v in self.estimator.coefficients.items()})
         level = OK if self.estimator.converged else WARN
         text = "converged" if self.estimator.converged else "adapting (not converged yet)"
+        if new_rejections:
+            level = WARN
+            text += (
+                f"; {new_rejections} joint states rejected since the last status (last: {log.last_reason})"
+            )
         self.diag.publish(level, text, values)
 
 

@@ -490,6 +490,23 @@ SCHEDULING_PARAMS = [
 ]
 
 
+def gate_params() -> list[Param]:
+    """``input_gate.*`` parameters of the joint-state plausibility gate (:mod:`friction_ros.core.input_gate`)."""
+    from friction_ros.core.input_gate import GATE_DEFAULTS, GATE_DOCS
+
+    return [
+        Param(
+            f"input_gate.{k}",
+            v,
+            GATE_DOCS[k][0],
+            lo=1 if isinstance(v, int) else 0.0,
+            unit=GATE_DOCS[k][1],
+            read_only=True,
+        )
+        for k, v in GATE_DEFAULTS.items()
+    ]
+
+
 def apply_scheduling(node: Node, values: dict[str, Any]) -> None:
     """Apply the ``realtime_priority`` / ``cpu_affinity`` parameters (:data:`SCHEDULING_PARAMS`)."""
     set_cpu_affinity(values.get("cpu_affinity", -1), node.get_logger())

@@ -30,6 +30,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.harness import command_scale
+from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
+from friction_ros.core.plant import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
@@ -51,7 +53,6 @@ from friction_ros.nodes.node_utils import (
     declare,
     declare_section,
     run_node,
-    select_effort,
 )
 
 PARAMS = [
@@ -95,10 +96,18 @@ PARAMS = [
     ),
     Param(
         "max_effort",
-        1.0e6,
+        PLAUSIBLE_EFFORT,
         "plausibility bound: a commanded |effort| above it is rejected like a NaN (zero torque, logged)",
         lo=1e-9,
         unit="N*m",
+    ),
+    Param(
+        "log_period",
+        1.0,
+        "at most one log line per command rejection reason per this period",
+        lo=0.0,
+        unit="s",
+        read_only=True,
     ),
     Param(
         "resend_period",
@@ -170,8 +179,10 @@ class PlantSimulator(Node):
         self._lock = threading.Lock()
         self._command = 0.0
         self._command_wall = -math.inf
-        self._commands_rejected = 0
-        self._commands_ignored = 0
+        self._commands_rejected = 0  # implausible effort for this joint: zero torque applied instead
+        self._commands_ignored = 0  # another joint / malformed (logged) or a lockstep duplicate
+        self._rejections = RejectionLog(f"joint_commands for {self.joint}", self.p["log_period"])
+        self._diag_rejected = 0
         self._steps = 0
         self._latency = LatencyHistogram()
         self._last_state_wall = 0.0
@@ -231,17 +242,21 @@ class PlantSimulator(Node):
             self._stats_reset_at = time.monotonic() + self.p["stats_delay"]
         if self._stats_reset_at <= time.monotonic():
             self._reset_statistics()
-        effort = select_effort(msg, self.joint)
+        # plausibility: the node's max_effort and the plant's own command range (MAX_COMMAND)
+        limit = (
+            min(self.p["max_effort"], MAX_COMMAND / abs(self.scale)) if self.scale else self.p["max_effort"]
+        )
+        effort, reason, detail = select_command(msg, self.joint, limit)
         if effort is None:
-            self._commands_ignored += 1
-            return
-        if not math.isfinite(effort) or abs(effort) > self.p["max_effort"]:
+            line = self._rejections.reject(reason, detail, time.monotonic())
+            if reason in ("wrong_joint", "wrong_length"):
+                self._commands_ignored += 1  # not a command for this joint: ignored
+                if line:
+                    self.get_logger().warning(f"{line}; ignored")
+                return
             self._commands_rejected += 1
-            self.get_logger().warning(
-                f"rejected joint_commands effort = {effort:g} for {self.joint}: must be a finite torque [N*m] "
-                f"with |effort| <= max_effort = {self.p['max_effort']:g}",
-                throttle_duration_sec=1.0,
-            )
+            if line:
+                self.get_logger().warning(f"{line}; applying zero torque instead")
             effort = 0.0
         if self.lockstep:
             if msg.stamp_ns != self._t_ns:
@@ -298,6 +313,7 @@ class PlantSimulator(Node):
             "sim_time": self.plant.time,
             "commands_rejected": self._commands_rejected,
             "commands_ignored": self._commands_ignored,
+            **self._rejections.values(),
         }
         level, text = OK, "running"
         if self.loop is not None:
@@ -316,8 +332,13 @@ class PlantSimulator(Node):
                 values.update(
                     latency_p50_s=self._latency.percentile(50), latency_p99_s=self._latency.percentile(99)
                 )
-        if self._commands_rejected:
-            level, text = max(level, WARN), f"{self._commands_rejected} non-finite commands rejected"
+        new = self._rejections.total - self._diag_rejected
+        self._diag_rejected = self._rejections.total
+        if new:
+            level = max(level, WARN)
+            text = (
+                f"{new} joint_commands rejected since the last status (last: {self._rejections.last_reason})"
+            )
         self.diag.publish(level if level != ERROR else ERROR, text, values)
 
     def loop_statistics(self) -> dict:

@@ -7,6 +7,12 @@ Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
              + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat) + load_feedforward
     command = clamp(u, u_clamp, rate limit)
 
+``u_clamp_max/min`` default to +-1e6 N*m (:data:`friction_ros.core.input_gate.PLAUSIBLE_EFFORT`,
+the plant simulator's plausibility bound): whatever the gains and inputs, the command stays finite
+and bounded; set them to the joint's torque limit. In ``pid`` mode the PID integrator is kept
+inside the same clamp and, by default, only integrates while the output is not saturated
+(``pid.antiwindup_strategy`` = conditional_integration), so a saturated transient does not wind up.
+
 ``theta_dot_hat`` is the measured velocity (``velocity_source = measured``) or the filtered
 backward difference of the measured position (``differentiated``, seed 001 section 6.1, with the
 lost-bit hold filter ``position_jump_limit``: a sample that jumps more than the limit is replaced
@@ -49,6 +55,7 @@ from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, Fricti
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
 from friction_ros.core.control.pid import PID_DEFAULTS, Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
+from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 from friction_ros.core.validation import (
     ParameterError,
     check_choice,
@@ -65,8 +72,8 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "feedforward_gain": 0.0,
     "inertia": 0.0,
     "load_feedforward": 0.0,
-    "u_clamp_max": math.inf,
-    "u_clamp_min": -math.inf,
+    "u_clamp_max": PLAUSIBLE_EFFORT,
+    "u_clamp_min": -PLAUSIBLE_EFFORT,
     "rate_limit": math.inf,
     "velocity_source": "measured",
     "velocity_filter_time_constant": 0.0,
@@ -399,7 +406,16 @@ class CompensatingController:
         hi = min(self.u_clamp_max, upper)
         if self.scheme is None:
             offset = ff_inertia + ff_vel + f_ff + f_fb
-            out = self.pid.update(e, dt, error_dot=edot, offset=offset, lower=lo, upper=hi)
+            out = self.pid.update(
+                e,
+                dt,
+                error_dot=edot,
+                offset=offset,
+                lower=lo,
+                upper=hi,
+                integral_lower=self.u_clamp_min,
+                integral_upper=self.u_clamp_max,
+            )
             s = SchemeOutput(out.p_term, out.i_term, out.d_term, 0.0, 0.0)
             unlimited, cmd, sat = out.unlimited, out.command, out.saturated
         else:

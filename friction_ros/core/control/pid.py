@@ -15,8 +15,11 @@ strategy of control_toolbox ``AntiWindupStrategy``:
 * ``none``:                    I += i e dt, then I clamped to [i_clamp_min, i_clamp_max]
 * ``back_calculation``:        I += dt (i e + (u_sat - u) / T_t), T_t = tracking_time_constant
   (0 -> control_toolbox default: sqrt(d / i) if d != 0 else p / i), then clamped
-* ``conditional_integration``: I += i e dt only if the output is not saturated or e drives it
-  out of saturation, then clamped
+* ``conditional_integration`` (default; control_toolbox's is ``none``): I += i e dt only if the
+  output is not saturated or e drives it out of saturation, then clamped
+
+``integral_lower``/``integral_upper`` of :meth:`Pid.update` bound I further (the façade passes its
+torque clamp: an integral beyond the output range can never be applied, only wound up).
 
 "Derivative on measurement" means the caller supplies ``e_dot = v_ref - v_measured`` (no
 derivative kick on reference steps); ``derivative_filter_time_constant`` T_f low-pass filters the
@@ -41,7 +44,7 @@ PID_DEFAULTS: dict[str, Any] = {
     "d": 0.0,
     "i_clamp_max": math.inf,
     "i_clamp_min": -math.inf,
-    "antiwindup_strategy": "none",
+    "antiwindup_strategy": "conditional_integration",
     "tracking_time_constant": 0.0,
     "u_clamp_max": math.inf,
     "u_clamp_min": -math.inf,
@@ -134,11 +137,14 @@ class Pid:
         offset: float = 0.0,
         lower: float = -math.inf,
         upper: float = math.inf,
+        integral_lower: float = -math.inf,
+        integral_upper: float = math.inf,
     ) -> PidOutput:
         """One period. ``error_dot`` None -> filtered backward difference of ``error``.
 
         ``offset`` (feed-forward) is added before limiting so anti-windup sees the real command;
-        ``lower``/``upper`` are extra command bounds (e.g. from a rate limit).
+        ``lower``/``upper`` are extra command bounds (e.g. from a rate limit);
+        ``integral_lower``/``integral_upper`` extra bounds of the integrator state.
         """
         if not dt > 0.0:
             raise ParameterError(f"{self.prefix}: dt = {dt!r} is out of range: must be > 0 [s]")
@@ -175,5 +181,7 @@ class Pid:
                     self.integral += dt * self.i * e
             else:
                 self.integral += dt * self.i * e
-            self.integral = min(max(self.integral, self.i_clamp_min), self.i_clamp_max)
+            self.integral = min(
+                max(self.integral, self.i_clamp_min, integral_lower), self.i_clamp_max, integral_upper
+            )
         return PidOutput(p_term, i_term, d_term, e, edot, u, u_sat, saturated)
