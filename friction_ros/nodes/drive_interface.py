@@ -21,6 +21,17 @@ live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTE
 zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
 bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
 
+Stale telemetry: the timeout is derived from the rates unless ``telemetry_timeout`` is set:
+3 telemetry periods (``telemetry_rate_hz``, default the control rate) plus a 0.5 s jitter margin
+(a healthy emulator process on a loaded 2-core machine goes silent for up to ~0.3 s). A silent drive
+is faulted (zero torque + IDLE, logged) at the first control period after the timeout; the fault
+stays latched when telemetry returns (logged: "cleared ...; drive stays disabled until ~/enable"),
+``~/enable`` resets it. Every fault of a drive is logged once when it starts and once when it clears
+(:class:`friction_ros.core.can.faults.FaultLog`); diagnostics carry ``stale_faults``,
+``telemetry_age_max_ms`` (per diagnostics period) and ``telemetry_timeout_ms``. ``joint_commands``
+messages for none of the node's joints or with mismatched arrays are ignored, counted
+(``commands_foreign``, ``commands_malformed``) and logged at most once a second per kind.
+
 Threads and wake-ups (issue 6: < 25 % of a core per axis at 1 kHz): the control period runs in
 the executor thread (:class:`~friction_ros.nodes.node_utils.DeadlineLoop`, driven by ``run_node``)
 and reads the bus itself: at each deadline it drains the frames received since the last period
