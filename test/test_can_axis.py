@@ -71,7 +71,8 @@ def test_enable_waits_for_telemetry_and_sends_the_odrive_sequence():
     a = DriveAxis(AxisConfig(node_id=3))
     a.request_enable()
     res = a.cycle(0.0)
-    assert not a.enabled and res.sample is None and res.flags & ax.FAULT_TELEMETRY_STALE
+    assert not a.enabled and res.sample is None and not res.frames
+    assert not res.flags  # nothing received yet, but not stale before the timeout
     feed(a, telemetry(3, pos=1.0), 0.001)
     res = a.cycle(0.002)
     assert a.enabled
@@ -120,7 +121,7 @@ def test_nan_and_inf_commands_are_rejected_with_zero_torque():
 
 
 def test_watchdog_zeroes_torque_after_timeout_and_recovers():
-    a, _ = enabled_axis(command_timeout=0.05, telemetry_timeout=1.0)
+    a, _ = enabled_axis(command_timeout=0.05, telemetry_timeout=1.0, telemetry_period=0.3)
     a.set_command(0.8, 0.0)
     assert torque_of(a.cycle(0.049).frames) == pytest.approx(0.8)
     res = a.cycle(0.051)
@@ -132,7 +133,7 @@ def test_watchdog_zeroes_torque_after_timeout_and_recovers():
 
 
 def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
-    a, _ = enabled_axis(telemetry_timeout=0.005)
+    a, _ = enabled_axis(telemetry_timeout=0.005, telemetry_period=0.002)
     a.set_command(1.0, 0.0)
     feed(a, telemetry(), 0.010)
     assert a.cycle(0.014).sample is not None

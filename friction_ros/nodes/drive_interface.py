@@ -21,10 +21,12 @@ live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTE
 zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
 bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
 
-Stale telemetry: the timeout is derived from the rates unless ``telemetry_timeout`` is set:
-3 telemetry periods (``telemetry_rate_hz``, default the control rate) plus a 0.5 s jitter margin
-(a healthy emulator process on a loaded 2-core machine goes silent for up to ~0.3 s). A silent drive
-is faulted (zero torque + IDLE, logged) at the first control period after the timeout; the fault
+Stale telemetry, in two stages derived from the telemetry period T (``telemetry_rate_hz``, default
+the control rate): telemetry older than 3 T gives no joint_states sample for the drive (never
+repeated values) and zero torque until fresh frames arrive (counted: ``telemetry_late_periods``);
+telemetry older than the timeout (``telemetry_timeout``, default 3 T plus a 0.5 s jitter margin: a
+healthy emulator process on a loaded 2-core machine goes silent for up to ~0.3 s) is a fault:
+zero torque + IDLE, logged, at the first control period after the timeout; the fault
 stays latched when telemetry returns (logged: "cleared ...; drive stays disabled until ~/enable"),
 ``~/enable`` resets it. Every fault of a drive is logged once when it starts and once when it clears
 (:class:`friction_ros.core.can.faults.FaultLog`); diagnostics carry ``stale_faults``,
@@ -887,6 +889,8 @@ class DriveInterface(Node):
             level, message = ERROR, f"fault: {axis.fault_reason}"
         elif flags:
             level, message = WARN, f"{'enabled' if axis.enabled else 'disabled'}, flags {fault_text(flags)}"
+        elif axis.telemetry.encoder_time is None:
+            level, message = WARN, "disabled, no telemetry yet"
         else:
             level, message = OK, "enabled" if axis.enabled else "disabled (telemetry ok)"
         values = {
@@ -907,6 +911,7 @@ class DriveInterface(Node):
             "telemetry_age_max_ms": axis.take_age_max() * 1e3,
             "telemetry_age_max_total_ms": c.telemetry_age_max * 1e3,
             "stale_faults": c.stale_faults,
+            "telemetry_late_periods": c.late_periods,
             "watchdog_trips": c.watchdog_trips,
             "fault_trips": c.fault_trips,
             "limit_hits": c.limit_hits,

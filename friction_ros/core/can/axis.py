@@ -6,8 +6,10 @@ the frames to send, with every safety rule of the drive interface in one place:
 * command watchdog: no command for ``command_timeout`` -> zero torque (flag, trip counted);
 * NaN/inf commands rejected (the command becomes zero torque, counted);
 * joint torque limit, motor current limit, joint velocity limit (no torque that accelerates further);
-* stale telemetry (no encoder/effort frame within the stale timeout, see below) -> no joint sample
-  is produced (never made-up states), and while enabled a latched fault that disables the drive;
+* late telemetry (newest encoder/effort frame older than ``STALE_PERIODS`` telemetry periods) ->
+  no joint sample (never repeated or made-up states) and zero torque until fresh frames arrive;
+* stale telemetry (no frame within the stale timeout, see below) -> while enabled a latched fault
+  that disables the drive;
 * drive error (ODrive axis_error, MIT error code) -> latched fault, drive disabled;
 * bus fault reported by the adapter -> latched fault.
 
@@ -130,6 +132,11 @@ class AxisConfig:
         return STALE_PERIODS * self.telemetry_period + JITTER_MARGIN
 
     @property
+    def late_after(self) -> float:
+        """Telemetry older than this gives no joint sample and zero torque [s] (not yet a fault)."""
+        return min(STALE_PERIODS * self.telemetry_period, self.stale_after)
+
+    @property
     def stale_after(self) -> float:
         """Effective stale-telemetry timeout [s]."""
         return self.telemetry_timeout if self.telemetry_timeout > 0 else self.auto_timeout
@@ -183,6 +190,7 @@ class AxisCounters:
     limit_hits: int = 0
     bus_errors: int = 0
     stale_faults: int = 0  # stale-telemetry episodes (condition starts)
+    late_periods: int = 0  # periods with telemetry older than late_after (zero torque, no sample)
     telemetry_age_max: float = 0.0  # [s] largest age of the newest telemetry seen at a period
 
 
@@ -387,9 +395,9 @@ class DriveAxis:
             self.fault_reason = reason
         self.latched |= bit
 
-    def _fresh(self, t: float) -> tuple[bool, float, bool]:
-        """(fresh, age [s], anything ever received). Without any telemetry the age counts from
-        the axis' first period, so an absent drive is reported after the same timeout."""
+    def _age(self, t: float) -> tuple[float, bool]:
+        """(age of the newest telemetry [s], anything ever received). Without any telemetry the
+        age counts from the axis' first period, so an absent drive is reported after the same timeout."""
         tel = self.telemetry
         eff_t = (
             tel.encoder_time
@@ -397,14 +405,14 @@ class DriveAxis:
             else (tel.iq_time if self.cfg.effort_source == "current" else tel.torque_time)
         )
         if tel.encoder_time is None or eff_t is None:
-            return False, t - self._start, False
+            return t - self._start, False
         age = t - min(tel.encoder_time, eff_t)
         c = self.counters
         if age > c.telemetry_age_max:
             c.telemetry_age_max = age
         if age > self.age_window_max:
             self.age_window_max = age
-        return age <= self.cfg.stale_after, age, True
+        return age, True
 
     def cycle(self, t: float) -> CycleResult:
         """One control period at time ``t``: supervise, and return frames to send + the joint sample."""
@@ -415,11 +423,13 @@ class DriveAxis:
         with self._lock:
             if self._start is None:
                 self._start = t
-            fresh, age, ever = self._fresh(t)
+            age, ever = self._age(t)
             stale = age > cfg.stale_after
-            if not fresh:
-                flags |= FAULT_TELEMETRY_STALE
+            late = not ever or age > cfg.late_after  # no sample, zero torque (not yet a fault)
+            if late:
+                self.counters.late_periods += 1
             if stale:
+                flags |= FAULT_TELEMETRY_STALE
                 what = (
                     f"newest telemetry is {age * 1e3:.0f} ms old"
                     if ever
@@ -440,7 +450,7 @@ class DriveAxis:
                     frames += self.disable_frames()
                 self.enabled = False
                 self.enable_requested = False
-            elif self.enable_requested and not self.enabled and fresh:
+            elif self.enable_requested and not self.enabled and not late:
                 frames += self.enable_frames()
                 self.enabled = True
                 self._cmd, self._cmd_time, self._watchdog_tripped = 0.0, None, True
@@ -456,7 +466,7 @@ class DriveAxis:
                     self.enable_requested = False
 
             sample = None
-            if fresh:
+            if not late:
                 pos = conv.joint_position(tel.motor_position)
                 vel = conv.joint_velocity(tel.motor_velocity)
                 if self.mit is not None or cfg.effort_source == "torque_estimate":
@@ -474,7 +484,7 @@ class DriveAxis:
                     if not self._watchdog_tripped:
                         self._watchdog_tripped = True
                         self.counters.watchdog_trips += 1
-                else:
+                elif not late:
                     cmd = self._cmd
                 if self._rejected_pending:
                     flags |= FAULT_COMMAND_REJECTED
