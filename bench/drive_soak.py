@@ -12,8 +12,10 @@ ids 1, 2, 3 in one node, one emulator process with ``--node-id 1 2 3``).
 
 Figures per config: stale-telemetry faults (diagnostics ``stale_faults`` and fault lines in the
 node's log, must be 0), the timeout, the largest telemetry age the node saw (the drive's longest
-silence as seen at a control period) and the 99th percentile of the per-second maxima, watchdog
-trips (a controller late by more than ``command_timeout``: not a drive fault), joint_states rate.
+silence as seen at a control period) and the 99th percentile of the per-second maxima, late
+periods (telemetry older than 3 periods: no sample and zero torque for that period; % of the 1 kHz
+periods), watchdog trips (a controller late by more than ``command_timeout``: not a drive fault),
+joint_states rate.
 At the end the emulator is killed (SIGKILL): time from the kill to the node's logged
 ``telemetry_stale`` line (the bound is the timeout plus one control period after the drive's last
 frame, plus however late the node itself runs), and whether the drive was disabled.
@@ -187,6 +189,8 @@ def soak(duration: float, load: int = 2, joints: dict[str, int] | None = None, k
             "telemetry_age_max_ms": float(last.get(k + "telemetry_age_max_total_ms", math.nan)),
             "telemetry_age_p99_of_1s_max_ms": ages[int(0.99 * (len(ages) - 1))] if ages else math.nan,
             "watchdog_trips": int(last.get(k + "watchdog_trips", -1)),
+            "late_periods": int(last.get(k + "telemetry_late_periods", -1))
+            - int(first.get(k + "telemetry_late_periods", 0)),
             "enabled_at_end_of_soak": last.get(k + "enabled") == "True",
         })  # fmt: skip
     res["per_drive"] = per_drive
@@ -217,13 +221,14 @@ def main() -> None:
     rows = [
         [r["config"], d["joint"], f"{r['duration_s']:.0f}", r["load_processes"], d["stale_faults"],
          d["stale_log_lines"], d["timeout_ms"], d["telemetry_age_max_ms"], d["telemetry_age_p99_of_1s_max_ms"],
-         d["watchdog_trips"], f"{r['joint_states_hz']:.0f}"]
+         d["watchdog_trips"], d["late_periods"], f"{100 * d['late_periods'] / (1000 * r['duration_s']):.2f}",
+         f"{r['joint_states_hz']:.0f}"]
         for r in runs for d in r["per_drive"]
     ]  # fmt: skip
     _common.print_table(
         "Healthy drive_emulator process, drive_interface at the README settings, busy loops on both cores",
         ["config", "joint", "s", "busy", "stale faults", "stale log lines", "timeout ms", "max age ms",
-         "p99 of 1 s max ms", "watchdog trips", "joint_states Hz"],
+         "p99 of 1 s max ms", "watchdog trips", "late periods", "late %", "joint_states Hz"],
         rows,
     )  # fmt: skip
     _common.print_table(
