@@ -71,9 +71,9 @@ FAULT_NAMES = {
 # Stale timeout derived from the telemetry period T: STALE_PERIODS * T + JITTER_MARGIN. The margin
 # covers frames a healthy drive sends late. Measured on the 2-core development VM with two busy loops
 # (and other users) on the cores: the newest telemetry seen by drive_interface from a drive_emulator
-# process (normal priority) was up to 174 ms old in 3 minutes (p99 of the 1 s maxima 99 ms), and a
-# bare 1 kHz sleep loop paused up to 314 ms in a minute (the same loop under SCHED_FIFO: 2.4 ms): the
-# pauses are the scheduler's, not the VM's. Firmware on a real drive with SocketCAN (kernel receive
+# process (normal priority) was up to 260 ms old in 5 minutes (bench/drive_soak.py, three drives in
+# one emulator process; 174 ms in 3 minutes with one), and a bare 1 kHz sleep loop paused up to
+# 314 ms in a minute (the same loop under SCHED_FIFO: 2.4 ms): the pauses are the scheduler's. Firmware on a real drive with SocketCAN (kernel receive
 # stamps) pauses ~never, so a robot may set telemetry_timeout to a few periods for faster detection.
 STALE_PERIODS = 3
 JITTER_MARGIN = 0.5  # [s]
