@@ -71,7 +71,8 @@ def test_enable_waits_for_telemetry_and_sends_the_odrive_sequence():
     a = DriveAxis(AxisConfig(node_id=3))
     a.request_enable()
     res = a.cycle(0.0)
-    assert not a.enabled and res.sample is None and res.flags & ax.FAULT_TELEMETRY_STALE
+    assert not a.enabled and res.sample is None and not res.frames
+    assert not res.flags  # nothing received yet, but not stale before the timeout
     feed(a, telemetry(3, pos=1.0), 0.001)
     res = a.cycle(0.002)
     assert a.enabled
@@ -120,7 +121,7 @@ def test_nan_and_inf_commands_are_rejected_with_zero_torque():
 
 
 def test_watchdog_zeroes_torque_after_timeout_and_recovers():
-    a, _ = enabled_axis(command_timeout=0.05, telemetry_timeout=1.0)
+    a, _ = enabled_axis(command_timeout=0.05, telemetry_timeout=1.0, telemetry_period=0.3)
     a.set_command(0.8, 0.0)
     assert torque_of(a.cycle(0.049).frames) == pytest.approx(0.8)
     res = a.cycle(0.051)
@@ -132,7 +133,7 @@ def test_watchdog_zeroes_torque_after_timeout_and_recovers():
 
 
 def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
-    a, _ = enabled_axis(telemetry_timeout=0.005)
+    a, _ = enabled_axis(telemetry_timeout=0.005, telemetry_period=0.002)
     a.set_command(1.0, 0.0)
     feed(a, telemetry(), 0.010)
     assert a.cycle(0.014).sample is not None
@@ -140,11 +141,139 @@ def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
     assert res.sample is None and res.flags & ax.FAULT_TELEMETRY_STALE
     assert torque_of(res.frames) == 0.0 and states_of(res.frames) == [od.AxisState.IDLE]
     assert not a.enabled and "telemetry stale" in a.fault_reason
-    feed(a, telemetry(), 0.016)
-    res = a.cycle(0.017)  # fresh again: still latched, no torque frames
+    # logged once when it starts, as an error naming the age, the rule and the action
+    (ev,) = [e for e in res.events if e.kind == "telemetry_stale"]
+    assert ev.level == "error" and "5 ms old (timeout 5 ms)" in ev.text and "drive disabled" in ev.text
+    assert not [e for e in a.cycle(0.016).events if e.kind == "telemetry_stale"]  # not again
+    feed(a, telemetry(), 0.0165)
+    res = a.cycle(0.017)  # fresh again: still latched, no torque frames; the clear is logged
     assert not a.enabled and torque_of(res.frames) is None and res.flags & ax.FAULT_TELEMETRY_STALE
+    (ev,) = [e for e in res.events if e.kind == "telemetry_stale"]
+    assert ev.text == "telemetry_stale cleared after 2 ms; drive stays disabled until ~/enable"
+    feed(a, telemetry(), 0.0172)
     a.request_enable()
-    assert a.cycle(0.0175).flags == ax.FAULT_COMMAND_WATCHDOG and a.enabled
+    res = a.cycle(0.0175)
+    assert res.flags == ax.FAULT_COMMAND_WATCHDOG and a.enabled
+    assert [e.text for e in res.events if e.kind == "telemetry_stale"] == [
+        "telemetry_stale fault reset by ~/enable"
+    ]
+    assert a.counters.stale_faults == 1
+
+
+def test_stale_timeout_is_derived_from_the_telemetry_period_and_validated():
+    cfg = AxisConfig(telemetry_period=0.01)
+    assert cfg.stale_after == pytest.approx(ax.STALE_PERIODS * 0.01 + ax.JITTER_MARGIN)
+    assert AxisConfig(telemetry_period=0.001).stale_after == pytest.approx(0.003 + ax.JITTER_MARGIN)
+    assert AxisConfig(telemetry_period=0.01, telemetry_timeout=0.05).stale_after == 0.05
+    with pytest.raises(ParameterError, match=r"shorter than 2 telemetry periods \(20 ms\).*use 0"):
+        AxisConfig(telemetry_period=0.01, telemetry_timeout=0.015)
+    with pytest.raises(ParameterError, match="telemetry_timeout"):
+        AxisConfig(telemetry_timeout=-1.0)
+
+
+@pytest.mark.parametrize("period", [0.001, 0.01])
+def test_late_frames_within_the_margin_are_tolerated_and_a_dead_drive_faults_in_time(period):
+    """Telemetry at ``period`` with pauses up to just below the automatic timeout (a healthy
+    emulator under load): no fault. Then the drive stops: the fault (zero torque + IDLE, logged)
+    comes at the first control period after the timeout, at 1 kHz."""
+    cfg = AxisConfig(telemetry_period=period, command_timeout=10.0, torque_limit=2.0)
+    a = DriveAxis(cfg)
+    a.request_enable()
+    t, k, pauses = 0.0, 0, {0.5: 0.9 * cfg.stale_after, 1.2: cfg.stale_after - 0.002}
+    next_frame, events = 0.0, []
+    while t < 2.0:
+        if t >= next_frame - 1e-12:
+            feed(a, telemetry(), t)
+            next_frame = t + period
+            for start, length in list(pauses.items()):
+                if t >= start:
+                    next_frame = t + length
+                    del pauses[start]
+        a.set_command(0.5, t)
+        r = a.cycle(t)
+        events += r.events
+        assert a.enabled and not r.flags & ax.FAULT_TELEMETRY_STALE, (t, r.flags)
+        k += 1
+        t = k * 0.001
+    last = next_frame - period  # the drive dies after its frame at `last`
+    while a.enabled:
+        r = a.cycle(t)
+        events += r.events
+        k += 1
+        t = k * 0.001
+    t_fault = (k - 1) * 0.001
+    assert cfg.stale_after < t_fault - last <= cfg.stale_after + 0.001 + 1e-9
+    assert torque_of(r.frames) == 0.0 and states_of(r.frames) == [od.AxisState.IDLE]
+    stale = [e for e in events if e.kind == "telemetry_stale"]
+    assert len(stale) == 1 and stale[0].t == t_fault and stale[0].level == "error"
+    assert not [e for e in events if e.kind not in ("telemetry_stale", "limit") and e.t > 0.01]
+
+
+def test_absent_drive_is_reported_once_after_the_timeout_and_when_it_appears():
+    """Nothing on the bus: the enable waits; after the timeout one warning (not a latched fault:
+    the drive was never enabled), and one line when the drive appears; then it enables."""
+    cfg = AxisConfig(telemetry_period=0.01, command_timeout=10.0)
+    a = DriveAxis(cfg)
+    a.request_enable()
+    events, t = [], 1.0
+    while t < 1.0 + 2 * cfg.stale_after:
+        r = a.cycle(t)
+        events += r.events
+        assert not r.frames and not a.enabled and r.sample is None
+        t += 0.001
+    (ev,) = events
+    assert ev.level == "warning" and ev.t == pytest.approx(1.0 + cfg.stale_after, abs=0.0011)
+    assert "no telemetry received from drive id 0" in ev.text and "3 telemetry periods of 10 ms" in ev.text
+    feed(a, telemetry(), t)
+    r = a.cycle(t)
+    assert a.enabled and [e.text.split(" after")[0] for e in r.events][:1] == ["telemetry_stale cleared"]
+    assert not a.latched
+
+
+def test_every_fault_kind_is_logged_once_when_it_starts_and_once_when_it_clears():
+    a, res = enabled_axis(telemetry_timeout=1.0, command_timeout=0.05)
+    assert [e.text for e in res.events] == ["command_watchdog: no joint_commands received yet: zero torque"]
+    log = []
+
+    def run(t0, t1, cmd=None, err=0):
+        t = t0
+        while t < t1 - 1e-12:
+            feed(a, telemetry(err=err, state=8), t)
+            if cmd is not None:
+                a.set_command(cmd, t)
+            log.extend((e.kind, e.level, e.text) for e in a.cycle(t).events)
+            t += 0.001
+
+    run(0.0, 0.3, cmd=0.5)  # commands arrive: the initial watchdog (no command yet) clears
+    assert [t for _, _, t in log] == ["command_watchdog cleared after 0 ms"]
+    log.clear()
+    run(0.3, 0.6)  # controller stops: watchdog once, no repeat while it lasts
+    assert [(k, lv) for k, lv, _ in log] == [("command_watchdog", "warning")]
+    assert "no joint_commands for 50 ms" in log[0][2]
+    log.clear()
+    run(0.6, 3.0, cmd=5.0)  # saturating for 2.4 s: one limit line (held), watchdog clear
+    assert sorted(k for k, _, _ in log) == ["command_watchdog", "limit"]
+    log.clear()
+    run(3.0, 3.5, cmd=0.1)  # within the hold (1 s): no line yet
+    assert log == []
+    run(3.5, 4.2, cmd=0.1)
+    assert [(k, t.startswith("limit cleared after 2.")) for k, _, t in log] == [("limit", True)]
+    log.clear()
+    a.report_bus_fault("bus-off error frame received")  # bus: latched, logged with the action
+    run(4.2, 4.3, cmd=0.1)
+    assert [(k, lv) for k, lv, _ in log] == [("bus", "error")] and "drive disabled" in log[0][2]
+    log.clear()
+    a.clear_bus_fault()
+    run(4.3, 4.4, cmd=0.1)
+    assert [t for _, _, t in log] == ["bus cleared after 100 ms; drive stays disabled until ~/enable"]
+    log.clear()
+    a.request_enable()
+    run(4.4, 4.5, cmd=0.1)
+    assert "bus fault reset by ~/enable" in [t for _, _, t in log]
+    log.clear()
+    run(4.5, 4.6, cmd=0.1, err=od.ERROR_CURRENT_LIMIT_VIOLATION)  # drive error: latched, once
+    assert [(k, lv) for k, lv, _ in log] == [("drive_error", "error")] and "0x" in log[0][2]
+    assert not a.enabled
 
 
 def test_drive_that_does_not_enter_closed_loop_gets_one_more_enable_then_a_fault():

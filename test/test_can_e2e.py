@@ -181,7 +181,8 @@ def test_odrive_hold_track_watchdog_and_sigint(tmp_path, pd):
 
 def test_odrive_stale_telemetry_faults_within_3_periods(tmp_path, pd):
     emu = {"encoder_rate_hz": 1 / STALE_PERIOD, "iq_rate_hz": 1 / STALE_PERIOD}
-    proc, log = start_stack(tmp_path, emulator=emu, params=[f"telemetry_timeout:={2.5 * STALE_PERIOD}"])
+    params = [f"telemetry_rate_hz:={1 / STALE_PERIOD}", f"telemetry_timeout:={2.5 * STALE_PERIOD}"]
+    proc, log = start_stack(tmp_path, emulator=emu, params=params)
     try:
         pd.ref = lambda t: (0.0, 0.0)
         pd.wait_started()

@@ -15,6 +15,7 @@ stops cleanly on Ctrl-C. Fault injection: ``--silent-after``, ``--error-after``,
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 import threading
@@ -114,17 +115,23 @@ def main(argv: list[str] | None = None) -> int:
     for emu, _bus in drives:
         emu.start()
     t0 = time.monotonic()
+    end = t0 + a.duration if a.duration is not None else math.inf
+    next_status = t0 + a.status_period
     try:
-        while not stop.wait(a.status_period):
+        while not stop.wait(max(0.0, min(next_status, end) - time.monotonic())):
+            now = time.monotonic()
+            if now >= end:
+                break
+            if now < next_status:
+                continue
+            next_status += a.status_period
             for node_id, (emu, _bus) in zip(ids, drives):
                 s = emu.stats
                 print(
-                    f"t={time.monotonic() - t0:.0f}s node {node_id} armed={emu.armed} q={emu.meas.position:+.4f} rad "
+                    f"t={now - t0:.0f}s node {node_id} armed={emu.armed} q={emu.meas.position:+.4f} rad "
                     f"rx={s.frames_rx} tx={s.frames_tx} lost={s.frames_lost} cmds={s.commands}",
                     flush=True,
                 )
-            if a.duration is not None and time.monotonic() - t0 >= a.duration:
-                break
     finally:
         for emu, bus in drives:
             emu.stop()

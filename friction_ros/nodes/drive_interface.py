@@ -21,6 +21,19 @@ live in :class:`friction_ros.core.can.axis.DriveAxis`; every fault, Ctrl-C/SIGTE
 zero torque + IDLE (ODrive) or zero command + exit motor mode (MIT). Bus errors are counted, a dead
 bus (bus-off, reader failure, repeated send failures) latches a bus fault and is reopened.
 
+Stale telemetry, in two stages derived from the telemetry period T (``telemetry_rate_hz``, default
+the control rate): telemetry older than 3 T gives no joint_states sample for the drive (never
+repeated values) and zero torque until fresh frames arrive (counted: ``telemetry_late_periods``);
+telemetry older than the timeout (``telemetry_timeout``, default 3 T plus a 0.5 s jitter margin: a
+healthy emulator process on a loaded 2-core machine goes silent for up to ~0.3 s) is a fault:
+zero torque + IDLE, logged, at the first control period after the timeout; the fault
+stays latched when telemetry returns (logged: "cleared ...; drive stays disabled until ~/enable"),
+``~/enable`` resets it. Every fault of a drive is logged once when it starts and once when it clears
+(:class:`friction_ros.core.can.faults.FaultLog`); diagnostics carry ``stale_faults``,
+``telemetry_age_max_ms`` (per diagnostics period) and ``telemetry_timeout_ms``. ``joint_commands``
+messages for none of the node's joints or with mismatched arrays are ignored, counted
+(``commands_foreign``, ``commands_malformed``) and logged at most once a second per kind.
+
 Threads and wake-ups (issue 6: < 25 % of a core per axis at 1 kHz): the control period runs in
 the executor thread (:class:`~friction_ros.nodes.node_utils.DeadlineLoop`, driven by ``run_node``)
 and reads the bus itself: at each deadline it drains the frames received since the last period
@@ -59,8 +72,10 @@ from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.axis import (
     FAULT_BUS,
+    JITTER_MARGIN,
     LATCHING,
     PROTOCOLS,
+    STALE_PERIODS,
     AxisConfig,
     DriveAxis,
     fault_text,
@@ -180,10 +195,21 @@ PARAMS = [
         unit="s",
     ),
     Param(
+        "telemetry_rate_hz",
+        0.0,
+        "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
+        "(MIT replies and RTR requests come once per period)",
+        lo=0.0,
+        hi=10000.0,
+        read_only=True,
+        unit="Hz",
+    ),
+    Param(
         "telemetry_timeout",
-        0.01,
-        "stale telemetry fault when no encoder/effort frame for this long",
-        lo=1e-4,
+        0.0,
+        f"stale telemetry fault when no encoder/effort frame for this long; 0 = automatic: "
+        f"{STALE_PERIODS} telemetry periods + {JITTER_MARGIN * 1e3:g} ms jitter margin",
+        lo=0.0,
         hi=10.0,
         unit="s",
     ),
@@ -238,6 +264,7 @@ def axis_config(v: dict) -> AxisConfig:
         current_limit=v["current_limit"],
         velocity_limit=v["velocity_limit"],
         command_timeout=v["command_timeout"],
+        telemetry_period=1.0 / (v["telemetry_rate_hz"] or v["control_rate_hz"]),
         telemetry_timeout=v["telemetry_timeout"],
         effort_source=v["effort_source"],
         request_telemetry=v["request_telemetry"],
@@ -426,6 +453,7 @@ class AxisPort:
         self.ds = DriveState(joint_name=self.joint, protocol=values["protocol"])
         self.flags = 0
         self.diag_prev: tuple[float, int, int, int, int] | None = None
+        self.label = f"drive '{self.joint}' (id {values['node_id']})"
 
     def drive_values(self, sample, flags: int) -> tuple:
         tel = self.axis.telemetry
@@ -485,7 +513,9 @@ class DriveInterface(Node):
         hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{ids}"
         self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
         add_runtime_validation(self, [*PARAMS, *self.axis_specs], self._apply)
-        self.commands_foreign = 0
+        self.commands_foreign = 0  # for other joints only
+        self.commands_malformed = 0  # array lengths that do not match
+        self._ignored_last: dict[str, float] = {}
         self._diag_next = time.monotonic()
         n = len(self.joints)
         self._js = JointState(
@@ -605,9 +635,19 @@ class DriveInterface(Node):
     def _command(self, names, efforts, now: float) -> None:
         """Efforts by joint name (a message may carry any subset of the joints; a drive left out
         gets no command, so its watchdog zeroes it), or by position when the message has no names
-        and exactly one effort per drive."""
+        and exactly one effort per drive. A message for none of this node's joints, or whose
+        arrays do not match, is ignored (counted, logged at most once a second): the previous
+        command stands until the watchdog."""
         ports = self.ports
         if names:
+            if len(efforts) != len(names):
+                self.commands_malformed += 1
+                self._ignored(
+                    "length",
+                    f"ignored joint_commands with {len(names)} names but {len(efforts)} efforts: "
+                    "must carry one effort per name",
+                )
+                return
             names = list(names)
             hit = False
             for port in ports:
@@ -616,14 +656,32 @@ class DriveInterface(Node):
                 except ValueError:
                     continue
                 hit = True
-                self._set_command(port, efforts[i] if i < len(efforts) else math.nan, now)
+                self._set_command(port, efforts[i], now)
             if not hit:
                 self.commands_foreign += 1
+                self._ignored(
+                    "foreign",
+                    f"ignored joint_commands for {names}: this node drives {self.joints} "
+                    "(set joint_name / joints to match the controller)",
+                )
         elif len(efforts) == len(ports):
             for port, value in zip(ports, efforts):
                 self._set_command(port, value, now)
         else:
-            self.commands_foreign += 1
+            self.commands_malformed += 1
+            self._ignored(
+                "length",
+                f"ignored joint_commands without names and {len(efforts)} efforts: "
+                f"must name its joints or carry exactly {len(ports)} effort{'s' if len(ports) > 1 else ''} "
+                f"(joints {self.joints})",
+            )
+
+    def _ignored(self, kind: str, text: str) -> None:
+        """Warn about an ignored command message, at most once a second per kind."""
+        now = time.monotonic()
+        if now - self._ignored_last.get(kind, -math.inf) >= 1.0:
+            self._ignored_last[kind] = now
+            self.get_logger().warning(text)
 
     def _set_command(self, port: AxisPort, value, now: float) -> None:
         if not port.axis.set_command(value, now):  # a command without effort is rejected too
@@ -657,9 +715,10 @@ class DriveInterface(Node):
         return ok
 
     def bus_dead(self, reason: str) -> None:
+        """Latch a bus fault on every drive (logged by each axis' fault log) and reopen the bus."""
         if self._bus_dead_since is None:
             self._bus_dead_since = time.monotonic()
-            self.get_logger().error(f"CAN bus fault: {reason}; drive disabled, reopening the bus")
+            reason += f"; reopening the bus every {self.v['bus_recovery_period']:g} s"
         for a in self.axes:
             a.report_bus_fault(reason)
 
@@ -676,7 +735,8 @@ class DriveInterface(Node):
             self.bus_reopens += 1
             self._consecutive_send_errors = 0
             self._bus_dead_since = None
-            self.get_logger().warning("CAN bus reopened; drive stays disabled until ~/enable")
+            for a in self.axes:  # each axis logs "bus cleared ...; drive stays disabled until ~/enable"
+                a.clear_bus_fault()
         except Exception as exc:
             self._bus_dead_since = now
             self.get_logger().error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)
@@ -747,6 +807,8 @@ class DriveInterface(Node):
             port.flags = res.flags
             frames += res.frames
             samples.append(res.sample)
+            if res.events:
+                self._log_faults(port, res.events)
         if frames and not self.send_frames(frames):
             for port in ports:
                 port.flags |= FAULT_BUS
@@ -780,6 +842,18 @@ class DriveInterface(Node):
         if now >= self._diag_next:
             self._diag_next = now + self.v["diagnostics_period"]
             self._publish_diagnostics(now)
+
+    def _log_faults(self, port: AxisPort, events) -> None:
+        """Fault start / clear lines of the core (see friction_ros.core.can.faults)."""
+        log = self.get_logger()
+        for ev in events:  # one call site per severity (rclpy refuses a changing one)
+            text = f"{port.label}: {ev.text}"
+            if ev.level == "error":
+                log.error(text)
+            elif ev.level == "warning":
+                log.warning(text)
+            else:
+                log.info(text)
 
     def _publish_joint_objects(self, sec: int, nsec: int, ports: list[AxisPort], samples: list) -> None:
         """joint_states as a message object (fallback path, or a subset of the joints)."""
@@ -815,6 +889,8 @@ class DriveInterface(Node):
             level, message = ERROR, f"fault: {axis.fault_reason}"
         elif flags:
             level, message = WARN, f"{'enabled' if axis.enabled else 'disabled'}, flags {fault_text(flags)}"
+        elif axis.telemetry.encoder_time is None:
+            level, message = WARN, "disabled, no telemetry yet"
         else:
             level, message = OK, "enabled" if axis.enabled else "disabled (telemetry ok)"
         values = {
@@ -831,6 +907,11 @@ class DriveInterface(Node):
             "frames_rejected": st.rejected,
             "last_reject_reason": st.last_reject_reason,
             "commands_rejected": c.commands_rejected,
+            "telemetry_timeout_ms": axis.cfg.stale_after * 1e3,
+            "telemetry_age_max_ms": axis.take_age_max() * 1e3,
+            "telemetry_age_max_total_ms": c.telemetry_age_max * 1e3,
+            "stale_faults": c.stale_faults,
+            "telemetry_late_periods": c.late_periods,
             "watchdog_trips": c.watchdog_trips,
             "fault_trips": c.fault_trips,
             "limit_hits": c.limit_hits,
@@ -858,6 +939,7 @@ class DriveInterface(Node):
         values.update(
             {
                 "commands_foreign": self.commands_foreign,
+                "commands_malformed": self.commands_malformed,
                 "send_errors": self.send_errors,
                 "error_frames": self.error_frames,
                 "bus_reopens": self.bus_reopens,

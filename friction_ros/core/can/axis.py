@@ -6,13 +6,26 @@ the frames to send, with every safety rule of the drive interface in one place:
 * command watchdog: no command for ``command_timeout`` -> zero torque (flag, trip counted);
 * NaN/inf commands rejected (the command becomes zero torque, counted);
 * joint torque limit, motor current limit, joint velocity limit (no torque that accelerates further);
-* stale telemetry (no encoder/effort frame within ``telemetry_timeout``) -> no joint sample is
-  produced (never made-up states), and while enabled a latched fault that disables the drive;
+* late telemetry (newest encoder/effort frame older than ``STALE_PERIODS`` telemetry periods) ->
+  no joint sample (never repeated or made-up states) and zero torque until fresh frames arrive;
+* stale telemetry (no frame within the stale timeout, see below) -> while enabled a latched fault
+  that disables the drive;
 * drive error (ODrive axis_error, MIT error code) -> latched fault, drive disabled;
 * bus fault reported by the adapter -> latched fault.
 
-Latched faults clear only with an explicit :meth:`request_enable`. Disabling means zero torque and
-IDLE (ODrive Set_Axis_State 1) or zero command + exit motor mode (MIT).
+Stale timeout (:attr:`AxisConfig.stale_after`): ``telemetry_timeout`` when set, else derived from
+the telemetry period T (the drive's encoder/effort frame period): ``STALE_PERIODS`` x T plus
+``JITTER_MARGIN`` for frames a healthy drive sends late (scheduling jitter of an emulator process or
+of the bus). Age = time since the newest encoder/effort frame, or since the axis' first period when
+nothing was ever received, so a dead or absent drive is reported at most one control period after
+the timeout.
+
+Latched faults clear only with an explicit :meth:`request_enable`: a drive that faulted does not
+restart by itself (no automatic restart after a communication loss, as in EN 60204-1 7.5 and the
+CiA 402 fault reset), even when its telemetry comes back. Disabling means zero torque and IDLE
+(ODrive Set_Axis_State 1) or zero command + exit motor mode (MIT). Every fault is logged once when
+it starts and once when it clears (or is reset) through :class:`~friction_ros.core.can.faults.FaultLog`:
+:meth:`DriveAxis.cycle` returns the lines as ``events``.
 """
 
 from __future__ import annotations
@@ -26,6 +39,7 @@ from typing import NamedTuple
 
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
+from friction_ros.core.can.faults import FaultEvent, FaultLog
 from friction_ros.core.can.frame import DecodeStats, Frame
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
@@ -54,6 +68,20 @@ FAULT_NAMES = {
 }
 
 
+# Stale timeout derived from the telemetry period T: STALE_PERIODS * T + JITTER_MARGIN. The margin
+# covers frames a healthy drive sends late. Measured on the 2-core development VM with two busy loops
+# (and other users) on the cores: the newest telemetry seen by drive_interface from a drive_emulator
+# process (normal priority) was up to 260 ms old in 5 minutes (bench/drive_soak.py, three drives in
+# one emulator process; 174 ms in 3 minutes with one), and a bare 1 kHz sleep loop paused up to
+# 314 ms in a minute (the same loop under SCHED_FIFO: 2.4 ms): the pauses are the scheduler's. Firmware on a real drive with SocketCAN (kernel receive
+# stamps) pauses ~never, so a robot may set telemetry_timeout to a few periods for faster detection.
+STALE_PERIODS = 3
+JITTER_MARGIN = 0.5  # [s]
+# Held kinds count as cleared only after being absent this long (one log line per episode).
+FAULT_HOLD = {FAULT_LIMIT: 1.0}
+DISABLE_ACTION = "drive disabled (zero torque, idle) until ~/enable"
+
+
 def fault_text(flags: int) -> str:
     return ",".join(name for bit, name in FAULT_NAMES.items() if flags & bit) or "none"
 
@@ -69,7 +97,8 @@ class AxisConfig:
     current_limit: float = 10.0  # |motor q current| [A]
     velocity_limit: float = 10.0  # |joint velocity| [rad/s]
     command_timeout: float = 0.1  # [s]
-    telemetry_timeout: float = 0.01  # [s]
+    telemetry_period: float = 0.001  # [s] period of the drive's encoder/effort frames
+    telemetry_timeout: float = 0.0  # [s] 0 = STALE_PERIODS * telemetry_period + JITTER_MARGIN
     effort_source: str = "current"  # ODrive: Iq_Measured * k_t, or the drive's Torque_Estimate
     request_telemetry: bool = False  # ODrive: send RTR requests for encoder + effort every cycle
 
@@ -89,7 +118,36 @@ class AxisConfig:
         check_real("current_limit", self.current_limit, 0.0, lo_open=True, unit="A")
         check_real("velocity_limit", self.velocity_limit, 0.0, lo_open=True, unit="rad/s")
         check_real("command_timeout", self.command_timeout, 0.0, lo_open=True, unit="s")
-        check_real("telemetry_timeout", self.telemetry_timeout, 0.0, lo_open=True, unit="s")
+        check_real("telemetry_period", self.telemetry_period, 0.0, lo_open=True, unit="s")
+        check_real("telemetry_timeout", self.telemetry_timeout, 0.0, unit="s (0 = automatic)")
+        if 0 < self.telemetry_timeout < 2 * self.telemetry_period:
+            raise ParameterError(
+                f"telemetry_timeout = {self.telemetry_timeout * 1e3:g} ms is shorter than 2 telemetry "
+                f"periods ({2e3 * self.telemetry_period:g} ms): a healthy drive would fault; use 0 "
+                f"(automatic: {self.auto_timeout * 1e3:g} ms) or at least {2e3 * self.telemetry_period:g} ms"
+            )
+
+    @property
+    def auto_timeout(self) -> float:
+        return STALE_PERIODS * self.telemetry_period + JITTER_MARGIN
+
+    @property
+    def late_after(self) -> float:
+        """Telemetry older than this gives no joint sample and zero torque [s] (not yet a fault)."""
+        return min(STALE_PERIODS * self.telemetry_period, self.stale_after)
+
+    @property
+    def stale_after(self) -> float:
+        """Effective stale-telemetry timeout [s]."""
+        return self.telemetry_timeout if self.telemetry_timeout > 0 else self.auto_timeout
+
+    def stale_rule(self) -> str:
+        if self.telemetry_timeout > 0:
+            return f"timeout {self.stale_after * 1e3:.4g} ms"
+        return (
+            f"timeout {self.stale_after * 1e3:.4g} ms = {STALE_PERIODS} telemetry periods of "
+            f"{self.telemetry_period * 1e3:.4g} ms + {JITTER_MARGIN * 1e3:g} ms jitter margin"
+        )
 
 
 class JointSample(NamedTuple):
@@ -131,6 +189,9 @@ class AxisCounters:
     fault_trips: int = 0
     limit_hits: int = 0
     bus_errors: int = 0
+    stale_faults: int = 0  # stale-telemetry episodes (condition starts)
+    late_periods: int = 0  # periods with telemetry older than late_after (zero torque, no sample)
+    telemetry_age_max: float = 0.0  # [s] largest age of the newest telemetry seen at a period
 
 
 class CycleResult(NamedTuple):
@@ -138,6 +199,7 @@ class CycleResult(NamedTuple):
     sample: JointSample | None
     flags: int
     joint_torque_command: float  # what was sent this cycle [N*m joint], 0 when disabled
+    events: list[FaultEvent] = []  # fault start / clear lines to log
 
 
 class DriveAxis:
@@ -169,6 +231,12 @@ class DriveAxis:
         self._enable_time = -math.inf  # when the enable sequence was last sent
         self._enable_attempts = 0
         self._closed_loop_seen = False  # a heartbeat after enabling reported CLOSED_LOOP_CONTROL
+        self._start: float | None = None  # first period: the age of "nothing received yet"
+        self._bus_reason = ""  # set while the adapter reports the bus dead
+        self.age_window_max = 0.0  # largest telemetry age since take_age_max() [s]
+        self.faults = FaultLog(
+            {b: n for b, n in FAULT_NAMES.items() if b != FAULT_COMMAND_REJECTED}, FAULT_HOLD
+        )  # rejected commands are logged one by one (rate-limited) by the adapter
         # Fast path of the two telemetry frames of every period (ODrive encoder estimates + Iq): one
         # dict lookup by arbitration id and one unpack instead of a message object and an isinstance
         # chain. Same checks and counters as the decoder; anything else takes the general path.
@@ -267,10 +335,23 @@ class DriveAxis:
             return True
 
     def report_bus_fault(self, reason: str) -> None:
-        """Adapter reports bus-off / repeated send failures: latched fault (drive disabled)."""
+        """Adapter reports bus-off / repeated send failures: latched fault (drive disabled); the
+        condition lasts until :meth:`clear_bus_fault`."""
         with self._lock:
             self.counters.bus_errors += 1
+            self._bus_reason = self._bus_reason or reason
             self._latch(FAULT_BUS, reason)
+
+    def clear_bus_fault(self) -> None:
+        """Adapter: the bus works again (the latched fault stays until :meth:`request_enable`)."""
+        with self._lock:
+            self._bus_reason = ""
+
+    def take_age_max(self) -> float:
+        """Largest telemetry age seen since the previous call [s] (diagnostics window)."""
+        with self._lock:
+            m, self.age_window_max = self.age_window_max, 0.0
+            return m
 
     def request_enable(self) -> None:
         """Clear latched faults and enable as soon as telemetry is fresh (see :meth:`cycle`)."""
@@ -314,7 +395,9 @@ class DriveAxis:
             self.fault_reason = reason
         self.latched |= bit
 
-    def _fresh(self, t: float) -> tuple[bool, float]:
+    def _age(self, t: float) -> tuple[float, bool]:
+        """(age of the newest telemetry [s], anything ever received). Without any telemetry the
+        age counts from the axis' first period, so an absent drive is reported after the same timeout."""
         tel = self.telemetry
         eff_t = (
             tel.encoder_time
@@ -322,33 +405,44 @@ class DriveAxis:
             else (tel.iq_time if self.cfg.effort_source == "current" else tel.torque_time)
         )
         if tel.encoder_time is None or eff_t is None:
-            return False, math.inf
+            return t - self._start, False
         age = t - min(tel.encoder_time, eff_t)
-        return age <= self.cfg.telemetry_timeout, age
+        c = self.counters
+        if age > c.telemetry_age_max:
+            c.telemetry_age_max = age
+        if age > self.age_window_max:
+            self.age_window_max = age
+        return age, True
 
     def cycle(self, t: float) -> CycleResult:
         """One control period at time ``t``: supervise, and return frames to send + the joint sample."""
         cfg, conv, tel = self.cfg, self.conv, self.telemetry
         frames: list[Frame] = []
         flags = 0
+        reasons: dict[int, str] = {}
         with self._lock:
-            fresh, age = self._fresh(t)
-            if not fresh:
+            if self._start is None:
+                self._start = t
+            age, ever = self._age(t)
+            stale = age > cfg.stale_after
+            late = not ever or age > cfg.late_after  # no sample, zero torque (not yet a fault)
+            if late:
+                self.counters.late_periods += 1
+            if stale:
                 flags |= FAULT_TELEMETRY_STALE
+                what = (
+                    f"newest telemetry is {age * 1e3:.0f} ms old"
+                    if ever
+                    else f"no telemetry received from drive id {cfg.node_id} in {age * 1e3:.0f} ms"
+                )
+                reasons[FAULT_TELEMETRY_STALE] = f"{what} ({cfg.stale_rule()})"
                 if self.enabled:
-                    what = (
-                        "no telemetry yet"
-                        if math.isinf(age)
-                        else f"newest telemetry is {age * 1e3:.1f} ms old"
-                    )
-                    self._latch(
-                        FAULT_TELEMETRY_STALE,
-                        f"telemetry stale: {what} (timeout {cfg.telemetry_timeout * 1e3:g} ms)",
-                    )
+                    self._latch(FAULT_TELEMETRY_STALE, f"telemetry stale: {reasons[FAULT_TELEMETRY_STALE]}")
             if tel.axis_error:
                 flags |= FAULT_DRIVE_ERROR
+                reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}"
                 if self.enabled or self.enable_requested:
-                    self._latch(FAULT_DRIVE_ERROR, f"drive reports error 0x{tel.axis_error:X}")
+                    self._latch(FAULT_DRIVE_ERROR, reasons[FAULT_DRIVE_ERROR])
             flags |= self.latched
             if self.latched:
                 if self.enabled or self.enable_requested:
@@ -356,7 +450,7 @@ class DriveAxis:
                     frames += self.disable_frames()
                 self.enabled = False
                 self.enable_requested = False
-            elif self.enable_requested and not self.enabled and fresh:
+            elif self.enable_requested and not self.enabled and not late:
                 frames += self.enable_frames()
                 self.enabled = True
                 self._cmd, self._cmd_time, self._watchdog_tripped = 0.0, None, True
@@ -372,7 +466,7 @@ class DriveAxis:
                     self.enable_requested = False
 
             sample = None
-            if fresh:
+            if not late:
                 pos = conv.joint_position(tel.motor_position)
                 vel = conv.joint_velocity(tel.motor_velocity)
                 if self.mit is not None or cfg.effort_source == "torque_estimate":
@@ -390,7 +484,7 @@ class DriveAxis:
                     if not self._watchdog_tripped:
                         self._watchdog_tripped = True
                         self.counters.watchdog_trips += 1
-                else:
+                elif not late:
                     cmd = self._cmd
                 if self._rejected_pending:
                     flags |= FAULT_COMMAND_REJECTED
@@ -422,7 +516,24 @@ class DriveAxis:
                 frames.append(od.encode_rtr(cfg.node_id, self._effort_cmd))
             self.counters.frames_tx += len(frames)
             self._last_flags = flags
-            return CycleResult(frames, sample, flags, cmd)
+            active = flags & (FAULT_COMMAND_WATCHDOG | FAULT_LIMIT | FAULT_DRIVE_ERROR)
+            if stale:
+                active |= FAULT_TELEMETRY_STALE
+            if self._bus_reason:
+                active |= FAULT_BUS
+                reasons[FAULT_BUS] = self._bus_reason
+            for bit in (FAULT_DRIVE_ERROR, FAULT_BUS):  # one-off latches (e.g. no closed loop)
+                if self.latched & bit and bit not in reasons:
+                    reasons[bit] = self.fault_reason
+            reasons[FAULT_COMMAND_WATCHDOG] = (
+                "no joint_commands received yet: zero torque"
+                if self._cmd_time is None
+                else f"no joint_commands for {cfg.command_timeout * 1e3:g} ms: zero torque"
+            )
+            reasons[FAULT_LIMIT] = "torque command limited (torque, current or velocity limit)"
+            events = self.faults.update(t, active, self.latched, reasons, DISABLE_ACTION)
+            self.counters.stale_faults = self.faults.starts[FAULT_TELEMETRY_STALE]
+            return CycleResult(frames, sample, flags, cmd, events)
 
     def _check_closed_loop(self, t: float) -> list[Frame]:
         """ODrive heartbeat check of an enabled axis (lock held): see :attr:`CLOSED_LOOP_GRACE_S`."""
