@@ -214,3 +214,30 @@ def test_facade_validation(cfg, words):
         CompensatingController(cfg)
     for w in words:
         assert w in str(ei.value)
+
+
+@pytest.mark.parametrize(
+    "values, words, not_words",
+    [
+        (
+            {"compensation": {"gian": 1.0}, "friction": {"model": "coulomb", "fc": 0.1}},
+            ["compensation", "'gian'"],
+            [],
+        ),
+        ({"compensation": {"gain": 3.0}}, ["compensation.gain", "<= 2"], []),
+        ({"friction": {"model": "coulomb", "fc": -1.0}}, ["friction.fc"], ["model.fc"]),
+        ({"pid": {"p": -2.0}}, ["pid.p"], []),
+    ],
+)
+def test_ros_parameter_errors_name_the_ros_keys(values, words, not_words):
+    """A typo in the node's parameter file is named as written there, not by core section names."""
+    from friction_ros.core.control.controller import controller_from_ros_parameters
+
+    with pytest.raises(ParameterError) as ei:
+        controller_from_ros_parameters(values)
+    text = str(ei.value)
+    assert "controller.friction" not in text and not text.startswith("controller."), text
+    for w in words:
+        assert w in text, text
+    for w in not_words:
+        assert w not in text, text

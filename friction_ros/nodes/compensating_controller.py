@@ -32,9 +32,8 @@ from trajectory_msgs.msg import JointTrajectory
 from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.control.controller import (
     CONTROLLER_DEFAULTS,
-    CompensatingController,
     ControllerTerms,
-    config_from_ros_parameters,
+    controller_from_ros_parameters,
 )
 from friction_ros.core.input_gate import (
     DUPLICATE,
@@ -202,8 +201,7 @@ class CompensatingControllerNode(Node):
         self.specs = specs
         values = declare(self, specs)
         self.values = unflatten(values)
-        cfg, ref_cfg = config_from_ros_parameters(self.values)
-        self.controller = CompensatingController(cfg)  # ParameterError -> refuses to start
+        self.controller, ref_cfg = controller_from_ros_parameters(self.values)  # ParameterError -> refuses
         self.reference = reference_from_config(ref_cfg)
         self.trajectory: TrajectoryReference | None = None
         add_runtime_validation(self, specs, self._apply)
@@ -258,8 +256,7 @@ class CompensatingControllerNode(Node):
         values = unflatten(
             {k: (list(v) if hasattr(v, "tolist") or isinstance(v, tuple) else v) for k, v in flat.items()}
         )
-        cfg, ref_cfg = config_from_ros_parameters(values)
-        new_ctrl = CompensatingController(cfg)  # raises ParameterError -> change rejected
+        new_ctrl, ref_cfg = controller_from_ros_parameters(values)  # ParameterError -> change rejected
         new_ref = reference_from_config(ref_cfg)
         if self.controller.compensation_fallback:
             self.get_logger().info(

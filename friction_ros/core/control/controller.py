@@ -171,6 +171,35 @@ def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any
     return cfg, dict(values.get("reference") or {"type": "constant"})
 
 
+def controller_from_ros_parameters(
+    values: Mapping[str, Any],
+) -> tuple[CompensatingController, dict[str, Any]]:
+    """compensating_controller ROS parameters -> (controller, reference config).
+
+    A refused parameter is named as the user wrote it in the ROS layout (``compensation.gain``,
+    ``friction.fc``), not by the core's section names (``controller.friction.gain``).
+    """
+    cfg, ref = config_from_ros_parameters(values)
+    try:
+        return CompensatingController(cfg), ref
+    except ParameterError as exc:
+        text = str(exc)
+        for core, ros in (
+            ("controller.friction.model.", "friction."),
+            ("controller.friction.model", "friction.model"),
+            ("controller.friction.", "compensation."),
+            ("controller.friction:", "compensation:"),
+            ("controller.", ""),
+        ):
+            text = text.replace(core, ros)
+        model = (
+            str((values.get("friction") or {}).get("model", "") or "") if isinstance(values, Mapping) else ""
+        )
+        if model and text.startswith(f"{model}."):  # a coefficient, named by the model's library
+            text = "friction." + text[len(model) + 1 :]
+        raise ParameterError(text) from None
+
+
 def loop_gains(mode: str, pid: Pid, scheme) -> tuple[float, float]:
     """(K_p, K_d) of the loop's linear feedback ``u = K_p e + K_d e_dot + ...`` per mode [N*m/rad,
     N*m*s/rad]: pid ``p, d``; dnpf / gain_scheduling ``kp, kd`` (the configured baseline);
