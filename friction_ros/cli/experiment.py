@@ -55,7 +55,9 @@ from friction_ros.core.excitation import (
     PROFILES,
     PROGRAM_NAMES,
     ExcitationProgram,
+    resolve_config,
 )
+from friction_ros.core.joint_sizing import fit_to_limits
 from friction_ros.core.validation import ParameterError
 
 
@@ -196,8 +198,22 @@ NODE_PERIOD = 1e-3
 PROBE = ("breakaway", "inertia", "torque_limit", "speed_limit", "travel", "resolution")
 
 
-def sized_config(args, preset) -> dict:
-    """The program's sections sized to the joint (preset or probe values), or {} for the profile."""
+#: --set limits that bound the joint scale the program is sized to
+_SCALE_LIMITS = {
+    "limits.max_travel": "travel",
+    "limits.max_velocity": "speed_limit",
+    "limits.max_torque": "torque_limit",
+}
+
+
+def sized_config(args, preset, sets: dict | None = None) -> dict:
+    """The program's sections sized to the joint (preset or probe values), or {} for the profile.
+
+    Limits given with ``--set`` (``limits.max_travel``/``max_velocity``/``max_torque``) bound the
+    joint's travel, speed and torque before sizing, so the plateaus, amplitudes and ramps are
+    derived within them."""
+    from dataclasses import replace
+
     from friction_ros.core.joint_sizing import JointScale, experiment_config
 
     given = {k: getattr(args, k) for k in PROBE if getattr(args, k) is not None}
@@ -219,6 +235,16 @@ def sized_config(args, preset) -> dict:
                 + " (or --sizing profile)"
             )
         scale = JointScale.from_probe(**given, period=NODE_PERIOD)
+    bounds = {}
+    for key, field in _SCALE_LIMITS.items():
+        value = (sets or {}).get(key)
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+            bounds[field] = min(float(getattr(scale, field)), float(value))
+    if bounds:
+        try:
+            scale = replace(scale, **bounds)
+        except ParameterError as exc:
+            raise ParameterError(f"the --set limits leave no room for the experiment: {exc}") from None
     return experiment_config(scale, args.profile)
 
 
@@ -230,6 +256,19 @@ def _flat(d: dict, prefix: str = "") -> dict:
         else:
             out[f"{prefix}{k}"] = v
     return out
+
+
+def _node_values(config: dict, profile: str, sized_flat: dict) -> dict:
+    """The experiment node's parameters: the sized values and whatever the limits fit changed."""
+    from friction_ros.core.excitation import SECTIONS, profile_defaults
+
+    base = _flat({s: profile_defaults(profile)[s] for s in SECTIONS})
+    fitted = _flat({s: config[s] for s in SECTIONS})
+    changed = {k: v for k, v in fitted.items() if base.get(k) != v and k not in sized_flat}
+    out = dict(sized_flat)
+    out.update({k: fitted[k] for k in sized_flat if k in fitted})
+    out.update(changed)
+    return _typed_like_defaults(out, profile)
 
 
 def _typed_like_defaults(flat: dict, profile: str) -> dict:
@@ -264,11 +303,13 @@ def main(argv: list[str] | None = None) -> int:
             from friction_ros.core.presets import load_preset
 
             preset_obj = load_preset(preset)
-        sized = sized_config(args, preset_obj)
+        sized = sized_config(args, preset_obj, sets)
         sized_flat = _typed_like_defaults(_flat(sized), args.profile)
         sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
         core = {"program": args.program, "profile": args.profile, **_nest({**sized_flat, **sets})}
-        program = ExcitationProgram(core)  # validates everything before any process starts
+        # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
+        program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
+        sized_flat = _node_values(program.config, args.profile, sized_flat)
         if sized_flat:
             import tempfile
 

@@ -70,6 +70,8 @@ def preset_path(name_or_path: str | os.PathLike) -> Path:
             )
         return p
     p = Path(s)
+    if p.is_dir():
+        raise ParameterError(f"preset file {s!r} is a directory, not a preset YAML file")
     if not p.is_file():
         raise ParameterError(f"preset file {s!r} does not exist")
     return p
