@@ -39,6 +39,7 @@ refused to start, no joint states), so the same ``-o`` works again.
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import subprocess
 import sys
@@ -430,6 +431,13 @@ def _run(args, specs, out: Path, created: str, timeout: float, preset, events: s
         )
     elif status == "interrupted":
         error = f"interrupted after {wall:.1f} s wall"
+    elif status == "failed":  # another node ended by itself (exit 0) before the program did
+        gone = [
+            s.label
+            for s, _ in bring.procs
+            if s.node != "identification_experiment" and bring.ended.get(s.label, math.inf) < bring.stopping
+        ]
+        error = f"{', '.join(gone) or 'a node'} exited before the program ended (after {wall:.1f} s wall)"
     elif rc_exp == EXIT_NOT_EXCITED:
         error = _last_line_with(bring.output.get(exp_label, []), "joint not excited:") or "joint not excited"
     if _remove_if_empty(out, created, events):
