@@ -44,6 +44,9 @@ def _files(tmp: Path, bag: Path) -> dict[str, Path]:
         "not_yaml": d / "not_yaml.yaml",
         "preset_copy": d / "preset.yaml",
         "dir": d / "a_dir",
+        "random_yaml": d / "random.yaml",
+        "list_yaml": d / "list.yaml",
+        "rcl_bad": d / "mixed_list.yaml",
     }
     shutil.copytree(bag, f["bag"])
     f["empty"].write_bytes(b"")
@@ -53,6 +56,10 @@ def _files(tmp: Path, bag: Path) -> dict[str, Path]:
     f["not_yaml"].write_text("plant_simulator: [unclosed\n  : : :\n")
     shutil.copy(ROOT / "params" / "abb_m19s.yaml", f["preset_copy"])
     f["dir"].mkdir()
+    (d / "a_dir.yaml").mkdir()
+    f["random_yaml"].write_bytes(bytes(range(256)) * 4)
+    f["list_yaml"].write_text("- plant_simulator\n- mode: lockstep\n")
+    f["rcl_bad"].write_text("plant_simulator:\n  ros__parameters:\n    x: [1, 'a', 2.0]\n")  # YAML, not ROS
     return f
 
 
@@ -74,18 +81,55 @@ CASES = {
     "bag-recover-in-place": ("bag", ["recover", "{bag}", "{bag}", "--overwrite"], ["overlaps"]),
     "bag-recover-into-the-bag": ("bag", ["recover", "{bag}", "{bag}/out", "--overwrite"], ["overlaps"]),
     "bag-recover-existing-output": ("bag", ["recover", "{bag}", "{dir}"], ["exists"]),
-}
+    # a --preset that is not a preset YAML, before anything starts
+    "experiment-preset-not-yaml": ("experiment", ["--preset", "{not_yaml}", "-o", "{tmp}/o"], ["not valid yaml"]),
+    "experiment-preset-random-bytes": ("experiment", ["--preset", "{random_yaml}", "-o", "{tmp}/o"], ["not a yaml"]),
+    "experiment-params-not-yaml": ("experiment", ["--params", "{not_yaml}", "-o", "{tmp}/o"], ["not valid yaml"]),
+    "experiment-set-beyond-the-limits": (
+        "experiment",
+        ["--no-sim", "--program", "plateaus", "--set", "plateaus.v_max=10", "--set", "limits.max_travel=3.0",
+         "-o", "{tmp}/o"],
+        ["plateaus.v_max", "limits.max_travel", "at most"],
+    ),
+    "bringup-preset-not-yaml": ("bringup", ["--preset", "{not_yaml}", "--duration", "1"], ["not valid yaml"]),
+    "bringup-preset-is-a-dir": ("bringup", ["--preset", "{dir}.yaml", "--duration", "1"], ["directory"]),
+    "bringup-params-not-yaml": ("bringup", ["--params", "{not_yaml}", "--duration", "1"], ["not valid yaml"]),
+    "bringup-params-not-a-mapping": ("bringup", ["--params", "{list_yaml}", "--duration", "1"], ["ros__parameters"]),
+    "drive-emulator-preset-not-yaml": (
+        "nodes.drive_emulator", ["--interface", "virtual", "--preset", "{not_yaml}", "--duration", "1"],
+        ["not valid yaml"],
+    ),
+    # every node given a parameter file that is not YAML (rcl would print a traceback, exit 1)
+    **{
+        f"{node}-params-file-not-yaml": (
+            f"nodes.{node}", ["--ros-args", "--params-file", "{not_yaml}"], ["parameter file", "not valid yaml"]
+        )
+        for node in (
+            "plant_simulator", "compensating_controller", "friction_estimator", "drive_interface",
+            "simulated_drive", "identification_experiment", "bag_recorder", "bag_player",
+        )
+    },
+    "plant_simulator-params-file-rcl-refuses": (
+        "nodes.plant_simulator", ["--ros-args", "--params-file", "{rcl_bad}"], ["params file", "same type"]
+    ),
+}  # fmt: skip
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_bad_input_gives_one_line_exit_2_and_leaves_inputs_alone(case, small_bag, tmp_path):
     tool, argv, words = CASES[case]
     f = _files(tmp_path, small_bag)
-    subs = {k: str(v) for k, v in f.items()} | {"tmp": str(tmp_path)}
+    subs = {k: str(v) for k, v in f.items()} | {"tmp": str(tmp_path), "dir": str(f["dir"])}
     args = [a.format(**subs) for a in argv]
     before = _digest(list(f.values()))
     proc = subprocess.run(
-        [sys.executable, "-m", f"friction_ros.cli.{tool}", *args, *(["--quiet"] if tool == "fit" else [])],
+        [
+            sys.executable,
+            "-m",
+            f"friction_ros.{tool}" if "." in tool else f"friction_ros.cli.{tool}",
+            *args,
+            *(["--quiet"] if tool == "fit" else []),
+        ],
         capture_output=True,
         text=True,
         timeout=120,
@@ -98,3 +142,4 @@ def test_bad_input_gives_one_line_exit_2_and_leaves_inputs_alone(case, small_bag
     for w in words:
         assert w.lower() in err[0].lower(), err[0]
     assert _digest(list(f.values())) == before
+    assert not (tmp_path / "o").exists()  # nothing started, nothing created

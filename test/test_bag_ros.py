@@ -240,3 +240,103 @@ def test_player_rate_and_errors(node, tmp_path):
         )
         assert r.returncode == 2 and words in r.stderr and "Traceback" not in r.stderr, r.stderr
     assert time.monotonic() - t0 < 30
+
+
+def _diag_values(box):
+    """Latest bag_recorder diagnostics status as (level, {key: value})."""
+    for arr in reversed(box):
+        for st in arr.status:
+            if st.name.endswith("bag_recorder"):
+                return st.level, {kv.key: kv.value for kv in st.values}
+    return None, {}
+
+
+def _burst_and_settle(pubs, box, topic, n, timeout=60.0):
+    """A primer message (so the burst does not start the topic: a drop before the first message
+    received cannot be seen), then ``n`` messages as fast as the publishers take them; waits until
+    the recorder accounts for all of them (received + dropped)."""
+    pubs[0].publish(JointState(name=["j"], position=[-1.0]))
+    end = time.monotonic() + 15
+    while _diag_values(box)[1].get(f"{topic} received") != "1":
+        assert time.monotonic() < end, "primer not recorded"
+        time.sleep(0.02)
+    for i in range(n):
+        pubs[i % len(pubs)].publish(JointState(name=["j"], position=[float(i)]))
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        v = _diag_values(box)[1]
+        if int(v.get(f"{topic} received", 0)) + int(v.get(f"{topic} dropped", 0)) >= n + 1:
+            return
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("variant", ["keep_all_recorder", "keep_last_10_recorder"])
+def test_10k_burst_is_recorded_completely_or_its_drops_are_counted_exactly(node, tmp_path, variant):
+    """10,000-message bursts from another process: with the recorder's default (keep-all) subscription a
+    burst from a RECORDED_QOS (5000-deep) publisher is recorded completely; when a publisher gives
+    samples up (keep-last 10 writer, one or two publishers on a topic) or a keep-last 10 recorder
+    overwrites them, the reported drops equal the messages missing from the bag, per topic, in the
+    log, the diagnostics and the bag's friction_ros_recording metadata record."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from friction_ros.nodes.node_utils import RECORDED_QOS
+
+    n = 10_000
+    pre = f"/burst_{variant}"
+    shallow = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    deep = QoSProfile(depth=n + 10, reliability=ReliabilityPolicy.RELIABLE)
+    if variant == "keep_all_recorder":
+        pubs = {
+            f"{pre}/recorded_qos": [node.create_publisher(JointState, f"{pre}/recorded_qos", RECORDED_QOS)],
+            f"{pre}/keep_last_10": [node.create_publisher(JointState, f"{pre}/keep_last_10", shallow)],
+            f"{pre}/two_publishers": [
+                node.create_publisher(JointState, f"{pre}/two_publishers", shallow) for _ in range(2)
+            ],
+        }
+        extra = []
+    else:
+        pubs = {f"{pre}/deep_publisher": [node.create_publisher(JointState, f"{pre}/deep_publisher", deep)]}
+        extra = ["-p", "qos_depth:=10"]
+    box: list = []
+    sub = node.create_subscription(DiagnosticArray, "/diagnostics", box.append, 100)
+    out = tmp_path / variant
+    rec = start(
+        "friction_ros.nodes.bag_recorder", *pubs, "-o", str(out),
+        "--ros-args", "-p", "diagnostics_period:=0.1", *extra,
+    )  # fmt: skip
+    try:
+        wait_subscribed([p for ps in pubs.values() for p in ps], rec)
+        for topic, ps in pubs.items():
+            _burst_and_settle(ps, box, topic, n)
+        level, values = _diag_values(box)
+    finally:
+        rec.send_signal(signal.SIGINT)
+        log = rec.communicate(timeout=30)[0]
+        node.destroy_subscription(sub)
+    assert rec.returncode == 0, log
+    b = read_bag(out)
+    record = b.metadata["friction_ros_recording"]
+    total_dropped = 0
+    for topic in pubs:
+        pos = np.asarray(b[topic].joint("j").position)
+        assert len(np.unique(pos)) == len(pos)  # nothing twice
+        assert pos[0] == -1.0  # the primer
+        missing = (n + 1) - len(pos)
+        dropped = int(record[f"dropped:{topic}"])
+        assert dropped == missing, (topic, dropped, missing, log)  # exact
+        assert int(record[f"received:{topic}"]) == len(pos)
+        assert int(values[f"{topic} dropped"]) == dropped and int(values[f"{topic} received"]) == len(pos)
+        total_dropped += dropped
+        if topic.endswith("recorded_qos"):
+            assert dropped == 0, log  # a burst up to the publisher's depth waits, it is not dropped
+        else:
+            assert dropped > 0  # the publisher (or the keep-last recorder) really gave samples up
+    assert int(record["dropped"]) == total_dropped
+    assert level == (b"\x01" if total_dropped else b"\x00")  # WARN when anything was dropped
+    assert f"DROPPED {total_dropped} message(s)" in log.splitlines()[-1] or total_dropped == 0
+    if variant == "keep_all_recorder":
+        from rosbags.rosbag2 import Reader
+
+        with Reader(out) as r:  # independent reader: the complete burst, in order
+            counts = {c.topic: c.msgcount for c in r.connections}
+        assert counts[f"{pre}/recorded_qos"] == n + 1

@@ -81,10 +81,13 @@ def test_breakaway_detected_at_static_friction_both_directions():
 
 
 def test_breakaway_without_motion_aborts_at_max_torque():
-    # max below the static friction: the ramp ends without motion -> ABORT, program goes on
+    # max below the static friction: the ramp ends without motion -> ABORT, program goes on; no ramp
+    # broke away, so the program ends with a program-level ABORT: the joint was not excited
     prog, d, events, _ = run({"program": "breakaway", "breakaway": {"repeats": 1, "max": 0.8}})
     aborts = [e for e in events if e.event == ABORT]
-    assert len(aborts) == 2 and "no breakaway up to breakaway.max = 0.8" in aborts[0].note
+    assert len(aborts) == 3 and "no breakaway up to breakaway.max = 0.8" in aborts[0].note
+    assert [a.segment for a in aborts] == ["breakaway+", "breakaway-", "program"]
+    assert prog.not_excited == aborts[2].note and "none of the 2 segments" in prog.not_excited
     assert prog.done and abs(d["tau"]).max() <= 0.8 + 1e-12 and d["tau"][-1] == 0.0
 
 

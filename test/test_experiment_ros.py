@@ -130,3 +130,120 @@ def test_bad_parameters_give_one_clear_line(tmp_path):
     )
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "breakaway.counts = 0 is out of range" in r.stderr
+
+
+# ---------------------------------------------------------------------------------------- failed runs
+def _experiment(tmp_path, *args, timeout=180):
+    return subprocess.run(
+        [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", *args],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=tmp_path,
+    )
+
+
+class _Joint:
+    """A real-time simulated joint in its own process, standing in for drive_interface (--no-sim)."""
+
+    def __init__(self, **params):
+        args = [a for k, v in params.items() for a in ("-p", f"{k}:={v}")]
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "friction_ros.nodes.plant_simulator", "--ros-args", *args],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.proc.terminate()
+        self.proc.wait(timeout=20)
+
+
+def _one_error_line(r) -> str:
+    err = r.stderr.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error: "), r.stderr[-3000:]
+    out = r.stdout + r.stderr
+    assert "Traceback" not in out and "KeyboardInterrupt" not in out, out[-3000:]
+    return err[0]
+
+
+def test_a_joint_that_cannot_move_ends_with_abort_the_reason_and_exit_1(tmp_path):
+    """--no-sim on a faulted drive (every command rejected: zero torque, position stays put): the
+    program stops after three plateaus without motion instead of running its 5.6 s, with an ABORT
+    event naming the reason, and the CLI exits 1 with that reason as its one error line."""
+    from friction_ros.core.plateaus import experiment_events
+
+    out = tmp_path / "stuck"
+    with _Joint(max_effort=0.001):  # rejects every command above 1 mN*m: a drive that does not move
+        r = _experiment(
+            tmp_path, "--no-sim", "--program", "plateaus", "-o", str(out), "--quiet", "--timeout", "60"
+        )
+    assert r.returncode == 1, r.stdout[-3000:] + r.stderr[-3000:]
+    line = _one_error_line(r)
+    assert "joint not excited: 3 segments in a row without the expected motion" in line
+    assert "held +0 rad/s on average" in line and "motion_check.fraction" in line
+    ev = experiment_events(out, "joint1")
+    aborts = [e for e in ev if e.event == 2]
+    assert [e.segment for e in aborts][-1] == "program" and aborts[-1].note in line
+    assert len(aborts) == 4 and not [e for e in ev if e.event == 1]  # no plateau completed
+    assert aborts[-1].time < 3.0  # stopped after ~2.1 s of the 5.6 s program
+    assert "4 ABORT" in r.stdout and "plateau map: no plateau completed" in r.stdout
+
+
+@pytest.mark.parametrize("quiet", [True, False])
+def test_a_node_that_refuses_its_parameters_is_the_one_line_the_user_sees(tmp_path, quiet):
+    """The experiment node refuses a parameter file (unknown key): the plant and the recorder are
+    stopped quietly, the one error line names the node and the key, exit 2, and the bag folder it
+    created is gone so the same -o works again."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("identification_experiment:\n  ros__parameters:\n    bogus_key: 1\n")
+    out = tmp_path / "refused"
+    r = _experiment(
+        tmp_path, "--mode", "lockstep", "--params", str(bad), "-o", str(out), *(["--quiet"] * quiet)
+    )
+    assert r.returncode == 2, r.stdout[-3000:] + r.stderr[-3000:]
+    line = _one_error_line(r)
+    assert line.startswith("error: identification_experiment: unknown parameter(s) bogus_key")
+    assert "bag has no topic" not in r.stdout + r.stderr
+    assert not out.exists()
+    if not quiet:  # the node's own line was forwarded; nothing else failed
+        assert "[identification_experiment] error:" in r.stdout
+        assert "exited with code" not in r.stdout + r.stderr
+
+
+def test_a_wrong_joint_name_is_named_instead_of_waiting_silently(tmp_path):
+    """drive_interface's old default joint name 'joint' against the experiment's 'joint1': the
+    experiment logs the joints it sees; on the timeout that is the error line; no folder is left."""
+    out = tmp_path / "wrong_joint"
+    with _Joint(joint_name="joint"):
+        r = _experiment(tmp_path, "--no-sim", "-o", str(out), "--timeout", "6")
+    assert r.returncode == 1, r.stdout[-3000:] + r.stderr[-3000:]
+    line = _one_error_line(r)
+    assert "timed out" in line and "joint_states carry no joint 'joint1' (they carry: joint)" in line
+    assert "[identification_experiment]" in r.stdout and "carry no joint 'joint1'" in r.stdout
+    assert not out.exists()
+
+
+def test_user_limits_constrain_the_program_instead_of_aborting_it(tmp_path):
+    """README's real-joint call with --set limits.max_travel=3.0: the profile's 5 rad/s plateaus
+    (3.5 rad each) are re-derived to fit (2.143 rad/s, 1.5 rad), so the run completes inside 3 rad."""
+    from friction_ros.core.bag import read_bag
+    from friction_ros.core.plateaus import experiment_events
+
+    out = tmp_path / "limited"
+    with _Joint():
+        r = _experiment(
+            tmp_path, "--no-sim", "--program", "plateaus", "--set", "limits.max_travel=3.0", "-o", str(out),
+            "--quiet", "--timeout", "90",
+        )  # fmt: skip
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    ev = experiment_events(out, "joint1")
+    assert not [e for e in ev if e.event == 2]
+    targets = sorted({abs(e.target) for e in ev if e.event == 1})
+    assert max(targets) == pytest.approx(3.0 * 0.5 / 0.7, rel=1e-3)  # half the travel per 0.7 s plateau
+    assert targets[0] == pytest.approx(0.2 * max(targets) / 5.0, rel=1e-3)  # the profile's span kept
+    pos = read_bag(out)["/joint_states"].joint("joint1").position
+    assert np.ptp(pos) < 3.0

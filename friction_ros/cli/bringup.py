@@ -12,13 +12,18 @@ Examples::
     friction-bringup --config params/bringup_cartesian_xyz.yaml
 
 Ctrl-C (or the end of ``--duration``) stops the controllers first, so the last command every
-actuator receives is zero torque, then the other nodes; a node that does not exit within the grace
-period is killed. The exit code is non-zero if a node failed to start (e.g. invalid parameters).
+actuator receives is zero torque, then the other nodes (SIGTERM; the nodes run in their own process
+group, so a terminal's Ctrl-C reaches only this command and the order holds); a node that does not
+exit within the grace period is killed. When a node fails (e.g. refuses its parameters) the others
+are stopped the same way, quietly, and the first failing node's reason is printed as one line
+``error: <node>: <reason>``, with or without ``--quiet``. Exit code: 0, 2 when a node refused its
+input (bad parameters, exit 2) or the arguments are bad, 1 when a node failed otherwise.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import signal
 import subprocess
@@ -28,9 +33,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
 from friction_ros.core.validation import ParameterError
+from friction_ros.core.yaml_files import check_parameter_file, load_yaml
 
 NODES = (
     "simulated_drive",
@@ -72,8 +76,7 @@ class NodeSpec:
         if self.namespace:
             cmd += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
         for p in self.params:
-            if not Path(p).is_file():
-                raise ParameterError(f"parameter file {p} does not exist")
+            check_parameter_file(p)  # one line for a missing file or one that is not a parameter YAML
             cmd += ["--params-file", str(p)]
         for key, value in self.overrides.items():
             cmd += ["-p", f"{key}:={_ros_value(value)}"]
@@ -93,7 +96,12 @@ def _ros_value(value: object) -> str:
 
 
 class Bringup:
-    """Start, watch and stop node processes; forward their output with a label prefix."""
+    """Start, watch and stop node processes; forward their output with a label prefix.
+
+    Each node runs in its own process group (a terminal's Ctrl-C reaches only the parent, which
+    stops the nodes in :data:`STOP_ORDER`). Exits are timed by the output pumps, so
+    :meth:`first_failure` names the node that failed first on its own (not one that was stopped).
+    """
 
     def __init__(self, specs: list[NodeSpec], quiet: bool = False, env: dict[str, str] | None = None):
         self.specs = specs
@@ -101,12 +109,20 @@ class Bringup:
         self.env = dict(os.environ if env is None else env)
         self.procs: list[tuple[NodeSpec, subprocess.Popen]] = []
         self.output: dict[str, list[str]] = {}
+        self.ended: dict[str, float] = {}  # label -> monotonic time its process ended
+        self.stopping: float | None = None  # monotonic time stop() began
 
     def start(self) -> None:
         for spec in self.specs:
             cmd = spec.command()
             proc = subprocess.Popen(
-                cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=self.env, bufsize=1
+                cmd,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+                env=self.env,
+                bufsize=1,
+                process_group=0,
             )
             self.procs.append((spec, proc))
             self.output[spec.label] = []
@@ -117,10 +133,40 @@ class Bringup:
             self.output[label].append(line.rstrip())
             if not self.quiet:
                 print(f"[{label}] {line.rstrip()}", flush=True)
+        proc.wait()
+        self.ended[label] = time.monotonic()
 
     def failed(self) -> list[tuple[str, int]]:
         """Nodes that exited on their own with a non-zero code (e.g. refused to start)."""
-        return [(s.label, p.returncode) for s, p in self.procs if p.poll() not in (None, 0)]
+        return [
+            (s.label, p.returncode)
+            for s, p in self.procs
+            if p.poll() not in (None, 0)
+            and (self.stopping is None or self.ended.get(s.label, time.monotonic()) < self.stopping)
+        ]
+
+    def reason(self, label: str) -> str:
+        """Why the node ``label`` ended: its last ``error:`` line, else its last line of output."""
+        lines = [ln.strip() for ln in self.output.get(label, []) if ln.strip()]
+        node = label.rsplit("/", 1)[-1]
+        for ln in reversed(lines):
+            if ln.startswith("error:"):
+                text = ln.removeprefix("error:").strip()
+                return text.removeprefix(f"{node}: ")  # the label names the node already
+        code = dict((s.label, p.returncode) for s, p in self.procs).get(label)
+        last = lines[-1] if lines else "no output"
+        return f"exited with code {code}: {last}"
+
+    def first_failure(self) -> tuple[str, int, str] | None:
+        """``(label, exit code, reason)`` of the node that failed first on its own, or None."""
+        failed = self.failed()
+        if not failed:
+            return None
+        deadline = time.monotonic() + 1.0  # its pump reads the last line, then times the exit
+        while time.monotonic() < deadline and any(lbl not in self.ended for lbl, _ in failed):
+            time.sleep(0.01)
+        label, code = min(failed, key=lambda lc: self.ended.get(lc[0], math.inf))
+        return label, code, self.reason(label)
 
     def wait(self, duration: float | None, stop_event: threading.Event) -> None:
         end = None if duration is None else time.monotonic() + duration
@@ -130,26 +176,24 @@ class Bringup:
             time.sleep(0.05)
 
     def stop(self, grace: float = 5.0) -> None:
+        """SIGTERM every node still running, torque commanders first; kill after ``grace`` s."""
+        if self.stopping is None:
+            self.stopping = time.monotonic()
         order = {name: i for i, name in enumerate(STOP_ORDER)}
         for spec, proc in sorted(self.procs, key=lambda sp: order.get(sp[0].node, 99)):
             if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
+                proc.send_signal(signal.SIGTERM)
                 try:
                     proc.wait(timeout=grace)
                 except subprocess.TimeoutExpired:
-                    print(
-                        f"[bringup] {spec.label} did not stop within {grace:g} s: killing it", file=sys.stderr
-                    )
+                    print(f"[bringup] {spec.label} did not stop within {grace:g} s: killing it", flush=True)
                     proc.kill()
                     proc.wait()
 
 
 def specs_from_config(path: str) -> list[NodeSpec]:
     """Read a bring-up YAML: ``joints: [{namespace, nodes, params, overrides}]``."""
-    try:
-        data = yaml.safe_load(Path(path).read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ParameterError(f"bring-up file {path}: cannot read it ({exc})") from None
+    data = load_yaml(path, "bring-up file")
     if not isinstance(data, dict) or not isinstance(data.get("joints"), list):
         raise ParameterError(f"bring-up file {path}: needs a top-level 'joints:' list")
     base = Path(path).parent
@@ -248,6 +292,7 @@ def main(argv: list[str] | None = None) -> int:
                 pin_latency_chain(specs)
         for s in specs:
             s.command()  # validate before starting anything
+            check_preset(s)
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -258,11 +303,23 @@ def main(argv: list[str] | None = None) -> int:
     print(f"[bringup] starting {', '.join(s.label for s in specs)} (Ctrl-C stops them, controllers first)")
     bring.start()
     bring.wait(args.duration, stop)
-    failed = bring.failed()
+    first = bring.first_failure()
     bring.stop()
-    for label, code in failed:
-        print(f"[bringup] {label} exited with code {code}", file=sys.stderr)
-    return 1 if failed else 0
+    if first is None:
+        return 0
+    label, code, reason = first
+    print(f"error: {label}: {reason}", file=sys.stderr)
+    return 2 if code == 2 else 1
+
+
+def check_preset(spec: NodeSpec) -> None:
+    """A plant preset given as an override is loaded here first: a bad one is one line, exit 2,
+    before any process starts."""
+    preset = spec.overrides.get("preset")
+    if spec.node == "plant_simulator" and isinstance(preset, str) and preset:
+        from friction_ros.core.presets import load_preset
+
+        load_preset(preset)
 
 
 if __name__ == "__main__":

@@ -27,13 +27,19 @@ over the experiment node exits by itself (zero torque), then the recorder gets S
 is finished properly, then the plant. Ctrl-C stops the experiment first (zero torque). Prints the
 bag location and a summary: segments, aborts, breakaway torques and the plateau map (mean and
 spread of velocity and torque per plateau; with the simulated plant also the preset's true
-steady-state friction). Exit code: 0 completed, 3 stopped by a safety limit, 2 bad arguments,
-1 a process failed or timed out.
+steady-state friction). Exit code: 0 completed, 3 stopped by a safety limit, 2 bad arguments or
+a node refused its parameters, 1 a process failed, timed out or the joint was not excited (the
+program's motion check: no motion, no reversals, plateaus that do not reach their speed; the
+experiment node stops the program with an ABORT event naming the reason). A failed run ends with
+one line ``error: <reason>`` on stderr, with or without ``--quiet``; a run that recorded nothing
+removes the bag folder it created when the program never started (no experiment event: a node
+refused to start, no joint states), so the same ``-o`` works again.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import subprocess
 import sys
@@ -44,7 +50,15 @@ from pathlib import Path
 import yaml
 
 from friction_ros.cli.bringup import Bringup, NodeSpec
-from friction_ros.core.excitation import PROFILES, PROGRAM_NAMES, ExcitationProgram
+from friction_ros.core.excitation import (
+    EXIT_ABORTED,
+    EXIT_NOT_EXCITED,
+    PROFILES,
+    PROGRAM_NAMES,
+    ExcitationProgram,
+    resolve_config,
+)
+from friction_ros.core.joint_sizing import fit_to_limits
 from friction_ros.core.validation import ParameterError
 
 
@@ -133,7 +147,7 @@ def _topic(ns: str, name: str) -> str:
 
 def _stop_proc(proc: subprocess.Popen, grace: float = 5.0) -> None:
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(signal.SIGTERM)
         try:
             proc.wait(timeout=grace)
         except subprocess.TimeoutExpired:
@@ -163,7 +177,11 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
         lines.append(
             "breakaway torques [N*m]: " + ", ".join(f"{e.segment[-1]}{abs(e.target):.4f}" for e in brk)
         )
-    if any("plateau" in e.program for e in ev):
+    if any("plateau" in e.program for e in ev) and not any(
+        "plateau" in e.program and e.event == 1 for e in ev
+    ):
+        lines.append("plateau map: no plateau completed")
+    elif any("plateau" in e.program for e in ev):
         truth = None
         if preset:
             from friction_ros.core.presets import load_preset
@@ -181,8 +199,22 @@ NODE_PERIOD = 1e-3
 PROBE = ("breakaway", "inertia", "torque_limit", "speed_limit", "travel", "resolution")
 
 
-def sized_config(args, preset) -> dict:
-    """The program's sections sized to the joint (preset or probe values), or {} for the profile."""
+#: --set limits that bound the joint scale the program is sized to
+_SCALE_LIMITS = {
+    "limits.max_travel": "travel",
+    "limits.max_velocity": "speed_limit",
+    "limits.max_torque": "torque_limit",
+}
+
+
+def sized_config(args, preset, sets: dict | None = None) -> dict:
+    """The program's sections sized to the joint (preset or probe values), or {} for the profile.
+
+    Limits given with ``--set`` (``limits.max_travel``/``max_velocity``/``max_torque``) bound the
+    joint's travel, speed and torque before sizing, so the plateaus, amplitudes and ramps are
+    derived within them."""
+    from dataclasses import replace
+
     from friction_ros.core.joint_sizing import JointScale, experiment_config
 
     given = {k: getattr(args, k) for k in PROBE if getattr(args, k) is not None}
@@ -204,6 +236,16 @@ def sized_config(args, preset) -> dict:
                 + " (or --sizing profile)"
             )
         scale = JointScale.from_probe(**given, period=NODE_PERIOD)
+    bounds = {}
+    for key, field in _SCALE_LIMITS.items():
+        value = (sets or {}).get(key)
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+            bounds[field] = min(float(getattr(scale, field)), float(value))
+    if bounds:
+        try:
+            scale = replace(scale, **bounds)
+        except ParameterError as exc:
+            raise ParameterError(f"the --set limits leave no room for the experiment: {exc}") from None
     return experiment_config(scale, args.profile)
 
 
@@ -215,6 +257,19 @@ def _flat(d: dict, prefix: str = "") -> dict:
         else:
             out[f"{prefix}{k}"] = v
     return out
+
+
+def _node_values(config: dict, profile: str, sized_flat: dict) -> dict:
+    """The experiment node's parameters: the sized values and whatever the limits fit changed."""
+    from friction_ros.core.excitation import SECTIONS, profile_defaults
+
+    base = _flat({s: profile_defaults(profile)[s] for s in SECTIONS})
+    fitted = _flat({s: config[s] for s in SECTIONS})
+    changed = {k: v for k, v in fitted.items() if base.get(k) != v and k not in sized_flat}
+    out = dict(sized_flat)
+    out.update({k: fitted[k] for k in sized_flat if k in fitted})
+    out.update(changed)
+    return _typed_like_defaults(out, profile)
 
 
 def _typed_like_defaults(flat: dict, profile: str) -> dict:
@@ -249,11 +304,13 @@ def main(argv: list[str] | None = None) -> int:
             from friction_ros.core.presets import load_preset
 
             preset_obj = load_preset(preset)
-        sized = sized_config(args, preset_obj)
+        sized = sized_config(args, preset_obj, sets)
         sized_flat = _typed_like_defaults(_flat(sized), args.profile)
         sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
         core = {"program": args.program, "profile": args.profile, **_nest({**sized_flat, **sets})}
-        program = ExcitationProgram(core)  # validates everything before any process starts
+        # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
+        program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
+        sized_flat = _node_values(program.config, args.profile, sized_flat)
         if sized_flat:
             import tempfile
 
@@ -262,6 +319,11 @@ def main(argv: list[str] | None = None) -> int:
                 yaml.safe_dump({"identification_experiment": {"ros__parameters": sized_flat}}, fh)
         stamp = time.strftime("%Y%m%d_%H%M%S")
         out = Path(args.output or Path("bags") / f"experiment_{preset or 'joint'}_{stamp}")
+        # what a failed run that recorded nothing may remove: the folder it creates, or only its own
+        # files in an empty folder that was there
+        created = (
+            "folder" if not out.exists() else ("files" if out.is_dir() and not any(out.iterdir()) else "")
+        )
         if out.exists() and any(out.iterdir()) and not args.overwrite:
             raise ParameterError(
                 f"output {out} exists and is not empty: choose another -o or pass --overwrite"
@@ -304,6 +366,8 @@ def main(argv: list[str] | None = None) -> int:
         for s in specs:
             s.command()
     except (ParameterError, ValueError, OSError) as exc:
+        if params_tmp:
+            Path(params_tmp).unlink(missing_ok=True)
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
@@ -315,6 +379,15 @@ def main(argv: list[str] | None = None) -> int:
         + f"; recording {', '.join(topics)} to {out}",
         flush=True,
     )
+    try:
+        return _run(args, specs, out, created, timeout, preset, events, states)
+    finally:
+        if params_tmp:
+            Path(params_tmp).unlink(missing_ok=True)
+
+
+def _run(args, specs, out: Path, created: str, timeout: float, preset, events: str, states: str) -> int:
+    """Run the graph; print the bag, the summary and, for a failed run, one ``error:`` line."""
     bring = Bringup(specs, quiet=args.quiet)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -337,29 +410,92 @@ def main(argv: list[str] | None = None) -> int:
         time.sleep(0.05)
     _stop_proc(exp)  # no-op when it exited by itself; else zero torque first
     time.sleep(0.5)  # last events/states reach the recorder
-    failed_early = [(s.label, p.returncode) for s, p in bring.procs if p.returncode not in (None, 0)]
+    first = bring.first_failure()
     bring.stop()
     wall = time.monotonic() - t0
     rc_exp = exp.returncode
-    for label, code in failed_early:
-        if label.endswith("identification_experiment") and code == 3:
-            continue
-        print(f"[experiment] {label} exited with code {code}", file=sys.stderr)
-        status = "failed" if status == "ok" else status
-    if status != "ok":
-        print(f"[experiment] {status} after {wall:.1f} s wall", file=sys.stderr)
+    exp_label = next(s.label for s, _ in bring.procs if s.node == "identification_experiment")
+    if first is not None and first[0] == exp_label and first[1] in (EXIT_ABORTED, EXIT_NOT_EXCITED):
+        first = None  # the run's own result, reported below with the summary
+    error = None
+    if first is not None:
+        label, code, reason = first
+        error = f"{label}: {reason}"
+        if code == 2:  # a node refused its input: nothing was run
+            _remove_if_empty(out, created, events)
+            print(f"error: {error}", file=sys.stderr)
+            return 2
+    elif status == "timeout":
+        error = f"timed out after {wall:.1f} s wall (--timeout {timeout:g} s)" + _waiting_reason(
+            bring, exp_label
+        )
+    elif status == "interrupted":
+        error = f"interrupted after {wall:.1f} s wall"
+    elif status == "failed":  # another node ended by itself (exit 0) before the program did
+        gone = [
+            s.label
+            for s, _ in bring.procs
+            if s.node != "identification_experiment" and bring.ended.get(s.label, math.inf) < bring.stopping
+        ]
+        error = f"{', '.join(gone) or 'a node'} exited before the program ended (after {wall:.1f} s wall)"
+    elif rc_exp == EXIT_NOT_EXCITED:
+        error = _last_line_with(bring.output.get(exp_label, []), "joint not excited:") or "joint not excited"
+    if _remove_if_empty(out, created, events):
+        print(f"[experiment] the program never started: removed {out}", flush=True)
+        print(
+            f"error: {error or 'the program never started (no experiment event recorded)'}", file=sys.stderr
+        )
+        return 1
     print(f"[experiment] bag: {out.resolve()} ({wall:.1f} s wall)", flush=True)
     try:
         print(summarize(out, args.joint, preset, events, states), flush=True)
     except (ParameterError, ValueError, OSError) as exc:
-        print(f"[experiment] summary not available: {exc}", file=sys.stderr)
-        if status == "ok":
-            status = "failed"
-    if params_tmp:
-        Path(params_tmp).unlink(missing_ok=True)
-    if status != "ok":
+        error = error or f"summary not available: {exc}"
+    if error is not None:
+        print(f"error: {error}", file=sys.stderr)
         return 1
-    return 3 if rc_exp == 3 else 0
+    return EXIT_ABORTED if rc_exp == EXIT_ABORTED else 0
+
+
+def _last_line_with(lines: list[str], marker: str) -> str | None:
+    """The text from ``marker`` on of the last line that contains it."""
+    for ln in reversed(lines):
+        if marker in ln:
+            return ln[ln.index(marker) :].strip()
+    return None
+
+
+def _waiting_reason(bring: Bringup, exp_label: str) -> str:
+    """Why the program did not run: the experiment's line about joint_states without its joint."""
+    text = _last_line_with(bring.output.get(exp_label, []), "joint_states carry no joint")
+    if text:
+        return ": " + text.split("; set joint_name")[0] + " (set --joint)"
+    return ""
+
+
+def _remove_if_empty(out: Path, created: str, events_topic: str) -> bool:
+    """After a run whose program never started (no experiment event recorded: a node refused to
+    start, the joint states never came), remove what it created: the bag folder (``created`` =
+    "folder") or only its files in a folder that was empty before ("files"); True if removed."""
+    if not created or not out.is_dir():
+        return False
+    from friction_ros.core.bag import bag_info
+
+    try:
+        info = bag_info(out).info
+        if events_topic in info and info[events_topic].count > 0:
+            return False
+    except (ValueError, OSError):  # a bag the recorder could not even start: its own files only
+        pass
+    ours = {f"{out.name}_0.mcap", "metadata.yaml", "metadata.yaml.tmp"}
+    files = list(out.iterdir())
+    if not {f.name for f in files} <= ours or any(not f.is_file() for f in files):
+        return False
+    for f in files:
+        f.unlink()
+    if created == "folder":
+        out.rmdir()
+    return True
 
 
 if __name__ == "__main__":

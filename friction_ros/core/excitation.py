@@ -49,6 +49,19 @@ aborts the segment (ABORT event naming the reason, zero torque); ``on_limit: sto
 ends the program (zero torque until the end), ``skip`` waits ``gap`` s at zero torque and goes on
 with the next segment. A non-finite position/velocity aborts likewise. After the end, the torque is 0.
 
+Motion check (``motion_check``): an experiment that does not excite the joint (a faulted drive,
+a stuck joint, a torque limit too low for the friction) ends with ABORT and a reason instead of a
+record without motion. Each segment that must move the joint is checked when it ends: a plateau's
+mean speed over its hold and the random program's RMS speed must reach ``fraction`` of their
+targets (the share of time the velocity loop spent at its torque limit is named), a breakaway
+ramp must break away; the open-loop chirp and presliding cycles are not checked on their own (a
+chirp above breakaway may still move less than a count of a coarse encoder, presliding stays below
+a count by design). A failed segment ends with ABORT instead of END; ``max_failures`` failed segments in a row
+(0: never) stop the program. At the end, a program with moving segments must have moved the
+joint ``travel_counts`` counts (of ``breakaway.resolution``) and reversed ``reversals`` times (a
+reversal: ``travel_counts`` counts back from the last extreme); a program with checked segments
+none of which moved the joint is not excited either. ``not_excited`` then holds the reason (None when excited).
+
 Profiles (``PROFILES``): ``default`` (~115 s simulated, scaled for the ABB M19-S preset: static
 friction 0.95 N*m, J = 0.0012 kg m^2) and ``quick`` (~27 s, tests/demo). Config keys given next to
 ``profile`` override the profile's values section by section.
@@ -78,6 +91,9 @@ START, END, ABORT = 0, 1, 2
 EVENT_NAMES = {START: "START", END: "END", ABORT: "ABORT"}
 PROGRAM_NAMES = ("plateaus", "breakaway", "random", "chirp", "presliding", "sequence")
 ON_LIMIT = ("stop", "skip")
+#: exit codes of the experiment node (friction-experiment reports them): a safety limit stopped the
+#: program / the joint was not excited (motion check)
+EXIT_ABORTED, EXIT_NOT_EXCITED = 3, 4
 
 #: The default profile (ABB M19-S scale). Every key is documented in the module docstring.
 DEFAULTS: dict[str, Any] = {
@@ -119,6 +135,7 @@ DEFAULTS: dict[str, Any] = {
     },
     "chirp": {"duration": 15.0, "f0": 2.0, "f1": 10.0, "amplitude": 1.2, "final_amplitude": 0.5},
     "presliding": {"amplitudes": [0.3, 0.6, 0.85], "frequency": 1.0, "cycles": 3},
+    "motion_check": {"fraction": 0.5, "max_failures": 3, "travel_counts": 10, "reversals": 1},
 }
 
 PROFILES: dict[str, dict[str, Any]] = {
@@ -132,7 +149,16 @@ PROFILES: dict[str, dict[str, Any]] = {
         "presliding": {"amplitudes": [0.4, 0.8], "cycles": 2},
     },
 }
-SECTIONS = ("limits", "velocity_loop", "plateaus", "breakaway", "random", "chirp", "presliding")
+SECTIONS = (
+    "limits",
+    "velocity_loop",
+    "plateaus",
+    "breakaway",
+    "random",
+    "chirp",
+    "presliding",
+    "motion_check",
+)
 
 
 class Event(NamedTuple):
@@ -257,6 +283,11 @@ def _validate(c: dict) -> None:
     ]
     check_real("presliding.frequency", ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
     check_int("presliding.cycles", ps["cycles"], 1, 10000)
+    mc = c["motion_check"]
+    check_real("motion_check.fraction", mc["fraction"], 0.0, 1.0)
+    check_int("motion_check.max_failures", mc["max_failures"], 0, 1000)
+    check_int("motion_check.travel_counts", mc["travel_counts"], 0, 1_000_000)
+    check_int("motion_check.reversals", mc["reversals"], 0, 1000)
 
 
 # ------------------------------------------------------------------------------------------ segments
@@ -277,10 +308,22 @@ class _Ctx:
         self.remember = vl["remember_integral"]
         self.memory: dict[int, float] = {}
         self.last_torque = 0.0
+        self.torque_limit = vl["torque_limit"]
+        self.saturated = False  # the last velocity-loop command was at its torque limit
+        mc = cfg["motion_check"]
+        self.fraction = mc["fraction"]
+        self.min_travel = mc["travel_counts"] * cfg["breakaway"]["resolution"]
 
     def velocity_control(self, v_ref: float, a_ref: float, velocity: float, dt: float) -> float:
         out = self.pid.update(v_ref - velocity, dt, error_dot=0.0, offset=self.inertia * a_ref)
+        self.saturated = abs(out.command) >= 0.999 * self.torque_limit
         return out.command
+
+
+def _saturation_note(saturated: int, n: int, limit: float) -> str:
+    if n and saturated >= 0.5 * n:
+        return f"; the velocity loop was at its torque limit {limit:g} N*m for {100.0 * saturated / n:.0f} % of it"
+    return ""
 
 
 class Segment:
@@ -306,6 +349,13 @@ class Segment:
 
     def end_note(self) -> str:
         return ""
+
+    #: whether the segment must move the joint (see the module docstring's motion check)
+    checked = False
+
+    def motion_failure(self, ctx: _Ctx) -> str | None:
+        """Why the segment did not move the joint as it must (None: it did, or it is not checked)."""
+        return None
 
 
 class Rest(Segment):
@@ -340,11 +390,28 @@ class Release(Segment):
 
 
 class Plateau(Segment):
+    checked = True
+
     def __init__(self, index: int, target: float, settle: float, hold: float):
         super().__init__("plateaus", f"plateau{target:+.4g}", index, settle + hold, target)
         self.start_note = f"settle={settle:g}"
+        self.settle = settle
+        self._sum = 0.0
+        self._n = 0
+        self._sat = 0
+
+    def motion_failure(self, ctx):
+        mean = self._sum / self._n if self._n else 0.0
+        if ctx.fraction <= 0 or mean / self.target >= ctx.fraction:
+            return None
+        return (
+            f"plateau at {self.target:+.4g} rad/s held {mean:+.4g} rad/s on average "
+            f"(< {100.0 * ctx.fraction:g} % of the target, motion_check.fraction)"
+            + _saturation_note(self._sat, self._n, ctx.torque_limit)
+        )
 
     def begin(self, ctx, position):
+        self._sum, self._n, self._sat = 0.0, 0, 0
         sgn = 1 if self.target > 0 else -1
         if ctx.remember:
             if sgn in ctx.memory:
@@ -356,38 +423,92 @@ class Plateau(Segment):
         if tau >= self.planned:
             ctx.memory[1 if self.target > 0 else -1] = ctx.pid.integral
             return 0.0, True
-        return ctx.velocity_control(self.target, 0.0, velocity, dt), False
+        torque = ctx.velocity_control(self.target, 0.0, velocity, dt)
+        if tau >= self.settle:
+            self._sum += velocity
+            self._n += 1
+            self._sat += ctx.saturated
+        return torque, False
 
 
 class VelocityProfile(Segment):
+    checked = True
+
     def __init__(self, program: str, label: str, index: int, v: np.ndarray, dt: float, target: float):
         super().__init__(program, label, index, v.size * dt, target)
         self.v, self.dt = v, dt
         self.a = np.gradient(v, dt)
+        self._ref2 = self._v2 = 0.0
+        self._n = self._sat = 0
 
     def begin(self, ctx, position):
         ctx.pid.reset(0.0)
+        self._ref2 = self._v2 = 0.0
+        self._n = self._sat = 0
+
+    def motion_failure(self, ctx):
+        if ctx.fraction <= 0 or self._ref2 <= 0 or math.sqrt(self._v2 / self._ref2) >= ctx.fraction:
+            return None
+        rms_ref = math.sqrt(self._ref2 / max(self._n, 1))
+        rms = math.sqrt(self._v2 / max(self._n, 1))
+        return (
+            f"{self.program}: RMS speed {rms:.4g} rad/s for a reference of {rms_ref:.4g} rad/s "
+            f"(< {100.0 * ctx.fraction:g} %, motion_check.fraction)"
+            + _saturation_note(self._sat, self._n, ctx.torque_limit)
+        )
 
     def step(self, ctx, tau, position, velocity, dt):
         if tau >= self.planned:
             return 0.0, True
         k = min(int(tau / self.dt), self.v.size - 1)
-        return ctx.velocity_control(float(self.v[k]), float(self.a[k]), velocity, dt), False
+        ref = float(self.v[k])
+        torque = ctx.velocity_control(ref, float(self.a[k]), velocity, dt)
+        self._ref2 += ref * ref
+        self._v2 += velocity * velocity
+        self._n += 1
+        self._sat += ctx.saturated
+        return torque, False
 
 
 class TorqueProfile(Segment):
-    def __init__(self, program: str, label: str, index: int, duration: float, fn, target: float):
+    """Open-loop torque ``fn(tau)``; with ``expect_motion`` it must move the joint ``travel_counts``."""
+
+    def __init__(
+        self, program: str, label: str, index: int, duration: float, fn, target: float, expect_motion=False
+    ):
         super().__init__(program, label, index, duration, target)
         self.fn = fn
+        self.checked = expect_motion
+        self._lo = math.inf
+        self._hi = -math.inf
+
+    def begin(self, ctx, position):
+        self._lo = self._hi = position
+
+    def motion_failure(self, ctx):
+        moved = self._hi - self._lo
+        if not self.checked or moved >= ctx.min_travel:
+            return None
+        return (
+            f"{self.program}: the joint moved {moved:.4g} rad under torques up to {abs(self.target):g} N*m "
+            f"(< motion_check.travel_counts = {ctx.min_travel:.4g} rad)"
+        )
 
     def step(self, ctx, tau, position, velocity, dt):
         if tau >= self.planned:
             return 0.0, True
+        self._lo = min(self._lo, position)
+        self._hi = max(self._hi, position)
         return float(self.fn(tau)), False
 
 
 class BreakawayRamp(Segment):
     """Preload, then small steps until ``counts`` encoder counts of motion within one step."""
+
+    checked = True
+
+    def motion_failure(self, ctx):
+        return f"no breakaway up to breakaway.max = {self.b['max']:g} N*m" if self.failed else None
 
     def __init__(self, index: int, direction: int, b: dict):
         self.dir = 1 if direction > 0 else -1
@@ -577,6 +698,12 @@ class ExcitationProgram:
         self.abort_reasons: list[str] = []
         self.breakaways: list[tuple[str, float]] = []
         self.t = 0.0
+        self.not_excited: str | None = None
+        self._failures = 0  # checked segments in a row without their motion
+        self._passed = 0  # checked segments that moved the joint as they must
+        self._lo = self._hi = self._ext = math.nan  # position range and last extreme
+        self._dir = 0  # direction of the current excursion (+1/-1, 0 before the first)
+        self.reversals = 0
 
     # ------------------------------------------------------------------------------ status
     @property
@@ -634,6 +761,57 @@ class ExcitationProgram:
             self._finish_segment(t)
             self._skip_until = t + self.config["gap"]
 
+    def _track_motion(self, position: float) -> None:
+        """Position range and reversals (``travel_counts`` counts back from the last extreme)."""
+        if not math.isfinite(position):
+            return
+        if math.isnan(self._lo):
+            self._lo = self._hi = self._ext = position
+            return
+        self._lo, self._hi = min(self._lo, position), max(self._hi, position)
+        thr = max(self.ctx.min_travel, 1e-12)
+        d = position - self._ext
+        if self._dir == 0:
+            if abs(d) >= thr:
+                self._dir, self._ext = (1 if d > 0 else -1), position
+        elif self._dir * d > 0:
+            self._ext = position
+        elif -self._dir * d >= thr:
+            self.reversals += 1
+            self._dir, self._ext = -self._dir, position
+
+    def _stop_not_excited(self, reason: str, events: list[Event]) -> None:
+        self.not_excited = f"joint not excited: {reason}"
+        events.append(Event(self.t, self.name, "program", 0, ABORT, math.nan, self.not_excited))
+        self.abort_reasons.append(self.not_excited)
+        self._done_planned = self.total_duration
+        self._i = len(self.segments)
+        self.done = True
+
+    def _final_motion_check(self, events: list[Event]) -> None:
+        """Whole-program check when the program completes (module docstring's motion check)."""
+        checked = [s for s in self.segments if s.checked]
+        if checked and self._passed == 0:
+            self._stop_not_excited(
+                f"none of the {len(checked)} segments that must move the joint did "
+                f"(last: {self.abort_reasons[-1] if self.abort_reasons else 'no motion'})",
+                events,
+            )
+            return
+        travel = [s for s in checked if not isinstance(s, BreakawayRamp)]
+        mc = self.config["motion_check"]
+        if not travel or mc["travel_counts"] == 0:
+            return
+        moved = (self._hi - self._lo) if math.isfinite(self._hi - self._lo) else 0.0
+        if moved < self.ctx.min_travel or self.reversals < mc["reversals"]:
+            self._stop_not_excited(
+                f"over the whole program the joint moved {moved:.4g} rad and reversed {self.reversals} "
+                f"time(s); needed: {self.ctx.min_travel:.4g} rad (motion_check.travel_counts = "
+                f"{mc['travel_counts']} counts of breakaway.resolution) and motion_check.reversals = "
+                f"{mc['reversals']}",
+                events,
+            )
+
     def _check_limits(self, position: float, velocity: float) -> str | None:
         if not (math.isfinite(position) and math.isfinite(velocity)):
             return f"joint state not finite (position {position}, velocity {velocity})"
@@ -661,8 +839,10 @@ class ExcitationProgram:
         self.t = t - self._t0
         bias = self.config["bias"]
         if self.done:
-            self._last_torque = 0.0 if self.aborted and self.on_limit == "stop" else bias
+            stopped = (self.aborted and self.on_limit == "stop") or self.not_excited is not None
+            self._last_torque = 0.0 if stopped else bias
             return self._last_torque, events
+        self._track_motion(float(position))
         reason = self._check_limits(float(position), float(velocity))
         if reason is not None:
             self._abort(self.t, reason, events)
@@ -686,11 +866,16 @@ class ExcitationProgram:
             torque, finished = seg.step(self.ctx, self.t - self._seg_t0, position, velocity, dt)
             if not finished:
                 break
+            failure = seg.motion_failure(self.ctx) if seg.checked else None
+            if seg.checked:
+                self._failures = self._failures + 1 if failure else 0
+                self._passed += failure is None
             if seg.marked:
-                if isinstance(seg, BreakawayRamp) and seg.failed:
-                    reason = f"no breakaway up to breakaway.max = {seg.b['max']:g} N*m"
-                    events.append(Event(self.t, seg.program, seg.label, seg.index, ABORT, seg.target, reason))
-                    self.abort_reasons.append(reason)
+                if failure:
+                    events.append(
+                        Event(self.t, seg.program, seg.label, seg.index, ABORT, seg.target, failure)
+                    )
+                    self.abort_reasons.append(failure)
                 else:
                     events.append(
                         Event(
@@ -701,6 +886,20 @@ class ExcitationProgram:
                         self.breakaways.append((seg.label, seg.torque))
             self._finish_segment(self.t)
             torque = 0.0
+            limit = self.config["motion_check"]["max_failures"]
+            if failure and limit and self._failures >= limit:
+                self._stop_not_excited(
+                    f"{self._failures} segments in a row without the expected motion "
+                    f"(motion_check.max_failures = {limit}; last: {failure})",
+                    events,
+                )
+                self._last_torque = self.ctx.last_torque = 0.0
+                return 0.0, events
+            if self.done:
+                self._final_motion_check(events)
+                if self.not_excited is not None:
+                    self._last_torque = self.ctx.last_torque = 0.0
+                    return 0.0, events
         if not math.isfinite(torque) or abs(torque + bias) > self.max_torque:
             self._abort(
                 self.t,

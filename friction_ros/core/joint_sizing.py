@@ -443,3 +443,82 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     c["bias"] = float(-load)
     c.pop("profile", None)
     return c
+
+
+#: share of ``limits.max_travel`` one plateau (or the random program's excursion) may use, and of
+#: ``limits.max_velocity`` the fastest commanded speed may reach (room for overshoot)
+LIMIT_SHARE = 0.5
+
+
+def plateau_travel(plateaus: dict, v: float) -> float:
+    """Distance [rad] one plateau at speed ``v`` covers (settle + hold, at least their travels)."""
+    p = plateaus
+    return max(v * p["settle"], p["settle_travel"]) + max(v * p["hold"], p["hold_travel"])
+
+
+def fit_to_limits(config: dict[str, Any], keep: set[str] | frozenset[str] = frozenset()) -> dict[str, Any]:
+    """``config`` (a complete excitation config, ``excitation.resolve_config``) with its speeds
+    re-derived within its limits, so the program does not run into them.
+
+    Plateaus go out and back, so one plateau may cover ``LIMIT_SHARE`` of ``limits.max_travel``
+    (:func:`plateau_travel`) and the fastest may run at ``LIMIT_SHARE`` of ``limits.max_velocity``;
+    ``plateaus.v_max`` is lowered to fit and ``v_min`` with it (same span). The random program's
+    amplitude is lowered until its excursion (the integral of its velocity) and its peak speed fit
+    the same shares. Dotted keys in ``keep`` (what the user set) are not changed: if one of them
+    does not fit, ParameterError names it, the limit and what would fit (bad input, not an abort
+    after the run started). Torque-driven programs (breakaway, chirp, presliding) are left as they
+    are: their travel depends on the joint.
+    """
+    from friction_ros.core.excitation import random_velocity
+
+    c = copy.deepcopy(config)
+    lim = c["limits"]
+    travel, speed = LIMIT_SHARE * lim["max_travel"], LIMIT_SHARE * lim["max_velocity"]
+    names = c["sequence"] if c["program"] == "sequence" else [c["program"]]
+    p = c["plateaus"]
+    if "plateaus" in names:
+        fit = min(p["v_max"], speed)
+        if plateau_travel(p, fit) > travel:  # travel grows with v: bisect the fastest that fits
+            lo, hi = 0.0, fit
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if plateau_travel(p, mid) <= travel else (lo, mid)
+            fit = lo
+        if fit < p["v_max"]:
+            if "plateaus.v_max" in keep or fit <= 0.0:
+                why = (
+                    f"{plateau_travel(p, p['v_max']):.4g} rad per plateau, more than {LIMIT_SHARE:g} x "
+                    f"limits.max_travel = {lim['max_travel']:g} rad"
+                    if plateau_travel(p, p["v_max"]) > travel
+                    else f"more than {LIMIT_SHARE:g} x limits.max_velocity = {lim['max_velocity']:g} rad/s"
+                )
+                hint = f"at most {fit:.4g} rad/s" if fit > 0 else "lower plateaus.settle_travel/hold_travel"
+                raise ParameterError(
+                    f"plateaus.v_max = {p['v_max']:g} rad/s is out of range for the limits: {why}; "
+                    f"must be {hint} (or raise the limit)"
+                )
+            ratio = fit / p["v_max"]
+            p["v_max"] = float(fit)
+            if "plateaus.v_min" not in keep:
+                p["v_min"] = float(p["v_min"] * ratio)
+            if p["v_min"] > p["v_max"]:
+                raise ParameterError(
+                    f"plateaus.v_min = {p['v_min']:g} rad/s is out of range: must be <= plateaus.v_max = "
+                    f"{p['v_max']:.4g} rad/s, the fastest plateau that fits the limits"
+                )
+    if "random" in names:
+        r = c["random"]
+        unit = random_velocity({**c, "random": {**r, "amplitude": 1.0}})
+        excursion = float(np.max(np.abs(np.cumsum(unit)))) * c["dt"]
+        peak = float(np.max(np.abs(unit)))
+        fit = min(r["amplitude"], travel / max(excursion, 1e-300), speed / max(peak, 1e-300))
+        if fit < r["amplitude"]:
+            if "random.amplitude" in keep:
+                raise ParameterError(
+                    f"random.amplitude = {r['amplitude']:g} rad/s is out of range for the limits: its excursion "
+                    f"{r['amplitude'] * excursion:.4g} rad and peak {r['amplitude'] * peak:.4g} rad/s must stay "
+                    f"within {LIMIT_SHARE:g} x limits.max_travel = {lim['max_travel']:g} rad and "
+                    f"{LIMIT_SHARE:g} x limits.max_velocity = {lim['max_velocity']:g} rad/s: at most {fit:.4g}"
+                )
+            r["amplitude"] = float(fit)
+    return c

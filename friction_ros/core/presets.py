@@ -28,6 +28,7 @@ import yaml
 from friction_ros.core.friction import FrictionModel
 from friction_ros.core.plant import GearheadServoPlant, PlantParams
 from friction_ros.core.validation import ParameterError, check_keys, check_real
+from friction_ros.core.yaml_files import load_yaml
 
 NODE_NAME = "plant_simulator"
 PRESET_NAMES: tuple[str, ...] = (
@@ -69,6 +70,8 @@ def preset_path(name_or_path: str | os.PathLike) -> Path:
             )
         return p
     p = Path(s)
+    if p.is_dir():
+        raise ParameterError(f"preset file {s!r} is a directory, not a preset YAML file")
     if not p.is_file():
         raise ParameterError(f"preset file {s!r} does not exist")
     return p
@@ -159,8 +162,12 @@ def load_preset(name_or_path: str | os.PathLike) -> Preset:
     ``params, friction = load_preset("abb_m19s")`` also works (plant params, main friction model).
     """
     path = preset_path(name_or_path)
-    with open(path, encoding="utf-8") as fh:
-        doc = yaml.safe_load(fh)
+    doc = load_yaml(path, "preset file")
+    if doc is not None and not isinstance(doc, Mapping):
+        raise ParameterError(
+            f"preset file {str(path)!r}: expected a mapping (plant_simulator: ros__parameters: ...), "
+            f"got a {type(doc).__name__}"
+        )
     return preset_from_config(doc or {}, source=str(path))
 
 

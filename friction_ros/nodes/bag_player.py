@@ -19,7 +19,6 @@ import time
 
 import rclpy
 from rclpy.node import Node
-from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 
 from friction_ros.core.bag import BagError, bag_info, iter_messages
@@ -31,6 +30,7 @@ from friction_ros.nodes.bag_common import (
     message_class,
     qos_from_dicts,
 )
+from friction_ros.nodes.node_utils import init_ros
 
 SPECS = [
     Spec("bag", "", "bag directory or .mcap file to replay (required)"),
@@ -160,8 +160,10 @@ def _parse_cli(argv: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     stop = install_stop_handlers()
+    reason = init_ros(argv)
+    if reason is not None:
+        return fail(ValueError(reason))
     node = None
     try:
         node = BagPlayer(overrides=_parse_cli(rclpy.utilities.remove_ros_args(argv)[1:]))

@@ -9,6 +9,22 @@ and transient-local if every publisher is. Each message is stored with log_time 
 publish_time = source timestamp (ns since epoch). The publishers' offered QoS go into the channel
 metadata (``offered_qos_profiles``).
 
+Burst safety: the subscriptions keep *all* samples (``qos_depth`` 0, the default): a reliable
+reader that keeps all never overwrites a sample it has not taken, so a burst backs up in the
+publisher's history (RECORDED_QOS: 5000 deep) instead of being dropped here; only what a publisher
+itself gives up is lost. ``qos_depth`` > 0 restores a keep-last reader of that depth.
+
+Drops are counted per topic, exactly: the larger of the samples DDS reports lost to the
+subscription (``message_lost`` event: every publisher, also when several publish on one topic)
+and the gaps in the publisher's sequence numbers (``publication_sequence_number`` of each
+message, counted while the topic has one publisher; catches a keep-last reader overwriting
+samples, which DDS does not report). A sample lost before the first one received on a topic, or
+left undelivered by a publisher that exits before the recorder took it, has no later sample to
+reveal it and is not counted. Drops are logged when they happen (at most one line per topic and
+diagnostics period), published in ``diagnostics`` (WARN, ``dropped`` and per-topic counts), written
+into the bag as the MCAP metadata record ``friction_ros_recording`` (``messages``, ``dropped``,
+``received:<topic>``, ``dropped:<topic>``) and in the final log line.
+
 SIGINT/SIGTERM: the recorder stops subscribing, takes every message still queued, then finishes the
 MCAP file (summary, statistics) and writes metadata.yaml. SIGKILL: every completed chunk is
 recoverable by ``friction_ros.core.bag.read_bag``; at most the last ``flush_interval`` seconds (or
@@ -22,10 +38,10 @@ import sys
 import time
 
 import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 
 from friction_ros.core.bag import BagWriter, run_metadata
 from friction_ros.core.bag.writer import COMPRESSIONS
@@ -37,6 +53,7 @@ from friction_ros.nodes.bag_common import (
     message_class,
     qos_to_dict,
 )
+from friction_ros.nodes.node_utils import OK, WARN, DiagnosticsPublisher, init_ros
 
 SPECS = [
     Spec("topics", [], "topics to record (absolute names); empty with all_topics=false records nothing"),
@@ -60,16 +77,51 @@ SPECS = [
         3600.0,
         "s",
     ),
-    Spec("qos_depth", 1000, "keep-last depth of the recording subscriptions", lo=1, hi=100000),
+    Spec(
+        "qos_depth",
+        0,
+        "depth of the recording subscriptions: 0 keeps all (a burst waits in the publisher, never "
+        "dropped here); > 0 keep-last of that depth",
+        lo=0,
+        hi=1000000,
+    ),
     Spec(
         "discovery_period", 0.2, "period of the search for publishers of the wanted topics", 0.01, 60.0, "s"
     ),
     Spec("max_duration", 0.0, "stop after this time, 0 = until SIGINT/SIGTERM", 0.0, 1e9, "s"),
+    Spec(
+        "diagnostics_period",
+        1.0,
+        "period of the diagnostics status (messages and drops per topic) and of drop log lines",
+        0.05,
+        3600.0,
+        "s",
+    ),
     Spec("preset", "", "run metadata: plant/joint preset name"),
     Spec("program", "", "run metadata: excitation program"),
     Spec("parameter_files", [], "run metadata: parameter files embedded by content"),
 ]
 _IGNORED = ("/rosout", "/parameter_events")
+RECORDING_METADATA_NAME = "friction_ros_recording"
+_SEQ_UNSUPPORTED = 1 << 63  # rmw reports RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED (UINT64_MAX)
+
+
+class TopicStats:
+    """Received and dropped messages of one recorded topic (see the module docstring)."""
+
+    __slots__ = ("received", "lost", "gaps", "last_seq", "several", "reported")
+
+    def __init__(self):
+        self.received = 0
+        self.lost = 0  # DDS message_lost total of the subscription
+        self.gaps = 0  # missing publisher sequence numbers
+        self.last_seq: int | None = None
+        self.several = False  # several publishers: sequence numbers interleave, gaps not counted
+        self.reported = 0  # dropped count of the last log line
+
+    @property
+    def dropped(self) -> int:
+        return max(self.lost, self.gaps)
 
 
 class BagRecorder(Node):
@@ -78,6 +130,8 @@ class BagRecorder(Node):
     def __init__(self, overrides: dict | None = None, **kwargs):
         super().__init__("bag_recorder", **kwargs)
         p = self.p = declare_params(self, SPECS, overrides)
+        if not p["topics"] and not p["all_topics"]:
+            raise ValueError("no topics to record: give topics (positional or -p topics:=[...]) or --all")
         out = p["output"] or time.strftime("run_%Y%m%d_%H%M%S")
         meta = run_metadata(p["preset"], p["program"], p["parameter_files"], topics=p["topics"])
         self.writer = BagWriter(
@@ -90,22 +144,30 @@ class BagRecorder(Node):
         )
         self.wanted = [t if t.startswith("/") else "/" + t for t in p["topics"]]
         self.subs: dict[str, object] = {}
-        self.counts: dict[str, int] = {}
+        self.stats: dict[str, TopicStats] = {}
         self.closed = False
         self.create_timer(p["discovery_period"], self.discover)
         poll = min(max(p["flush_interval"] / 4.0, 0.005), 0.1)
         self.create_timer(poll, self.writer.poll)
+        self.diag = DiagnosticsPublisher(self, "bag_recorder", str(self.writer.path))
+        self.create_timer(p["diagnostics_period"], self.report)
         self.started = time.monotonic()
         self.discover()
+        depth = f"keep-last {p['qos_depth']}" if p["qos_depth"] > 0 else "keep-all"
         self.get_logger().info(
             f"recording to {self.writer.path} (chunk {p['chunk_size']} B, flush {p['flush_interval']:g} s, "
-            f"{p['compression']}); topics: {', '.join(self.wanted) or 'all'}"
+            f"{p['compression']}, {depth}); topics: {', '.join(self.wanted) or 'all'}"
         )
 
     def discover(self) -> None:
-        """Subscribe to wanted topics that have a publisher now."""
+        """Subscribe to wanted topics that have a publisher now; note topics with several publishers."""
         if self.closed:
             return
+        for name, st in self.stats.items():
+            several = self.count_publishers(name) > 1
+            if st.several and not several:
+                st.last_seq = None  # one publisher again: its numbers are consecutive from here on
+            st.several = several
         for name, types in self.get_topic_names_and_types():
             if name in self.subs:
                 continue
@@ -132,15 +194,26 @@ class BagRecorder(Node):
             latched = bool(pubs) and all(
                 i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in pubs
             )
+            depth = self.p["qos_depth"]
             qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST,
-                depth=self.p["qos_depth"],
+                history=HistoryPolicy.KEEP_LAST if depth > 0 else HistoryPolicy.KEEP_ALL,
+                depth=depth if depth > 0 else 1,
                 reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                 durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
             )
-            self.counts[name] = 0
+            st = self.stats[name] = TopicStats()
+            st.several = len(pubs) > 1
+
+            def lost(info, st=st) -> None:
+                st.lost = int(info.total_count)
+
             self.subs[name] = self.create_subscription(
-                cls, name, lambda data, info, topic=name: self._on_message(topic, data, info), qos, raw=True
+                cls,
+                name,
+                lambda data, info, topic=name: self._on_message(topic, data, info),
+                qos,
+                raw=True,
+                event_callbacks=SubscriptionEventCallbacks(message_lost=lost),
             )
             self.get_logger().info(f"recording {name} [{msgtype}]")
 
@@ -150,23 +223,71 @@ class BagRecorder(Node):
         recv = int(info.get("received_timestamp") or 0) or time.time_ns()
         sent = int(info.get("source_timestamp") or 0) or recv
         self.writer.write(topic, data, recv, sent)
-        self.counts[topic] += 1
+        st = self.stats[topic]
+        st.received += 1
+        seq = info.get("publication_sequence_number")
+        if seq is None or seq >= _SEQ_UNSUPPORTED or st.several:
+            return
+        last = st.last_seq
+        st.last_seq = seq
+        if last is not None and seq != last + 1:
+            if self.count_publishers(topic) > 1:  # a second publisher appeared since discover()
+                st.several = True
+            elif seq > last + 1:
+                st.gaps += seq - last - 1
+            # a lower number: the publisher was replaced, its numbers start again
 
     @property
     def message_count(self) -> int:
-        return sum(self.counts.values())
+        return sum(st.received for st in self.stats.values())
+
+    @property
+    def dropped(self) -> int:
+        return sum(st.dropped for st in self.stats.values())
 
     def expired(self) -> bool:
         d = self.p["max_duration"]
         return d > 0 and time.monotonic() - self.started >= d
 
+    def report(self) -> None:
+        """Log new drops (one line per topic) and publish the diagnostics status."""
+        if self.closed:
+            return
+        for name, st in self.stats.items():
+            if st.dropped > st.reported:
+                self.get_logger().warning(
+                    f"dropped {st.dropped - st.reported} message(s) on {name} "
+                    f"({st.dropped} dropped, {st.received} recorded so far)"
+                )
+                st.reported = st.dropped
+        values: dict = {"messages": self.message_count, "dropped": self.dropped, "topics": len(self.stats)}
+        for name, st in self.stats.items():
+            values[f"{name} received"] = st.received
+            values[f"{name} dropped"] = st.dropped
+        level = WARN if self.dropped else OK
+        text = f"{self.message_count} messages recorded, {self.dropped} dropped"
+        self.diag.publish(level, text, values)
+
+    def summary(self) -> str:
+        """The final line: messages, topics, drops (per topic when any)."""
+        text = f"wrote {self.message_count} messages on {len(self.stats)} topic(s) to {self.writer.path}"
+        drops = {n: st.dropped for n, st in self.stats.items() if st.dropped}
+        if drops:
+            per = ", ".join(f"{n}: {d}" for n, d in drops.items())
+            return f"{text}; DROPPED {sum(drops.values())} message(s) ({per})"
+        return f"{text}; 0 dropped"
+
     def close(self) -> None:
         if not self.closed:
             self.closed = True
+            record = {"messages": self.message_count, "dropped": self.dropped}
+            for name, st in self.stats.items():
+                record[f"received:{name}"] = st.received
+                record[f"dropped:{name}"] = st.dropped
+            self.writer.add_metadata(RECORDING_METADATA_NAME, record)
             self.writer.close()
-            self.get_logger().info(
-                f"wrote {self.message_count} messages on {len(self.counts)} topic(s) to {self.writer.path}"
-            )
+            log = self.get_logger().warning if self.dropped else self.get_logger().info
+            log(self.summary())
 
 
 def _parse_cli(argv: list[str]) -> dict:
@@ -199,14 +320,14 @@ def _parse_cli(argv: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     stop = install_stop_handlers()
+    reason = init_ros(argv)
+    if reason is not None:
+        return fail(ValueError(reason))
     node = None
     try:
         cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
         node = BagRecorder(overrides=cli)
-        if not node.wanted and not node.p["all_topics"]:
-            raise ValueError("no topics to record: give topics (positional or -p topics:=[...]) or --all")
     except (ValueError, OSError) as exc:
         if node is not None:
             node.close()

@@ -23,8 +23,12 @@ When the program is over (completed or stopped by a safety limit) the node answe
 torque for ``end_tail`` seconds of joint time (stamps, not wall time), then answers no more states
 (a lockstep plant stops, so the record ends at the same simulated time on any machine), waits
 ``exit_delay`` of wall time and exits by itself: exit code 0 when it completed, 3 when a safety
-limit stopped it. Ctrl-C/SIGTERM: zero torque, exit. Progress (percentage, segment) is logged every
-``progress_period`` s of wall time.
+limit stopped it, 4 when the joint was not excited (the program's motion check,
+``motion_check.*``: no motion, no reversals, plateaus that do not reach their speed; an ABORT
+event and an error line give the reason). Ctrl-C/SIGTERM: zero torque, exit. Progress
+(percentage, segment) is logged every ``progress_period`` s of wall time. Joint states that do not
+carry ``joint_name`` are logged (once, naming the joints they carry, then every 10 s while they
+last), so a wrong joint name does not wait silently.
 """
 
 from __future__ import annotations
@@ -42,6 +46,8 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.excitation import (
     DEFAULTS,
     EVENT_NAMES,
+    EXIT_ABORTED,
+    EXIT_NOT_EXCITED,
     PROFILES,
     SECTIONS,
     ExcitationProgram,
@@ -65,7 +71,7 @@ from friction_ros.nodes.node_utils import (
     unflatten,
 )
 
-EXIT_ABORTED = 3
+WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
 
 NODE_PARAMS = [
     Param("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
@@ -202,6 +208,7 @@ class IdentificationExperiment(Node):
         self._end_ns: int | None = None
         self._last_progress = time.monotonic()
         self._wall0: float | None = None
+        self._wrong_joint_logged: float | None = None
         self.counts = {"cycles": 0, "duplicates": 0, "rejected_states": 0, "events": 0, "aborts": 0}
         self.get_logger().info(
             f"program {self.program.name} (profile {self.values['profile']}): {self.program.marked_count} "
@@ -224,6 +231,15 @@ class IdentificationExperiment(Node):
         sel = select_joint(msg, self.joint)
         if sel is None:
             self.counts["rejected_states"] += 1
+            now = time.monotonic()
+            if self._wrong_joint_logged is None or now - self._wrong_joint_logged >= WRONG_JOINT_LOG_PERIOD:
+                self._wrong_joint_logged = now
+                seen = ", ".join(msg.name) if msg.name else f"{len(msg.position)} unnamed position(s)"
+                self.get_logger().warning(
+                    f"joint_states carry no joint {self.joint!r} (they carry: {seen}); set joint_name "
+                    f"(friction-experiment --joint) to one of them ({self.counts['rejected_states']} "
+                    "state(s) ignored so far)"
+                )
             return
         if not self._ready:
             if not self._subscribers_ready():
@@ -262,6 +278,9 @@ class IdentificationExperiment(Node):
                 self.get_logger().error(
                     f"program stopped by a safety limit at t = {st.time:.2f} s: {self.program.abort_reasons[-1]}"
                 )
+            elif self.program.not_excited is not None:
+                _RESULT["code"] = EXIT_NOT_EXCITED
+                self.get_logger().error(f"program stopped at t = {st.time:.2f} s: {self.program.not_excited}")
             else:
                 self.get_logger().info(
                     f"[100%] program {self.program.name} complete: {st.time:.2f} s simulated/real joint time "
@@ -319,7 +338,9 @@ class IdentificationExperiment(Node):
             total_s=st.total,
         )
         level, text = OK, "running" if self._t0_ns is not None else "waiting for joint states"
-        if self.program.aborted:
+        if self.program.not_excited is not None:
+            level, text = ERROR, self.program.not_excited
+        elif self.program.aborted:
             level, text = WARN, f"segment aborted: {self.program.abort_reasons[-1]}"
             if self.program.done and self.program.on_limit == "stop":
                 level = ERROR

@@ -529,16 +529,86 @@ def make_executor():
     return rclpy.executors.SingleThreadedExecutor()
 
 
+def _parameter_files(args: list[str]) -> list[str | None]:
+    """The ``--params-file`` arguments inside ``--ros-args`` sections (None for a missing name)."""
+    files: list[str | None] = []
+    in_ros = False
+    it = iter(args)
+    for a in it:
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--":
+            in_ros = False
+        elif in_ros and a == "--params-file":
+            files.append(next(it, None))
+    return files
+
+
+def init_ros(args: list[str] | None = None) -> str | None:
+    """``rclpy.init`` for a node process; returns None, or one line saying why it cannot start.
+
+    Parameter files are checked first (exists, YAML, node -> ``ros__parameters`` mappings:
+    :func:`~friction_ros.core.yaml_files.check_parameter_file`); anything rcl still refuses is
+    reported from rcl's own message, with rcl's log output held back so the reason is the one line
+    the user sees. SIGINT/SIGTERM are left to the caller (rclpy installs no handlers).
+    """
+    import os
+    import tempfile
+
+    from friction_ros.core.yaml_files import check_parameter_file
+
+    args = list(sys.argv if args is None else args)
+    try:
+        for f in _parameter_files(args):
+            if f is None:
+                raise ParameterError("--params-file needs a file name")
+            check_parameter_file(f)
+    except ParameterError as exc:
+        return str(exc)
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            failure = None
+        except Exception as exc:  # noqa: BLE001 - rclpy raises RCLError (not exported) for bad arguments
+            failure = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if failure is None:
+            held.seek(0)
+            text = held.read()
+            if text:
+                sys.stderr.write(text.decode(errors="replace"))
+            return None
+    for prefix in ("failed to initialize rcl: ",):
+        failure = failure.removeprefix(prefix)
+    return f"ROS arguments refused: {failure.split(', at ')[0]}"
+
+
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Standard ``main()`` of a friction_ros node.
 
-    Starts rclpy, builds the node (a ParameterError/ValueError there prints one clear line and
-    exits with code 2: the node refuses to start), spins until Ctrl-C/SIGTERM, then calls the
-    node's ``on_shutdown()`` (which must leave actuators safe: zero torque, drive idle) before
-    destroying it.
+    Starts rclpy (:func:`init_ros`: a bad parameter file prints one line, exit code 2), builds the
+    node (a ParameterError/ValueError there prints one clear line and exits with code 2: the node
+    refuses to start), spins until Ctrl-C/SIGTERM, then calls the node's ``on_shutdown()`` (which
+    must leave actuators safe: zero torque, drive idle) before destroying it. SIGINT/SIGTERM are
+    handled from before rclpy starts: a stop that arrives while the node is being built ends it
+    quietly once it is built (on_shutdown() runs, no KeyboardInterrupt traceback).
     """
+    stop = threading.Event()
+
+    def _on_signal(signum, _frame):
+        stop.set()
+
     # Our own SIGINT/SIGTERM handling keeps the context alive until on_shutdown() has zeroed outputs.
-    rclpy.init(args=args if args is not None else sys.argv, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _on_signal)
+    signal.signal(signal.SIGINT, _on_signal)
+    reason = init_ros(args)
+    if reason is not None:
+        print(f"error: {reason}", file=sys.stderr)
+        return 2
     node = None
     try:
         node = factory()
@@ -550,13 +620,6 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     # the cyclic collector so a full collection does not scan it (multi-ms pauses in the loop).
     gc.collect()
     gc.freeze()
-    stop = threading.Event()
-
-    def _on_signal(signum, _frame):
-        stop.set()
-
-    signal.signal(signal.SIGTERM, _on_signal)
-    signal.signal(signal.SIGINT, _on_signal)
     executor = make_executor()
     executor.add_node(node)
     loop = getattr(node, "loop", None)
