@@ -150,7 +150,7 @@ PARAMS = [
             "t_max",
         )
     ],
-    Param("joint_name", "joint", "joint name in joint_states / joint_commands", read_only=True),
+    Param("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
     Param(
         "control_rate_hz",
         1000.0,
