@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ORDER = ["demo", "robustness", "models", "compensation", "fitting", "loop", "can", "bags"]
+ORDER = ["demo", "robustness", "models", "compensation", "fitting", "loop", "can", "drive_soak", "bags"]
 TITLES = {
     "demo": "Main job: identify and compensate the simulated ABB M19-S joint (issue 9)",
     "robustness": "Main job on every preset x 3 experiment seeds (issue 14)",
@@ -21,6 +21,7 @@ TITLES = {
     "fitting": "Offline identification (issue 8)",
     "loop": "Closed loop across processes over DDS (issue 5)",
     "can": "CAN codec and drive node (issue 6)",
+    "drive_soak": "Drive node under load: stale telemetry and a killed drive (issue 15)",
     "bags": "MCAP recording and reading (issue 7)",
 }
 BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"

@@ -72,6 +72,7 @@ from friction_ros.nodes.node_utils import (
 )
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
+MATCH_GRACE = 0.5  # s of wall time the recorders must stay matched before the program starts
 
 NODE_PARAMS = [
     Param("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
@@ -204,6 +205,7 @@ class IdentificationExperiment(Node):
         self._last_ns: int | None = None
         self._last_stamp = None
         self._ready = self.values["wait_for_subscribers"] == 0
+        self._seen_since: float | None = None
         self._done_wall: float | None = None
         self._end_ns: int | None = None
         self._last_progress = time.monotonic()
@@ -221,11 +223,22 @@ class IdentificationExperiment(Node):
 
     # -- loop -------------------------------------------------------------------------------------
     def _subscribers_ready(self) -> bool:
+        """The recorder(s) are discovered on both topics, matched to our event publisher, and have
+        been for ``MATCH_GRACE`` s of wall time (the plant's state publisher matches them in that
+        time too; states are not answered meanwhile, so a lockstep run stays the same run)."""
         n = self.values["wait_for_subscribers"]
-        return (
+        seen = (
             self.count_subscribers("experiment_events") >= n
+            and self.event_pub.get_subscription_count() >= n  # matched, not only discovered
             and self.count_subscribers("joint_states") >= n + 1
         )
+        now = time.monotonic()
+        if not seen:
+            self._seen_since = None
+            return False
+        if self._seen_since is None:
+            self._seen_since = now
+        return now - self._seen_since >= MATCH_GRACE
 
     def _on_state(self, msg: JointState) -> None:
         sel = select_joint(msg, self.joint)
