@@ -648,8 +648,6 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
     out: list[Breakaway] = []
     pairs = _segment_pairs(data.events, "breakaway")
     if pairs:
-        # a coarse encoder makes the differentiated velocity noisy without any stick-slip
-        q_noise = quantization_velocity_noise(data)
         for s, e in pairs:
             i0 = int(np.searchsorted(data.t, s.time))
             i1 = int(np.searchsorted(data.t, e.time))
