@@ -525,7 +525,10 @@ def find_plateaus(
             # not at the commanded speed (stuck or stick-slip below the breakaway): not a plateau
             if math.isfinite(s.target) and abs(vv.mean() - s.target) > 0.2 * abs(s.target):
                 continue
-            if vv.std() > 0.6 * abs(vv.mean()) + 3.0 * q_noise:  # stick-slip, not quantization noise
+            # stick-slip scatters the velocity by more than 60 % of its mean; when encoder quantization
+            # alone would (a coarse encoder), only scatter beyond 3x that noise counts
+            limit = 0.6 * abs(vv.mean())
+            if vv.std() > (limit if q_noise < limit else 3.0 * q_noise):
                 continue
             out.append(
                 Plateau(
