@@ -226,3 +226,36 @@ def test_a_standstill_is_not_scored():
     y = np.concatenate([np.ones(100), np.zeros(100)]) + 0.01
     m = metrics.compare(np.zeros(200) + 0.01, y, np.ones(200, bool), 2, scored=np.arange(200) >= 100)
     assert m["n_rest_excluded"] == 100 and m["rmse"] == 0.0
+
+
+def _coarse_plateau_run(resolution: float, settle_note: float):
+    """A joint at +-v for 4 s each, position read by an encoder of ``resolution`` [rad], torque
+    0.3 sgn(v) + 0.01 v + a 1 s transient of 1 N*m at each plateau's start."""
+    dt = 1e-3
+    t = np.arange(0, 8.0, dt)
+    v = np.where(t < 4.0, 1.0, -1.0)
+    pos = np.cumsum(v) * dt
+    pos_q = np.round(pos / resolution) * resolution
+    tau = 0.3 * np.sign(v) + 0.01 * v + np.where((t % 4.0) < 1.0, 1.0 * np.sign(v), 0.0)
+    evs = []
+    for k, (t0, vt) in enumerate(((0.0, 1.0), (4.0, -1.0))):
+        evs.append(D.Event(t0, "plateaus", f"plateau{vt:+g}", k, D.START, vt, f"settle={settle_note:g}"))
+        evs.append(D.Event(t0 + 3.999, "plateaus", f"plateau{vt:+g}", k, D.END, vt, ""))
+    return D.prepare(t, pos_q, None, tau, events=evs)
+
+
+def test_plateaus_on_a_coarse_encoder_are_kept_and_each_start_note_sets_its_settle():
+    """A 60-count encoder makes the differentiated velocity noise (std >> speed) without stick-slip:
+    the plateau is still a plateau. The transient named by the START note is discarded."""
+    data = _coarse_plateau_run(2 * math.pi / 60, settle_note=1.2)
+    assert D.quantization_velocity_noise(data) > 1.0  # the noise that used to reject the plateaus
+    ps = D.find_plateaus(data)
+    assert len(ps) == 2
+    for p in ps:
+        assert p.velocity == pytest.approx(math.copysign(1.0, p.velocity), rel=0.05)
+        assert p.torque == pytest.approx(math.copysign(0.31, p.velocity), rel=0.02)  # transient left out
+    # an explicit settle overrides the notes: the transient is then inside the plateau
+    short = D.find_plateaus(data, settle=0.2)
+    assert abs(short[0].torque) > 0.4
+    # a fine encoder keeps its strict stick-slip test
+    assert D.quantization_velocity_noise(_coarse_plateau_run(1e-4, 1.2)) < 0.05

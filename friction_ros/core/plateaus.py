@@ -9,8 +9,8 @@ the seed 004 "mean over the repeats per set-point" with the spread across repeat
 It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.pipeline.load_bag`:
 uniform grid, Savitzky-Golay velocity from position, torque from ``effort``) and its event-based
 plateau extraction (:func:`friction_ros.core.identification.data.find_plateaus`), so the map printed
-after an experiment is exactly what ``friction-fit`` fits. ``settle`` defaults to the value the
-runner wrote into the START notes (``settle=0.2``), else seed 004's 0.2 s.
+after an experiment is exactly what ``friction-fit`` fits. ``settle`` defaults to what each
+plateau's START note says (``settle=<s>``, sized per plateau by the runner), else seed 004's 0.2 s.
 
 ``breakaway_torques(bag_or_path)`` lists the breakaway torques the runner detected (END events of
 ``breakaway`` segments carry the torque in ``target``), ``experiment_events(...)`` all markers.
@@ -20,15 +20,12 @@ from __future__ import annotations
 
 import math
 import os
-import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from friction_ros.core.identification import data as D
 from friction_ros.core.identification.pipeline import load_bag
-
-_SETTLE = re.compile(r"settle=([0-9.eE+-]+)")
 
 
 @dataclass
@@ -121,7 +118,8 @@ def _path(bag_or_path) -> str:
 
 
 def _settle_from(events: list[D.Event]) -> float | None:
-    vals = [float(m.group(1)) for e in events if e.event == D.START for m in [_SETTLE.search(e.note)] if m]
+    vals = [D.start_settle(e, math.nan) for e in events if e.event == D.START]
+    vals = [v for v in vals if math.isfinite(v)]
     return max(vals) if vals else None
 
 
@@ -147,9 +145,6 @@ def plateau_map(
     """
     path = _path(bag_or_path)
     data = load_bag(path, topic=topic, joint=joint, events_topic=events_topic)
-    if settle is None:
-        settle = _settle_from(data.events)
-        settle = 0.2 if settle is None else settle
     pairs = D._segment_pairs(data.events, "plateau")
     if not pairs:
         raise D.ExcitationError(
@@ -177,7 +172,8 @@ def plateau_map(
             )
         )
     aborted = [f"{e.segment}: {e.note}" for e in data.events if e.event == D.ABORT]
-    return PlateauMap(rows, joint or "", settle, path, aborted)
+    shown = settle if settle is not None else (_settle_from(data.events) or 0.2)  # the longest one
+    return PlateauMap(rows, joint or "", shown, path, aborted)
 
 
 def breakaway_torques(

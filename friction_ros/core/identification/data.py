@@ -27,6 +27,7 @@ Pipeline (all SI, REP-103 signs):
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -121,6 +122,22 @@ class JointData:
 def _window(seconds: float, dt: float, order: int) -> int:
     w = int(round(seconds / dt)) | 1
     return max(w, order + 2 + ((order + 2) % 2 == 0))
+
+
+def quantization_velocity_noise(data: JointData) -> float:
+    """Standard deviation [rad/s] that encoder quantization alone puts on the velocity estimate.
+
+    Uniform quantization error of resolution q has sigma q / sqrt(12); the Savitzky-Golay
+    derivative (order 3, ``velocity_window_s``) multiplies it by the norm of its coefficients / dt.
+    0 when the position is continuous or the velocity was measured.
+    """
+    if data.resolution <= 0 or not str(data.meta.get("velocity_source", "Savitzky")).startswith("Savitzky"):
+        return 0.0
+    from scipy.signal import savgol_coeffs
+
+    w = _window(float(data.meta.get("velocity_window_s", 0.021)), data.dt, 3)
+    gain = float(np.linalg.norm(savgol_coeffs(w, 3, deriv=1, delta=data.dt)))
+    return data.resolution / math.sqrt(12.0) * gain
 
 
 def estimate_resolution(position: np.ndarray) -> float:
@@ -464,15 +481,27 @@ def _segment_pairs(events: list[Event], key: str) -> list[tuple[Event, Event]]:
     return out
 
 
+_SETTLE_NOTE = re.compile(r"settle=([0-9.eE+-]+)")
+
+
+def start_settle(event: Event, default: float) -> float:
+    """The transient a plateau's START marker says to discard (``settle=<s>`` in its note) [s]."""
+    m = _SETTLE_NOTE.search(event.note or "")
+    return float(m.group(1)) if m else default
+
+
 def find_plateaus(
     data: JointData,
     *,
-    settle: float = 0.2,
+    settle: float | None = None,
     min_duration: float = 0.3,
     rel_tol: float = 0.05,
     min_speed: float | None = None,
 ) -> list[Plateau]:
     """Constant-velocity plateaus: from ``plateau`` event markers if any, else automatic detection.
+
+    ``settle`` [s]: the transient discarded at each plateau's start; None = what each START marker
+    says (``settle=<s>``: the experiment sizes it per plateau), else 0.2 s.
 
     Automatic: a sample belongs to a plateau when the 0.25 s running mean of the velocity is steady
     within ``max(rel_tol |v|, 3 noise)``, the samples scatter by less than 60 % around it
@@ -483,8 +512,12 @@ def find_plateaus(
     out: list[Plateau] = []
     pairs = _segment_pairs(data.events, "plateau")
     if pairs:
+        # a coarse encoder makes the differentiated velocity noisy without any stick-slip
+        q_noise = quantization_velocity_noise(data)
         for s, e in pairs:
-            i0 = int(np.searchsorted(data.t, s.time + settle))
+            i0 = int(
+                np.searchsorted(data.t, s.time + (settle if settle is not None else start_settle(s, 0.2)))
+            )
             i1 = int(np.searchsorted(data.t, e.time))
             if i1 - i0 < max(int(min_duration / dt / 3), 5):
                 continue
@@ -492,7 +525,10 @@ def find_plateaus(
             # not at the commanded speed (stuck or stick-slip below the breakaway): not a plateau
             if math.isfinite(s.target) and abs(vv.mean() - s.target) > 0.2 * abs(s.target):
                 continue
-            if vv.std() > 0.6 * abs(vv.mean()):
+            # stick-slip scatters the velocity by more than 60 % of its mean; when encoder quantization
+            # alone would (a coarse encoder), only scatter beyond 3x that noise counts
+            limit = 0.6 * abs(vv.mean())
+            if vv.std() > (limit if q_noise < limit else 3.0 * q_noise):
                 continue
             out.append(
                 Plateau(
@@ -521,6 +557,7 @@ def find_plateaus(
     )
     steady &= np.abs(vm) > min_speed
     sign = np.sign(vm)
+    settle = 0.2 if settle is None else settle
     for i0, i1 in _runs(steady):
         # split a run wherever the mean velocity drifts by more than rel_tol
         i0s = i0 + int(round(settle / dt))
