@@ -252,7 +252,7 @@ def track(
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
     states: list = []
-    node.create_subscription(ControllerState, "controller_state", states.append, RECORDED_QOS)
+    sub = node.create_subscription(ControllerState, "controller_state", states.append, RECORDED_QOS)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     stop = threading.Event()
@@ -263,15 +263,27 @@ def track(
 
     th = threading.Thread(target=spin, daemon=True)
     th.start()
-    bring = Bringup(specs, quiet=True)
+    # the controller first; the plant (which steps the run) only once this subscription is matched to
+    # the controller's publisher, so that no state of the run is published before we listen (a late
+    # match under load used to shift the evaluated window: figures then depended on machine speed)
+    bring_ctrl = Bringup(specs[1:], quiet=True)
+    bring_plant = Bringup(specs[:1], quiet=True)
     t0 = time.monotonic()
-    bring.start()
+    bring_ctrl.start()
     n_periods = int(round(duration / period))
     try:
+        while sub.get_publisher_count() < 1:
+            if bring_ctrl.failed():
+                out = "\n".join(sum(bring_ctrl.output.values(), [])[-20:])
+                raise RuntimeError(f"tracking run {label}: the controller failed\n{out}")
+            if time.monotonic() - t0 > 60:
+                raise RuntimeError(f"tracking run {label}: controller_state not matched within 60 s")
+            time.sleep(0.01)
+        bring_plant.start()
         last_print = 0.0
         while True:
-            if bring.failed():
-                out = "\n".join(sum(bring.output.values(), [])[-20:])
+            if bring_ctrl.failed() or bring_plant.failed():
+                out = "\n".join(sum([*bring_ctrl.output.values(), *bring_plant.output.values()], [])[-20:])
                 raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
             t_sim = _stamp(states[-1]) - _stamp(states[0]) if states else 0.0
             if t_sim >= duration + 2 * period:
@@ -284,7 +296,8 @@ def track(
             time.sleep(0.02)
     finally:
         wall = time.monotonic() - t0
-        bring.stop()
+        bring_ctrl.stop()  # the torque commander first
+        bring_plant.stop()
         stop.set()
         th.join(timeout=2)
         node.destroy_node()
