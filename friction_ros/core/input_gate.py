@@ -119,19 +119,25 @@ def _sel(seq, i: int, n: int):
     return (float(seq[i]), True) if m == n else (None, False)
 
 
+def _name_index(names, joint: str) -> tuple[int | None, str]:
+    """Index of ``joint`` in a message's ``name`` list, or (None, why)."""
+    names = list(names)
+    if joint in names:
+        return names.index(joint), ""
+    return None, f"joint {joint!r} is not in name {names} (check joint_name)"
+
+
 def select_sample(msg, joint: str) -> tuple[tuple[float, float | None, float | None] | None, str, str]:
     """(position, velocity|None, effort|None) of ``joint`` in a JointState-like ``msg``.
 
     Returns ``(values, "", "")`` or ``(None, reason, detail)`` (``wrong_joint``/``wrong_length``).
     An unnamed message with exactly one position counts as the joint.
     """
-    names = msg.name
-    n = len(names)
+    n = len(msg.name)
     if n:
-        try:
-            i = list(names).index(joint)
-        except ValueError:
-            return None, "wrong_joint", f"joint {joint!r} is not in name {list(names)} (check joint_name)"
+        i, detail = _name_index(msg.name, joint)
+        if i is None:
+            return None, "wrong_joint", detail
     elif len(msg.position) == 1:
         i, n = 0, 1
     else:
@@ -156,13 +162,11 @@ def select_command(msg, joint: str, max_effort: float) -> tuple[float | None, st
     An unnamed command with exactly one effort counts as the joint. Reasons: ``wrong_joint``,
     ``wrong_length``, ``not_finite``, ``out_of_range`` (``|effort| > max_effort``).
     """
-    names = msg.name
-    n = len(names)
+    n = len(msg.name)
     if n:
-        try:
-            i = list(names).index(joint)
-        except ValueError:
-            return None, "wrong_joint", f"joint {joint!r} is not in name {list(names)} (check joint_name)"
+        i, detail = _name_index(msg.name, joint)
+        if i is None:
+            return None, "wrong_joint", detail
         if len(msg.effort) != n:
             return None, "wrong_length", f"effort has {len(msg.effort)} values for {n} names"
     elif len(msg.effort) == 1:
