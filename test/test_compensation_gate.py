@@ -95,6 +95,32 @@ def test_with_the_bound_the_bad_case_is_stable_and_better_than_none(abb):
     assert v["feedback"].worst_ratio < 0.95
 
 
+def test_the_bound_applies_to_each_direction_of_an_asymmetric_model():
+    """An asymmetric (direction-dependent) LuGre in feedback: both directions' presliding terms are
+    bounded, the sliding levels of each direction kept."""
+    body = {k: v for k, v in BAD_LUGRE.items() if k != "model"}
+    asym = {
+        "model": "asymmetric",
+        "base": "lugre",
+        "positive": body,
+        "negative": {**body, "fc": 0.8 * body["fc"]},
+    }
+    cfg = {
+        "mode": "pid",
+        "pid": SEED003_PD,
+        "inertia": 0.0012,
+        "friction": {"model": asym, "source": "feedback"},
+    }
+    ctrl = CompensatingController(cfg)
+    note = ctrl.feedback_bound_note
+    assert "positive sigma1 0.9 -> 0.075" in note and "negative sigma1 0.9 -> 0.075" in note, note
+    assert "negative presliding stiffness 1e+05 -> 100" in note, note
+    fb = ctrl.friction._fb_model.to_config()
+    assert fb["negative"]["fc"] == pytest.approx(0.8 * body["fc"]) and fb["positive"][
+        "sigma0"
+    ] == pytest.approx(100)
+
+
 def test_a_static_fit_in_feedback_is_refused(abb):
     """The same Coulomb level as a static model (no presliding term to bound) switched on the
     measured velocity: refused, feed-forward of it enabled only if it is not worse in any case."""

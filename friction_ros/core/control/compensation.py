@@ -134,6 +134,30 @@ class LuGreObserver:
         return np.array([self.z])
 
 
+def _presliding_bound(
+    name: str, cfg: Mapping, w: float, kp: float, kd: float, f: float
+) -> tuple[dict, list[str]]:
+    """The coefficient changes that keep ``w d_hat <= f K_d`` and ``w k_hat <= f K_p`` for one
+    model config (see :meth:`FrictionCompensator._apply_bound`), with a note per change."""
+    changes, notes = {}, []
+    s1 = cfg.get("sigma1")
+    if isinstance(s1, (int, float)) and s1 > 0.0 and w * s1 > f * kd:
+        changes["sigma1"] = f * max(kd, 0.0) / w
+        notes.append(f"sigma1 {s1:.4g} -> {changes['sigma1']:.4g} N*m*s/rad (<= {f:g} Kd {kd:.4g})")
+    stiff_key = {"lugre": "sigma0", "gms": "k", "dahl": "sigma"}.get(name)
+    k = cfg.get(stiff_key) if stiff_key else None
+    if k is not None:
+        k_sum = float(sum(k)) if isinstance(k, (list, tuple)) else float(k)
+        if k_sum > 0.0 and w * k_sum > f * kp:
+            # a stiffness must stay > 0 for the model to validate: a loop without Kp keeps 1e-9
+            scale = max(f * kp / w, 1e-9) / k_sum
+            changes[stiff_key] = [x * scale for x in k] if isinstance(k, (list, tuple)) else k * scale
+            notes.append(
+                f"presliding stiffness {k_sum:.4g} -> {k_sum * scale:.4g} N*m/rad (<= {f:g} Kp {kp:.4g})"
+            )
+    return changes, notes
+
+
 class FrictionCompensator:
     """Friction compensation term(s) from a library model; see the module docstring."""
 
@@ -264,22 +288,16 @@ class FrictionCompensator:
             return ""
         cfg = m.to_config()
         f = self.feedback_bound
-        changes, notes = {}, []
-        s1 = cfg.get("sigma1")
-        if isinstance(s1, (int, float)) and s1 > 0.0 and w * s1 > f * kd:
-            changes["sigma1"] = f * max(kd, 0.0) / w
-            notes.append(f"sigma1 {s1:.4g} -> {changes['sigma1']:.4g} N*m*s/rad (<= {f:g} Kd {kd:.4g})")
-        stiff_key = {"lugre": "sigma0", "gms": "k", "dahl": "sigma"}.get(m.name)
-        k = cfg.get(stiff_key) if stiff_key else None
-        if k is not None:
-            k_sum = float(sum(k)) if isinstance(k, (list, tuple)) else float(k)
-            if k_sum > 0.0 and w * k_sum > f * kp:
-                # a stiffness must stay > 0 for the model to validate: a loop without Kp keeps 1e-9
-                scale = max(f * kp / w, 1e-9) / k_sum
-                changes[stiff_key] = [x * scale for x in k] if isinstance(k, (list, tuple)) else k * scale
-                notes.append(
-                    f"presliding stiffness {k_sum:.4g} -> {k_sum * scale:.4g} N*m/rad (<= {f:g} Kp {kp:.4g})"
-                )
+        if m.name == "asymmetric":  # a direction-dependent model: bound each direction's set
+            notes = []
+            new = dict(cfg)
+            for d in ("positive", "negative"):
+                ch, nt = _presliding_bound(cfg["base"], cfg[d], w, kp, kd, f)
+                new[d] = {**cfg[d], **ch}
+                notes += [f"{d} {n}" for n in nt]
+            changes = {"positive": new["positive"], "negative": new["negative"]} if notes else {}
+        else:
+            changes, notes = _presliding_bound(m.name, cfg, w, kp, kd, f)
         if not changes:
             return ""
         self._fb_model = build_model({**cfg, **changes})

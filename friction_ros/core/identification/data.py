@@ -610,6 +610,20 @@ def _gross_sliding_onset(pos: np.ndarray, i_rest: int, i_end: int, thr: float, s
     return None
 
 
+def mirrored_pairs(plateaus: list[Plateau], rel_tol: float = 0.05) -> list[tuple[Plateau, Plateau]]:
+    """(+v, -v) plateau pairs whose speeds agree within ``rel_tol`` (each positive plateau with the
+    first matching negative one)."""
+    pos = [p for p in plateaus if p.velocity > 0]
+    neg = [p for p in plateaus if p.velocity < 0]
+    out = []
+    for a in pos:
+        for b in neg:
+            if abs(abs(b.velocity) - a.velocity) <= rel_tol * a.velocity:
+                out.append((a, b))
+                break
+    return out
+
+
 def load_offset(plateaus: list[Plateau], rel_tol: float = 0.05) -> tuple[float, str]:
     """A constant load torque (gravity on a vertical axis, a spring preload) seen in the plateaus.
 
@@ -619,15 +633,9 @@ def load_offset(plateaus: list[Plateau], rel_tol: float = 0.05) -> tuple[float, 
     ``mean((tau(+v) - tau(-v)) / 2)`` (no plausible asymmetry does that). Returns ``(c, note)`` or
     ``(0.0, "")``.
     """
-    pos = [p for p in plateaus if p.velocity > 0]
-    neg = [p for p in plateaus if p.velocity < 0]
-    sums, diffs = [], []
-    for a in pos:
-        for b in neg:
-            if abs(abs(b.velocity) - a.velocity) <= rel_tol * a.velocity:
-                sums.append(0.5 * (a.torque + b.torque))
-                diffs.append(0.5 * (a.torque - b.torque))
-                break
+    pairs = mirrored_pairs(plateaus, rel_tol)
+    sums = [0.5 * (a.torque + b.torque) for a, b in pairs]
+    diffs = [0.5 * (a.torque - b.torque) for a, b in pairs]
     if len(sums) < 2:
         return 0.0, ""
     c, f = float(np.mean(sums)), float(np.mean(np.abs(diffs)))

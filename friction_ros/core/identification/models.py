@@ -25,6 +25,7 @@ from friction_ros.core.identification import kernels
 from friction_ros.core.validation import ParameterError
 
 DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (seed 003 A.2.1/A.2.2)
+CONSTRAINT_WEIGHT = 1e6  # linear equality constraints: pseudo-observation weight (see FitSpec._constrain)
 
 
 def mid_velocity(v: np.ndarray) -> np.ndarray:
@@ -63,6 +64,9 @@ class FitSpec:
     eps: float = DEFAULT_EPS
     mid_velocity: bool = True  # drive the states with the interval-mean velocity
     extra: dict = field(default_factory=dict)
+    # equality constraints c . beta = d on the linear coefficients (order of linear_all), see
+    # fix_steady_state; enforced in grams() as heavily weighted pseudo-observations
+    linear_constraints: list[tuple[np.ndarray, float]] = field(default_factory=list)
 
     # ------------------------------------------------------------------ search-space transforms
     def to_search(self, theta: np.ndarray) -> np.ndarray:
@@ -161,7 +165,54 @@ class FitSpec:
             i = len(self.linear)
             keep = [j for j in range(g.shape[1]) if j != i]
             g = g[:, keep][:, :, keep]
+        return self._constrain(g)
+
+    def _constrain(self, g: np.ndarray) -> np.ndarray:
+        """Add each constraint ``c . beta = d`` as a pseudo-observation row ``sqrt(w) [c, d]``.
+
+        ``w`` is CONSTRAINT_WEIGHT times the largest data weight of a constrained column
+        (``(X'X)_ii / c_i^2``), so the data can move ``c . beta`` by about 1e-6 of what it would
+        unconstrained; the non-negativity of the NNLS solve is kept (a null-space elimination would
+        lose it for the GMS element weights)."""
+        if not self.linear_constraints:
+            return g
+        g = g.copy()
+        m = g.shape[1] - 1
+        diag = np.einsum("pii->pi", g[:, :m, :m])
+        for c, d in self.linear_constraints:
+            on = c != 0
+            w = CONSTRAINT_WEIGHT * np.max(diag[:, on] / c[on] ** 2, axis=1)
+            row = np.append(c, d)
+            g += w[:, None, None] * np.outer(row, row)[None]
         return g
+
+    def fix_steady_state(self, static: dict) -> None:
+        """Two-stage identification (anchors 3.3; seed 004 B.3): hold the whole steady-state curve
+        at a static fit's ``F_C, F_S, v_S, delta, F_v`` (from constant-velocity plateaus, where the
+        friction is measured directly) and leave only the presliding/dynamic coefficients and ``J``
+        to the time-domain search.
+
+        Nonlinear ``r = F_C/F_S, v_S, delta``: bounds narrowed to +-0.1 % around the static values
+        (not clipped to the free-fit bounds: a linear axis' v_S can be far below 1e-3 m/s). Linear:
+        ``F_S`` (LuGre ``fs``; GMS the sum of the element weights) and ``F_v`` by constraints. Left
+        free, the time domain trades ``F_C``/``F_v`` against ``J`` and the filter lag: 2-9 % sliding
+        map error on the presets against 0.1-0.2 % for the plateau fit."""
+        fs = float(static.get("fs", static.get("fc", 0.0)))
+        fc = float(static.get("fc", fs))
+        values = {"r": fc / fs if fs > 0 else 1.0, "vs": static.get("vs"), "delta": static.get("delta")}
+        for i, nme in enumerate(self.nonlinear):
+            x = values.get(nme)
+            if x is not None and np.isfinite(x) and x > 0:
+                self.lower[i], self.upper[i] = float(x) * 0.999, float(x) * 1.001
+        names = self.linear_all
+        constraints = []
+        if self.family == "lugre" and fs > 0:
+            constraints.append((np.array([1.0 if n == "fs" else 0.0 for n in names]), fs))
+        elif self.family == "gms" and fs > 0:
+            constraints.append((np.array([1.0 if n.startswith("beta") else 0.0 for n in names]), fs))
+        if self.viscous and "fv" in static:
+            constraints.append((np.array([1.0 if n == "fv" else 0.0 for n in names]), float(static["fv"])))
+        self.linear_constraints = constraints
 
     # ------------------------------------------------------------------ physical coefficients
     def coefficients(self, theta: np.ndarray, beta: np.ndarray) -> dict:

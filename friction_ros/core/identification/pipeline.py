@@ -313,18 +313,22 @@ def fit_records(
             if progress:
                 progress(name, 1.0)
         else:
-            static0 = None
+            static0 = per = None
             if static_from_plateaus and "stribeck" in results and results["stribeck"].method == "plateaus":
                 static0 = results["stribeck"].coefficients
+                per = results["stribeck"].extra.get("per_direction")
+            fit_train = train
             x0 = spec.initial_theta(static0) if static0 else None
             if static0 and two_stage and spec.dynamic and "r" in spec.nonlinear:
-                # two-stage identification (anchors 3.3): the Stribeck curve from the plateaus is
-                # kept, only the presliding/dynamic coefficients are searched in the time domain
-                for nme in ("r", "vs", "delta"):
-                    i = spec.nonlinear.index(nme)
-                    fixed = float(np.clip(x0[i], spec.lower[i], spec.upper[i]))
-                    spec.lower[i], spec.upper[i] = fixed * 0.999, fixed * 1.001
-                    x0[i] = fixed
+                # two-stage identification (anchors 3.3): the steady-state curve from the plateaus
+                # is kept, only the presliding/dynamic coefficients are searched in the time domain
+                spec.fix_steady_state(static0)
+                x0 = spec.initial_theta(static0)
+                if per:  # asymmetric joint: the symmetric dynamics fit the torque less d(v)
+                    d = _direction_part(per, static0)
+                    fit_train = [dataclasses.replace(r, torque=r.torque - d(r.velocity)) for r in train]
+            else:
+                per = None
             if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
                 smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
                 if smaller:
@@ -339,7 +343,7 @@ def fit_records(
             mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
             fit = fit_time_domain(
                 spec,
-                train,
+                fit_train,
                 optimizer=optimizer,
                 maxiter=mi,
                 popsize=popsize,
@@ -347,7 +351,9 @@ def fit_records(
                 x0=x0,
                 progress=prog(name),
             )
-            res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, train)
+            res = _wrap_dynamic(name, fit, eps, grid, identifiability_check, fit_train)
+            if per:
+                res = _with_direction_levels(res, per, static0)
         yhat = predict_val(res)
         res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm, scored=scored)
         res.extra["validation_prediction"] = yhat
@@ -524,6 +530,51 @@ def _fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResu
         )
     m = ModelResult(name, "plateaus", coefs, cfg, {}, ident, sf.seconds, ss, _static_predictor(ss, J), notes)
     m.extra["train_mse"] = float(np.mean((J * a + ss(r.velocity) - r.torque) ** 2))
+    if per:
+        m.extra["per_direction"] = {"positive": per["positive"], "negative": per["negative"]}
+    return m
+
+
+def _direction_part(per: dict, joint: dict) -> Callable[[np.ndarray], np.ndarray]:
+    """``d(v) = F_dir(v) - F_joint(v)``: what the direction-dependent steady state adds to the
+    symmetric one (both Stribeck maps of the plateau fit)."""
+
+    def d(v):
+        v = np.asarray(v, dtype=float)
+        f = np.where(v >= 0, stribeck_map(v, per["positive"]), stribeck_map(v, per["negative"]))
+        return f - stribeck_map(v, joint)
+
+    return d
+
+
+def _with_direction_levels(m: ModelResult, per: dict, joint: dict) -> ModelResult:
+    """A symmetric dynamic fit made direction-dependent (an asymmetric joint, seed 004 B.3): the
+    time-domain fit saw the torque less ``d(v)`` (:func:`_direction_part`); prediction and steady
+    state add it back, and the exported config is the library's ``asymmetric`` wrapper with the
+    presliding coefficients shared and each direction's ``fc, fs, vs, delta, fv`` from the plateaus."""
+    d = _direction_part(per, joint)
+    base_predict, base_ss = m.predict, m.steady_state
+    m.predict = lambda data: base_predict(data) + d(data.velocity)
+    m.steady_state = lambda v: base_ss(v) + d(v)
+    if m.config is not None:
+        body = {k: v for k, v in m.config.items() if k != "model"}
+        sets = {}
+        for key in ("positive", "negative"):
+            p = per[key]
+            sets[key] = {
+                **body,
+                "fc": p["fc"],
+                "fs": max(p.get("fs", p["fc"]), p["fc"]),
+                "fv": p.get("fv", 0.0),
+            }
+            sets[key].update({k: p[k] for k in ("vs", "delta") if k in p})
+        cfg = {"model": "asymmetric", "base": m.config["model"], **sets}
+        _validate_config(cfg)
+        m.config = cfg
+    m.identifiability["per_direction"] = per
+    m.notes.append(
+        "directions differ significantly: asymmetric model exported (levels per direction from the plateaus)"
+    )
     return m
 
 

@@ -8,8 +8,11 @@ At a plateau the acceleration is zero, so the mean torque is the steady-sliding 
 (Coulomb: F_S = F_C, F_v = 0; Coulomb+viscous: F_S = F_C) is fitted by robust nonlinear least
 squares (scipy ``least_squares``, soft-L1 loss, so one bad plateau cannot drag the fit), started
 from a variable-projection grid over (v_S, delta) with F_C, F_S - F_C, F_v by NNLS. Fitted per
-direction (|F| against |v|) and jointly; the model is flagged asymmetric when the two directions'
-Coulomb or static levels differ by more than 3 standard errors and 2 %.
+jointly (|F| against |v|); per direction the levels (F_C, F_v, and F_S unless a breakaway ramp
+measured it) are re-solved by linear least squares on the joint fit's shape (v_S, delta), which
+stays well posed with two plateaus per direction. The model is flagged asymmetric when mirrored
+(+v, -v) plateau pairs differ by more than 2 % of the friction level and 3 standard errors of the
+pair differences (without pairs: when the per-direction F_C or F_S differ by as much).
 Standard errors from the Jacobian: cov = s^2 (J^T J)^-1.
 """
 
@@ -21,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from friction_ros.core.identification.data import ExcitationError, Plateau
+from friction_ros.core.identification.data import ExcitationError, Plateau, mirrored_pairs
 
 STATIC_MODELS = ("coulomb", "coulomb_viscous", "stribeck")
 
@@ -169,13 +172,76 @@ def fit_plateaus(
     per = {}
     asym = False
     pos, neg = v > 0, v < 0
-    if pos.sum() > need and neg.sum() > need:
-        cp, sp, _ = _fit_magnitude(av[pos], af[pos], model, brk.get(1, fs_all))
-        cn, sn, _ = _fit_magnitude(av[neg], af[neg], model, brk.get(-1, fs_all))
+    if pos.sum() >= 2 and neg.sum() >= 2:
+        cp, sp = _fit_direction(av[pos], af[pos], model, coefs, brk.get(1))
+        cn, sn = _fit_direction(av[neg], af[neg], model, coefs, brk.get(-1))
         per = {"positive": cp, "negative": cn, "positive_stderr": sp, "negative_stderr": sn}
-        for k in ("fc", "fs"):
-            if k in cp:
-                diff = abs(cp[k] - cn[k])
-                tol = max(3 * np.hypot(sp.get(k, 0.0), sn.get(k, 0.0)), 0.02 * 0.5 * (cp[k] + cn[k]))
-                asym |= bool(diff > tol)
+        asym = directions_differ(plateaus)
+        if asym is None:  # no mirrored speeds: compare the per-direction levels
+            asym = False
+            for k in ("fc", "fs"):
+                if k in cp:
+                    diff = abs(cp[k] - cn[k])
+                    tol = max(3 * np.hypot(sp.get(k, 0.0), sn.get(k, 0.0)), 0.02 * 0.5 * (cp[k] + cn[k]))
+                    asym |= bool(diff > tol)
     return StaticFit(model, coefs, se, per, asym, rms, len(v), time.perf_counter() - t0)
+
+
+def directions_differ(plateaus: list[Plateau], rel: float = 0.02) -> bool | None:
+    """True when mirrored (+v, -v) plateau pairs show direction-dependent friction: the mean of
+    ``(|tau(+v)| - |tau(-v)|) / mean level`` exceeds ``rel`` and 3 standard errors (across pairs,
+    or of the plateau means with one pair); None without a mirrored pair."""
+    pairs = mirrored_pairs(plateaus)
+    if not pairs:
+        return None
+    level = np.array([0.5 * (abs(a.torque) + abs(b.torque)) for a, b in pairs])
+    d = np.array([abs(a.torque) - abs(b.torque) for a, b in pairs]) / np.maximum(level, 1e-300)
+    if len(d) >= 2:
+        se = float(np.std(d, ddof=1) / np.sqrt(len(d)))
+    else:
+        a, b = pairs[0]
+        se = float(
+            np.hypot(a.torque_std / np.sqrt(max(a.n, 1)), b.torque_std / np.sqrt(max(b.n, 1))) / level[0]
+        )
+    m = abs(float(np.mean(d)))
+    return bool(m > rel and m > 3.0 * se)
+
+
+def _fit_direction(
+    av: np.ndarray, af: np.ndarray, model: str, joint: dict, fs: float | None
+) -> tuple[dict, dict]:
+    """One direction's levels on the joint fit's shape: ``|F| = F_C (1 - e) + F_S e + F_v |v|``
+    with ``e = exp(-(|v|/v_S)^delta)`` from ``joint`` (Coulomb: the median), by NNLS; ``fs``: the
+    direction's breakaway level if measured."""
+    if model == "coulomb":
+        fc = float(np.median(af))
+        s = float(np.std(af - fc, ddof=1) / np.sqrt(len(af))) if len(af) > 1 else 0.0
+        return {"fc": fc}, {"fc": s}
+    if model == "coulomb_viscous":
+        cols, names, target = [np.ones_like(av), av], ["fc", "fv"], af
+    else:
+        e = np.exp(-((av / joint["vs"]) ** joint["delta"]))
+        if fs is not None:
+            cols, names, target = [1.0 - e, av], ["fc", "fv"], af - fs * e
+        else:
+            cols, names, target = [1.0 - e, e, av], ["fc", "fs", "fv"], af
+    A = np.column_stack(cols)
+    x, _ = nnls(A, target)
+    r = A @ x - target
+    dof = max(len(af) - len(x), 1)
+    try:
+        se = np.sqrt(np.maximum(np.diag(float(r @ r) / dof * np.linalg.pinv(A.T @ A)), 0.0))
+    except np.linalg.LinAlgError:
+        se = np.full(len(x), np.nan)
+    c, s = dict(zip(names, map(float, x))), dict(zip(names, map(float, se)))
+    if model == "stribeck":
+        c = {
+            "fc": c["fc"],
+            "fs": fs if fs is not None else c["fs"],
+            "vs": joint["vs"],
+            "delta": joint["delta"],
+            "fv": c["fv"],
+        }
+        c["fs"] = max(c["fs"], c["fc"])
+        s.setdefault("fs", 0.0)
+    return c, s
