@@ -291,3 +291,18 @@ def test_plateaus_on_a_coarse_encoder_are_kept_and_each_start_note_sets_its_sett
     assert abs(short[0].torque) > 0.4
     # a fine encoder keeps its strict stick-slip test
     assert D.quantization_velocity_noise(_coarse_plateau_run(1e-4, 1.2)) < 0.05
+
+
+def test_a_chattering_plateau_loop_is_named_in_the_fit_warnings():
+    """Torque that scatters by more than its mean on a plateau (a velocity loop flipping across the
+    count edge of a coarse encoder) makes the plateau means meaningless: the fit says so."""
+    good = D.Plateau(0.0, 1.0, 0.1, 1.05, 0.01, 0.001, 500)
+    bad = D.Plateau(0.0, 1.0, -0.1, -0.02, 0.3, 4.0, 500)
+    assert D.chattering_plateaus([good, bad]) == [bad]
+    t, pos, vel, tau = simulate_lugre_joint()
+    clean = fit_records(D.prepare(t, pos, None, tau), ["coulomb"], maxiter=5)
+    assert not any("chattered" in w for w in clean.warnings)
+    rng = np.random.default_rng(1)
+    noisy = tau + 5.0 * np.sign(rng.standard_normal(tau.size))  # +-5 N*m square chatter, fc = 1 N*m
+    res = fit_records(D.prepare(t, pos, None, noisy), ["coulomb"], maxiter=5)
+    assert any("velocity loop chattered on" in w for w in res.warnings), res.warnings

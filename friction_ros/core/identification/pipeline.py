@@ -278,6 +278,15 @@ def fit_records(
         return np.concatenate([model.predict(full)[keep] for full, keep in val_from])
 
     plateaus = [p for r in records for p in D.find_plateaus(r)]
+    chatter = D.chattering_plateaus(plateaus)
+    if chatter:
+        worst = max(p.torque_std / max(abs(p.torque), 1e-300) for p in chatter)
+        res_note = f" ({records[0].resolution:.3g} per count)" if records[0].resolution > 0 else ""
+        warnings_pre.append(
+            f"the velocity loop chattered on {len(chatter)} of {len(plateaus)} plateaus (torque scatter up to "
+            f"{worst:.1f} times the mean): their mean torque is not the friction at that speed, so every map "
+            f"fitted to them is suspect; a coarse encoder{res_note} or loop gains too high for it"
+        )
     breakaways = [b for r in records for b in D.find_breakaways(r)]
     ex = D.excitation(records[0] if len(records) == 1 else _concat(records), plateaus)
     dynamic_wanted = any(spec_for(n).dynamic for n in names if n not in LEARNED)
