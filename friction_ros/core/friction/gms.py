@@ -26,7 +26,7 @@ class GMS(DynamicModel):
     F_damp = (sigma1 / sum_j k_j) sum_i dF_i/dt, which is sigma1 v while every element sticks and
     fades as elements slip. ``sigma1 = 0`` (default) is the undamped model of seed 003.
     An element slips when |F_i| reaches alpha_i s(v) and sticks again on reversal or at v = 0.
-    Virgin curve y(x) = sum_i min(k_i x, alpha_i Fs); Masing rule and wiping-out follow (extract E.7).
+    Virgin curve y(x) = sum_i min(k_i x, alpha_i Fs); Masing rule and wiping-out follow (extract E.1.7).
 
     Integration: sticking is exact (F_i += k_i v dt) with break-away clipped inside the step; slipping
     uses the exact exponential solution with rate C/s: stable for k_i = 1e5 at dt = 1 ms.
