@@ -12,7 +12,8 @@ before the run; a breakaway ramp counts with its longest possible duration):
 ``plateaus``   seed 004 B.3 exp. 2: constant-velocity plateaus at ``count`` log-spaced speeds in
                [v_min, v_max], both directions (+v then -v at each speed, so the joint returns), each
                ``settle`` (transient, discarded: seed 004 0.2 s) + ``hold`` s, ``repeats`` times
-               (seed 004: 5). Tracked by the internal velocity PI (``velocity_loop``). A plateau at
+               (seed 004: 5). Tracked by the internal velocity PI (``velocity_loop``, with the
+               feed-forward ``inertia a + damping v + coulomb sgn(v)`` of the reference). A plateau at
                speed ``v`` settles at least ``settle_travel / v`` and holds at least ``hold_travel / v``
                seconds (default 0: fixed times), so slow plateaus cover a distance: enough encoder
                counts, and several stick-slip cycles below the Stribeck velocity.
@@ -24,6 +25,9 @@ before the run; a breakaway ramp counts with its longest possible duration):
                step was applied: the elastic presliding deflection caused by one small step (GMS/LuGre
                bristles) stays below a count, gross sliding does not. Both directions, ``repeats`` times.
                END event: ``target`` = breakaway torque; ABORT when ``max`` is reached without motion.
+               ``detection_lag`` [N*m] (0: unknown): how far above the true breakaway the detection
+               may read (one step plus the excess torque that moves ``counts`` counts within one
+               step); stated in the START note as ``lag=`` so a fit can judge the reading.
 ``random``     seed 003 A.3: band-limited random velocity (Butterworth ``bandwidth`` Hz, seeded) under
                the envelope made of the first three non-zero Fourier terms of a rectangle of period
                ``envelope_period`` (levels ``low_level`` and 1) times ``amplitude`` (rad/s, RMS at the
@@ -103,7 +107,15 @@ DEFAULTS: dict[str, Any] = {
     "gap": 0.5,
     "bias": 0.0,
     "limits": {"max_travel": 100.0, "max_velocity": 40.0, "max_torque": 2.5, "on_limit": "stop"},
-    "velocity_loop": {"p": 0.5, "i": 20.0, "torque_limit": 2.0, "inertia": 0.0, "remember_integral": True},
+    "velocity_loop": {
+        "p": 0.5,
+        "i": 20.0,
+        "torque_limit": 2.0,
+        "inertia": 0.0,
+        "damping": 0.0,
+        "coulomb": 0.0,
+        "remember_integral": True,
+    },
     "plateaus": {
         "v_min": 0.1,
         "v_max": 10.0,
@@ -124,6 +136,7 @@ DEFAULTS: dict[str, Any] = {
         "preload_time": 0.3,
         "release": 0.3,
         "repeats": 3,
+        "detection_lag": 0.0,
     },
     "random": {
         "duration": 50.0,
@@ -235,6 +248,8 @@ def _validate(c: dict) -> None:
         "velocity_loop.torque_limit", vl["torque_limit"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
     check_real("velocity_loop.inertia", vl["inertia"], 0.0, unit="kg*m^2")
+    check_real("velocity_loop.damping", vl["damping"], 0.0, unit="N*m*s/rad")
+    check_real("velocity_loop.coulomb", vl["coulomb"], 0.0, unit="N*m")
     check_bool("velocity_loop.remember_integral", vl["remember_integral"])
     p = c["plateaus"]
     check_real("plateaus.v_min", p["v_min"], 0.0, lo_open=True, unit="rad/s")
@@ -259,6 +274,7 @@ def _validate(c: dict) -> None:
     check_real("breakaway.resolution", b["resolution"], 0.0, 1.0, lo_open=True, unit="rad")
     check_real("breakaway.preload_time", b["preload_time"], 0.0, 60.0, unit="s")
     check_real("breakaway.release", b["release"], 0.0, 60.0, unit="s")
+    check_real("breakaway.detection_lag", b["detection_lag"], 0.0, unit="N*m")
     check_int("breakaway.repeats", b["repeats"], 1, 1000)
     r = c["random"]
     check_real("random.duration", r["duration"], 0.0, 3600.0, lo_open=True, unit="s")
@@ -305,6 +321,8 @@ class _Ctx:
             prefix="velocity_loop",
         )
         self.inertia = vl["inertia"]
+        self.damping = vl["damping"]
+        self.coulomb = vl["coulomb"]
         self.remember = vl["remember_integral"]
         self.memory: dict[int, float] = {}
         self.last_torque = 0.0
@@ -315,7 +333,8 @@ class _Ctx:
         self.min_travel = mc["travel_counts"] * cfg["breakaway"]["resolution"]
 
     def velocity_control(self, v_ref: float, a_ref: float, velocity: float, dt: float) -> float:
-        out = self.pid.update(v_ref - velocity, dt, error_dot=0.0, offset=self.inertia * a_ref)
+        ff = self.inertia * a_ref + self.damping * v_ref + self.coulomb * float(np.sign(v_ref))
+        out = self.pid.update(v_ref - velocity, dt, error_dot=0.0, offset=ff)
         self.saturated = abs(out.command) >= 0.999 * self.torque_limit
         return out.command
 
@@ -521,6 +540,8 @@ class BreakawayRamp(Segment):
         )
         self.threshold = b["counts"] * b["resolution"] * 0.999
         self.start_note = f"counts={b['counts']} resolution={b['resolution']:.6g}"
+        if b["detection_lag"] > 0:
+            self.start_note += f" lag={b['detection_lag']:.6g}"
         self.torque = math.nan
         self._step = -1
         self._ref = 0.0

@@ -96,14 +96,33 @@ class Preset:
     def joint_friction(self, v) -> np.ndarray:
         """Steady-state friction seen at the joint [N*m or N] at joint velocity ``v``: load-side
         friction, motor-side friction reflected through the gear (``r eta F_m(r v)``) and the viscous
-        damping of both sides (``(r^2 eta B_m + B_l) v``), what a plateau experiment measures."""
+        damping of both sides (``(r^2 eta B_m + B_l) v``), what a plateau experiment measures.
+
+        A load-dependent load-side model (``fc + fl |tau|``) is evaluated at the torque the plant
+        gives it, which at steady sliding contains that friction itself: the coupling torque
+        ``F_l + B_l v`` of a compliant transmission, the joint torque (``F_l + B_l v`` plus the
+        reflected motor side) of a rigid one; solved by fixed-point iteration (contraction ``fl``)."""
         p = self.params
         v = np.asarray(v, dtype=float)
         r, eta = p.ratio, p.gear_efficiency
-        f = np.asarray(p.friction_load.steady_state(v), dtype=float)
+        fm = np.zeros_like(v)
         if p.friction_motor.name != "none":
-            f = f + r * eta * np.asarray(p.friction_motor.steady_state(r * v), dtype=float)
-        return f + (r * r * eta * p.motor_damping + p.load_damping) * v
+            fm = r * eta * np.asarray(p.friction_motor.steady_state(r * v), dtype=float)
+        fl_model = p.friction_load
+        f = np.asarray(fl_model.steady_state(v), dtype=float)
+        if getattr(fl_model, "load_dependent", False) and not fl_model.is_dynamic:
+            others = p.load_damping * v
+            if not p.compliant:
+                others = others + fm + r * r * eta * p.motor_damping * v
+            for _ in range(100):
+                f_new = np.asarray(fl_model.torque(v, np.abs(f + others)), dtype=float)
+                if np.max(np.abs(f_new - f), initial=0.0) <= 1e-15 * max(
+                    np.max(np.abs(f_new), initial=0.0), 1e-300
+                ):
+                    f = f_new
+                    break
+                f = f_new
+        return f + fm + (r * r * eta * p.motor_damping + p.load_damping) * v
 
     @property
     def friction_motor(self) -> FrictionModel:

@@ -77,6 +77,7 @@ class Breakaway:
     torque: float
     direction: int
     source: str = "auto"
+    lag: float = math.nan  # torque the detection may have needed beyond the breakaway (ramp START note)
 
 
 @dataclass
@@ -482,6 +483,13 @@ def _segment_pairs(events: list[Event], key: str) -> list[tuple[Event, Event]]:
 
 
 _SETTLE_NOTE = re.compile(r"settle=([0-9.eE+-]+)")
+_LAG_NOTE = re.compile(r"\blag=([0-9.eE+-]+)")
+
+
+def start_lag(event: Event) -> float:
+    """The detection lag a breakaway ramp's START marker states (``lag=<N*m>``), else NaN."""
+    m = _LAG_NOTE.search(event.note or "")
+    return float(m.group(1)) if m else math.nan
 
 
 def start_settle(event: Event, default: float) -> float:
@@ -674,7 +682,9 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
             if math.isfinite(e.target) and e.target != 0.0:
                 # the experiment measured it (motion counted per ramp step, after the preload)
                 j = min(max(i1, 0), data.n - 1)
-                out.append(Breakaway(float(e.time), float(e.target), int(np.sign(e.target)), "events"))
+                out.append(
+                    Breakaway(float(e.time), float(e.target), int(np.sign(e.target)), "events", start_lag(s))
+                )
                 continue
             if i1 - i0 < 2:
                 continue

@@ -155,6 +155,33 @@ def recommend_with_rule(metrics: dict[str, dict], tolerance: float = RECOMMEND_T
     return {"model": best, "rule": rule, "reason": f"{best} has the lowest validation BIC"}
 
 
+#: validation NMSE [%] at or above which the torque record discriminates nothing (the mean does as well)
+NO_SIGNAL_NMSE = 100.0
+
+
+def recommend_by_plateaus(models: dict[str, tuple], plateaus) -> dict:
+    """The recommendation when no model explains the validation torque (every NMSE >= 100 %: the
+    mean predicts it as well, e.g. sub-count motion of a coarse encoder): lowest BIC of the
+    steady-state map on the constant-velocity plateau means, ``N ln(SSE/N) + k ln N`` over the
+    N plateaus. ``models``: name -> (steady_state, k)."""
+    v = np.array([p.velocity for p in plateaus], dtype=float)
+    f = np.array([p.torque for p in plateaus], dtype=float)
+    scores = {}
+    for name, (ss, k) in models.items():
+        e = np.asarray(ss(v), dtype=float) - f
+        sse = max(float(e @ e), 1e-300 * max(len(v), 1))
+        scores[name] = len(v) * math.log(sse / len(v)) + k * math.log(len(v))
+    best = min(scores, key=scores.get)
+    return {
+        "model": best,
+        "rule": (
+            f"every model's validation NMSE is >= {NO_SIGNAL_NMSE:g} % (the torque record discriminates nothing): "
+            f"lowest BIC of the steady-state map on the {len(v)} plateau means (N ln(SSE/N) + k ln N)"
+        ),
+        "reason": f"{best} has the lowest plateau BIC",
+    }
+
+
 def recommend(metrics: dict[str, dict], margin: float = RECOMMEND_TOLERANCE) -> str | None:
     """The recommended model's name (:func:`recommend_with_rule`)."""
     return recommend_with_rule(metrics, margin)["model"]
