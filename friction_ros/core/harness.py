@@ -45,17 +45,9 @@ PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"
 def load_plant_config(name: str) -> dict[str, Any]:
     """Plant config ``{"plant": ..., "friction_motor": ..., "friction_load": ...}`` of a preset.
 
-    Uses :func:`friction_ros.core.presets.load_preset` when available; otherwise reads
-    ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) directly (thin adapter).
+    Reads ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) and returns its sections as
+    written (a missing friction section is ``{"model": "none"}``).
     """
-    try:
-        from friction_ros.core import presets  # noqa: F401
-
-        loader = getattr(presets, "load_preset_config", None)
-        if loader is not None:
-            return loader(name)
-    except ImportError:
-        pass
     import yaml
 
     path = PARAMS_DIR / f"{name}.yaml"
