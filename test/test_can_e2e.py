@@ -240,10 +240,6 @@ def test_bad_parameter_refuses_to_start_with_one_line(tmp_path):
     assert "protocol" in out and "odrive_cansimple" in out and "Traceback" not in out
 
 
-COMPENSATING_CONTROLLER = HERE.parent / "friction_ros" / "nodes" / "compensating_controller.py"
-
-
-@pytest.mark.skipif(not COMPENSATING_CONTROLLER.exists(), reason="compensating_controller node not present")
 def test_compensating_controller_tracks_sinusoid_through_can(tmp_path):
     """The project's controller node (PID, no friction compensation) drives the CAN stack."""
     from friction_msgs.msg import ControllerState

@@ -184,10 +184,15 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
     elif any("plateau" in e.program for e in ev):
         truth = None
         if preset:
+            import numpy as np
+
             from friction_ros.core.presets import load_preset
 
             model = load_preset(preset).friction
-            truth = lambda v: float(model.steady_state(__import__("numpy").array([v]))[0])  # noqa: E731
+
+            def truth(v: float) -> float:
+                return float(model.steady_state(np.array([v]))[0])
+
         pm = plateau_map(bag, joint, topic=states_topic, events_topic=events_topic)
         lines.append(f"plateau map (first {pm.settle:g} s of each plateau discarded):")
         lines.append(pm.to_text(truth))

@@ -27,7 +27,6 @@ and amplitude above ``resolution``).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +37,7 @@ import numpy as np
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
 from friction_ros.core.references import Reference, reference_from_config
-from friction_ros.core.validation import ParameterError, check_keys, check_real
+from friction_ros.core.validation import ParameterError, check_real
 
 PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"
 
@@ -46,17 +45,9 @@ PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"
 def load_plant_config(name: str) -> dict[str, Any]:
     """Plant config ``{"plant": ..., "friction_motor": ..., "friction_load": ...}`` of a preset.
 
-    Uses :func:`friction_ros.core.presets.load_preset` when available; otherwise reads
-    ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) directly (thin adapter).
+    Reads ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) and returns its sections as
+    written (a missing friction section is ``{"model": "none"}``).
     """
-    try:
-        from friction_ros.core import presets  # noqa: F401
-
-        loader = getattr(presets, "load_preset_config", None)
-        if loader is not None:
-            return loader(name)
-    except ImportError:
-        pass
     import yaml
 
     path = PARAMS_DIR / f"{name}.yaml"
@@ -280,45 +271,3 @@ def run_closed_loop(
         t_end, R_end[:, 0], cols["tpos"], cols["tvel"], R_end[:, 1], cols["pos"], **dict(metrics or {})
     )
     return res
-
-
-HARNESS_KEYS = (
-    "plant",
-    "plant_overrides",
-    "controller",
-    "reference",
-    "estimator",
-    "duration",
-    "dt",
-    "adopt_period",
-    "scale",
-    "initial_position",
-    "record_terms",
-    "metrics",
-)
-
-
-def run_from_config(config: Mapping[str, Any]) -> LoopResult:
-    """Run a closed loop described by one dict (keys: :data:`HARNESS_KEYS`)."""
-    cfg = dict(config)
-    check_keys("harness", cfg, HARNESS_KEYS)
-    for req in ("plant", "controller", "reference", "duration"):
-        if req not in cfg:
-            raise ParameterError(f"harness.{req} is missing: required")
-    plant = make_plant(cfg["plant"], **dict(cfg.get("plant_overrides") or {}))
-    return run_closed_loop(
-        plant,
-        cfg["controller"],
-        cfg["reference"],
-        cfg["duration"],
-        cfg.get("dt", 1e-3),
-        estimator=cfg.get("estimator"),
-        adopt_period=cfg.get("adopt_period", 0.0),
-        scale=cfg.get("scale"),
-        initial_position=cfg.get("initial_position"),
-        record_terms=bool(cfg.get("record_terms", False)),
-        metrics=cfg.get("metrics"),
-    )
-
-
-_ = math

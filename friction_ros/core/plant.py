@@ -127,7 +127,6 @@ _SPECS: dict[str, tuple] = {
     "seed": (0, 0, False, "", "random seed of the sensor noise"),
 }
 _CHOICES = {"actuation": ("current", ACTUATION_MODES), "encoder_location": ("motor", ENCODER_LOCATIONS)}
-_BOOLS = {"stick_logic": True}
 _INTS = ("encoder_cpr", "seed")
 
 

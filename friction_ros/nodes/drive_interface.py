@@ -230,7 +230,6 @@ PARAMS = [
     Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
     *SCHEDULING_PARAMS,
 ]
-RUNTIME = ("torque_limit", "current_limit", "velocity_limit", "command_timeout", "telemetry_timeout")
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
     "node_id",

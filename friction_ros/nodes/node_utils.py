@@ -668,28 +668,6 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
     return nested
 
 
-def params_from_config(
-    config: dict[str, Any], docs: dict[str, str] | None = None, read_only: Iterable[str] = ()
-) -> list[Param]:
-    """Param specs for every leaf of a nested core config (type from the value; docs by dotted name).
-
-    Ranges of core parameters are enforced by the core object that the node builds from them (one
-    ParameterError naming the key and the allowed range), so a bad value still refuses to start.
-    """
-    docs = docs or {}
-    ro = set(read_only)
-    specs = []
-    for name, value in flatten(config).items():
-        if value is None:
-            continue
-        if isinstance(value, tuple):
-            value = list(value)
-        specs.append(
-            Param(name, value, docs.get(name, name.replace(".", " ").replace("_", " ")), read_only=name in ro)
-        )
-    return specs
-
-
 def override_values(node: Node, prefix: str) -> dict[str, Any]:
     """Values given for ``<prefix>.*`` in the node's parameter files / command line (dotted names)."""
     overrides = getattr(node, "_parameter_overrides", {})
@@ -751,11 +729,6 @@ class JointSample:
 
 
 _CDR_LE = b"\x00\x01\x00\x00"  # RTPS encapsulation: little-endian plain CDR (XCDR1), no options
-
-
-def _cdr_string(text: str) -> bytes:
-    raw = text.encode() + b"\0"
-    return struct.pack("<I", len(raw)) + raw
 
 
 class JointStateEncoder:

@@ -15,8 +15,6 @@ from __future__ import annotations
 import math
 import os
 
-import numpy as np
-
 _DISABLE = os.environ.get("FRICTION_ROS_NO_NUMBA", "").lower() in ("1", "true", "yes")
 
 try:  # pragma: no cover - exercised implicitly
@@ -284,7 +282,3 @@ def simulate_kernel(kind, p, st, v, h, out):
     """Simulate one parameter set over ``v`` (state ``st`` updated in place)."""
     for t in range(v.shape[0]):
         out[t] = friction_eval(kind, p, st, v[t], h, 0.0)
-
-
-def empty_state(n: int) -> np.ndarray:
-    return np.zeros(max(n, 1))

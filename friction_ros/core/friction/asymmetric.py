@@ -11,6 +11,7 @@ from friction_ros.core.validation import ParameterError, check_keys
 
 from . import _kernels as K
 from .base import DynamicModel, FrictionModel
+from .catalog import BASE_MODEL_CLASSES
 
 
 class Asymmetric(FrictionModel):
@@ -32,10 +33,8 @@ class Asymmetric(FrictionModel):
         positive: Mapping[str, Any] | None = None,
         negative: Mapping[str, Any] | None = None,
     ) -> None:
-        from .registry import MODEL_CLASSES, make_model
-
-        if base not in MODEL_CLASSES or base == "asymmetric":
-            allowed = ", ".join(n for n in MODEL_CLASSES if n != "asymmetric")
+        if base not in BASE_MODEL_CLASSES:
+            allowed = ", ".join(BASE_MODEL_CLASSES)
             raise ParameterError(f"asymmetric.base = {base!r} is not allowed: must be one of {allowed}")
         for key, val in (("positive", positive), ("negative", negative)):
             if not isinstance(val, Mapping):
@@ -43,11 +42,12 @@ class Asymmetric(FrictionModel):
             check_keys(
                 f"asymmetric.{key}",
                 {k: v for k, v in val.items() if k != "model"},
-                [c.name for c in MODEL_CLASSES[base].COEFS],
+                [c.name for c in BASE_MODEL_CLASSES[base].COEFS],
             )
         self.base = base
-        self.positive = make_model(base, **{k: v for k, v in positive.items() if k != "model"})
-        self.negative = make_model(base, **{k: v for k, v in negative.items() if k != "model"})
+        cls = BASE_MODEL_CLASSES[base]
+        self.positive = cls(**{k: v for k, v in positive.items() if k != "model"})
+        self.negative = cls(**{k: v for k, v in negative.items() if k != "model"})
         if len(self.positive.kernel_params) != len(self.negative.kernel_params):
             raise ParameterError(
                 "asymmetric.negative has a different element count from asymmetric.positive: "

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -305,14 +305,6 @@ class DynamicModel(FrictionModel):
         raise NotImplementedError
 
 
-def as_array(v: Any) -> np.ndarray:
-    return np.asarray(v, dtype=float)
-
-
 def stribeck_np(av: np.ndarray, fc: Any, fs: Any, vs: Any, delta: Any) -> np.ndarray:
     """Vectorised Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta)."""
     return fc + (fs - fc) * np.exp(-((av / vs) ** delta))
-
-
-def merge_mapping(m: Mapping[str, Any] | None) -> dict:
-    return dict(m or {})

@@ -52,6 +52,3 @@ class Dahl(DynamicModel):
                     f = fc * sv * (1.0 - np.where(y > 0, ayn, -ayn))
                 out[:, t] = f
         return out
-
-
-_ = K  # kernels imported for side effects of compilation order

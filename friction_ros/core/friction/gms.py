@@ -138,6 +138,3 @@ class GMS(DynamicModel):
                 stuck = stuck & ~brk
             out[:, t] = f.sum(axis=1) + fv * vt + damp * (f - f_old).sum(axis=1) / dt
         return out
-
-
-_ = K

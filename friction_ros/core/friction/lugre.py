@@ -65,6 +65,3 @@ class LuGre(DynamicModel):
         s1v = np.where(vd > 0, s1 * np.exp(-((vv / np.where(vd > 0, vd, 1.0)) ** 2)), s1)
         zdot = vv - a * zs
         return s0 * zs + s1v * zdot + fv * vv
-
-
-_ = K

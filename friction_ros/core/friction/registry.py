@@ -9,56 +9,10 @@ from friction_ros.core.validation import ParameterError, check_choice
 
 from .asymmetric import Asymmetric
 from .base import FrictionModel
-from .dahl import Dahl
-from .gms import GMS
-from .lugre import LuGre
-from .static import (
-    Coulomb,
-    CoulombViscous,
-    GADupont,
-    GAExponential,
-    GANonLinear,
-    GASevenParameter,
-    GATustin,
-    Gaussian,
-    LoadDependent,
-    Lorentzian,
-    Polynomial,
-    Stribeck,
-    StribeckEps,
-    Tustin,
-    Viscous,
-    ZeroFriction,
-)
-from .stiction import GKF, Karnopp
+from .catalog import BASE_MODEL_CLASSES
+from .static import ZeroFriction
 
-MODEL_CLASSES: dict[str, type[FrictionModel]] = {
-    cls.name: cls
-    for cls in (
-        ZeroFriction,
-        Coulomb,
-        Viscous,
-        CoulombViscous,
-        Stribeck,
-        Tustin,
-        Gaussian,
-        Lorentzian,
-        StribeckEps,
-        GAExponential,
-        GATustin,
-        GANonLinear,
-        GADupont,
-        GASevenParameter,
-        Polynomial,
-        LoadDependent,
-        Karnopp,
-        GKF,
-        Dahl,
-        LuGre,
-        GMS,
-        Asymmetric,
-    )
-}
+MODEL_CLASSES: dict[str, type[FrictionModel]] = {**BASE_MODEL_CLASSES, Asymmetric.name: Asymmetric}
 
 #: every model name accepted by :func:`make_model`
 MODEL_NAMES: tuple[str, ...] = tuple(MODEL_CLASSES)

@@ -283,6 +283,30 @@ def concatenate(records: list[JointData]) -> list[JointData]:
     return list(records)
 
 
+def concat_records(records: list[JointData]) -> JointData:
+    """One record with the samples of ``records`` back to back (a single record is returned as is).
+
+    For pooled statistics and plots: events and metadata are dropped, ``dt`` and ``resolution`` are
+    the first record's.
+    """
+    if len(records) == 1:
+        return records[0]
+
+    def cat(k: str) -> np.ndarray:
+        return np.concatenate([getattr(r, k) for r in records])
+
+    return JointData(
+        cat("t"),
+        cat("position"),
+        cat("velocity"),
+        cat("acceleration"),
+        cat("torque"),
+        records[0].dt,
+        [],
+        records[0].resolution,
+    )
+
+
 # ------------------------------------------------------------------------------ split
 def split(data: JointData, train_seconds: float = 10.0) -> tuple[JointData, JointData]:
     """Seed 003 A.3: the first ``train_seconds`` for training, the remainder for validation."""

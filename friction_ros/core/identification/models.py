@@ -293,7 +293,6 @@ _MODEL_HELP = (
     "coulomb, coulomb_viscous, stribeck, dahl, lugre, gms<N> (e.g. gms4), gms<N>d (with presliding "
     "damping, e.g. gms4d), anfis, nusvr"
 )
-PARAMETRIC = ("coulomb", "coulomb_viscous", "stribeck", "dahl", "lugre")
 LEARNED = ("anfis", "nusvr")
 
 

@@ -257,7 +257,7 @@ def fit_records(
                 keep[i0:i1] = False
                 train.append(r.slice(i0, i1))
                 windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
-            val.append(_concat([r.slice(a, b) for a, b in D._runs(keep)]))
+            val.append(D.concat_records([r.slice(a, b) for a, b in D._runs(keep)]))
             val_from.append((r, keep))
     if not val:  # records too short to split: validate on the training data (reported)
         train = list(records)
@@ -290,12 +290,12 @@ def fit_records(
     breakaways = [b for r in records for b in D.find_breakaways(r)]
     if note := _imprecise_breakaways(breakaways):
         warnings_pre.append(note)
-    ex = D.excitation(records[0] if len(records) == 1 else _concat(records), plateaus)
+    ex = D.excitation(records[0] if len(records) == 1 else D.concat_records(records), plateaus)
     dynamic_wanted = any(spec_for(n).dynamic for n in names if n not in LEARNED)
     static_from_plateaus = len(plateaus) >= 3
     D.check_excitation(ex, dynamic=dynamic_wanted, static_from_plateaus=False, label=label)
     if dynamic_wanted:
-        ex_train = D.excitation(_concat(train), [])
+        ex_train = D.excitation(D.concat_records(train), [])
         if ex_train.reversals < 4:
             why = (
                 f"too little excitation in the {train_seconds:g} s training window: "
@@ -308,7 +308,7 @@ def fit_records(
             # the plateaus still determine the static models: fit those, name what was skipped
             names = [n for n in names if n not in dynamic]
             warnings_pre.append(f"dynamic models skipped ({', '.join(dynamic)}): {why}")
-    vall = _concat(val)
+    vall = D.concat_records(val)
     mv = D.moving_mask(vall.velocity, vall.resolution, vall.dt)
     hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
     lm = mv & ~hm
@@ -446,22 +446,6 @@ def fit_records(
     )
 
 
-def _concat(records: list[D.JointData]) -> D.JointData:
-    if len(records) == 1:
-        return records[0]
-    cat = lambda k: np.concatenate([getattr(r, k) for r in records])  # noqa: E731
-    return D.JointData(
-        cat("t"),
-        cat("position"),
-        cat("velocity"),
-        cat("acceleration"),
-        cat("torque"),
-        records[0].dt,
-        [],
-        records[0].resolution,
-    )
-
-
 def _static_predictor(ss, J):
     return lambda r: J * r.acceleration + ss(r.velocity)
 
@@ -482,7 +466,7 @@ def _learning_data(plateaus, train, J, eps):
             np.array([p.torque for p in plateaus]),
             "plateau means",
         )
-    r = _concat(train)
+    r = D.concat_records(train)
     m = np.abs(r.velocity) > max(20 * eps, 0.02)
     return (
         r.velocity[m],
@@ -548,7 +532,7 @@ def _fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResu
         return stribeck_map(v, c)
 
     # inertia by NNLS on the training records with the map fixed (acceleration is ~0 on plateaus)
-    r = _concat(train)
+    r = D.concat_records(train)
     resid = r.torque - ss(r.velocity)
     a = r.acceleration
     J = max(float(a @ resid / max(a @ a, 1e-300)), 0.0)

@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.core.identification import export
+from friction_ros.core.identification.data import concat_records
 
 
 def _clean(x):
@@ -252,13 +253,11 @@ def make_plots(res, out: Path) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from friction_ros.core.identification.pipeline import _concat
-
     out.mkdir(parents=True, exist_ok=True)
     files = {}
     names = list(res.models)
-    tr = _concat(res.train)
-    va = _concat(res.validation)
+    tr = concat_records(res.train)
+    va = concat_records(res.validation)
     J = res.inertia
     # 1 friction-velocity map
     fig, ax = plt.subplots(figsize=(8, 5))

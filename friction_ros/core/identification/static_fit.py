@@ -26,8 +26,6 @@ from scipy.optimize import least_squares, nnls
 
 from friction_ros.core.identification.data import ExcitationError, Plateau, mirrored_pairs
 
-STATIC_MODELS = ("coulomb", "coulomb_viscous", "stribeck")
-
 
 @dataclass
 class StaticFit:
