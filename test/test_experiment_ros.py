@@ -47,6 +47,13 @@ def test_cli_runs_quick_profile_and_prints_summary(quick_bag):
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert f"bag: {out.resolve()}" in r.stdout
     assert "plateau map" in r.stdout and "breakaway torques" in r.stdout
+    # the truth column is the joint-level friction of the preset: the plateaus agree with it
+    errors = [
+        float(ln.split()[-1].rstrip("%"))
+        for ln in r.stdout.splitlines()
+        if ln.strip().startswith("plateau") and ln.rstrip().endswith("%")
+    ]
+    assert errors and max(abs(e) for e in errors) < 5.0, errors
     assert "Traceback" not in r.stdout + r.stderr
     assert (out / "metadata.yaml").is_file()
 

@@ -188,10 +188,13 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
 
             from friction_ros.core.presets import load_preset
 
-            model = load_preset(preset).friction
+            truth_preset = load_preset(preset)
+            p = truth_preset.params
+            holding = p.gravity_force - p.load_torque  # the torque that holds a constant load
 
             def truth(v: float) -> float:
-                return float(model.steady_state(np.array([v]))[0])
+                # what a plateau measures on the simulated joint: joint-level friction + holding torque
+                return float(truth_preset.joint_friction(np.array([v]))[0]) + holding
 
         pm = plateau_map(bag, joint, topic=states_topic, events_topic=events_topic)
         lines.append(f"plateau map (first {pm.settle:g} s of each plateau discarded):")
