@@ -270,6 +270,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    # Ctrl-C from the first instant: validation imports the model library (seconds on a loaded
+    # machine), and a SIGINT then must stop the run quietly, not print an import traceback
+    stop = threading.Event()
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     args = build_parser().parse_args(argv)
     try:
         if args.config:
@@ -296,10 +301,9 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if stop.is_set():  # stopped while validating: nothing was started
+        return 0
     bring = Bringup(specs, quiet=args.quiet)
-    stop = threading.Event()
-    signal.signal(signal.SIGINT, lambda *_: stop.set())
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     print(f"[bringup] starting {', '.join(s.label for s in specs)} (Ctrl-C stops them, controllers first)")
     bring.start()
     bring.wait(args.duration, stop)
