@@ -82,7 +82,8 @@ def main() -> int:
                 except Exception as exc:  # a failed cell is a result, reported in the table
                     cell.update(complete=False, error=str(exc).splitlines()[0][:120])
                     cells.append(cell)
-                    rows.append([preset, seed, "FAILED", "-", "-", cell["error"], "", "", "", ""])
+                    rows.append([preset, seed, "FAILED", "-", "-", cell["error"], "", "", "", "", ""])
+                    print(f"cell {preset} seed {seed} FAILED: {exc!r}", file=sys.stderr)
                     continue
                 none = res.runs["none"].rms
                 worse = [m for m in MODES if res.runs[m].enabled and res.runs[m].rms > none * 1.02]

@@ -306,3 +306,13 @@ def test_a_chattering_plateau_loop_is_named_in_the_fit_warnings():
     noisy = tau + 5.0 * np.sign(rng.standard_normal(tau.size))  # +-5 N*m square chatter, fc = 1 N*m
     res = fit_records(D.prepare(t, pos, None, noisy), ["coulomb"], maxiter=5)
     assert any("velocity loop chattered on" in w for w in res.warnings), res.warnings
+
+
+def test_a_joint_state_stamped_by_another_clock_is_left_out_and_named():
+    """One wall-clock stamp among simulated time (1.8e9 s away) used to stretch the uniform grid to
+    a 13 TiB allocation: the largest run of samples on one clock is kept, the rest named."""
+    t, pos, vel, tau = simulate_lugre_joint()
+    t2 = np.append(t, 1.8e9)
+    rec = D.prepare(t2, np.append(pos, pos[-1]), None, np.append(tau, 0.0))
+    assert rec.n == t.size and rec.t[-1] == pytest.approx(t[-1])
+    assert any("1 joint states stamped up to 1.8e+09 s away" in w for w in rec.meta["warnings"]), rec.meta

@@ -42,6 +42,9 @@ SCHEMES = ("feedforward", "feedback", "blended")
 WORSE_TOLERANCE = 0.02
 # the ROS graph's control period (plant_simulator / compensating_controller / experiment default)
 GRAPH_PERIOD = 1e-3
+# s of wall time between seeing the controller's writer and starting the plant (its writer matches
+# this reader a moment later; the experiment node waits alike)
+MATCH_GRACE = 0.5
 
 
 @dataclass
@@ -218,6 +221,14 @@ def controller_document(
 
 
 # -- step 3 -------------------------------------------------------------------------------------------
+class MissingStates(RuntimeError):
+    """A tracking run whose controller states did not all arrive."""
+
+
+#: tracking runs repeated when states went missing (the run is deterministic: a repeat is the same run)
+TRACK_ATTEMPTS = 3
+
+
 def track(
     preset: str,
     params_file: Path,
@@ -229,9 +240,25 @@ def track(
     """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
 
     Every controller_state of the run is read (a reliable subscription as deep as the publisher's
-    history); the run fails if one control period is missing, so the figures never depend on what
-    a loaded machine happened to deliver.
+    history); a run in which one control period is missing is repeated (up to TRACK_ATTEMPTS runs;
+    lockstep makes the repeat identical) and fails after that, so the figures never depend on what
+    a loaded machine happened to deliver. Measured under a load average of 9 on 2 cores: the
+    controller's writer had not yet matched this reader when the plant started (108 of 4001 states
+    missing at the start) although the reader already saw the writer.
     """
+    for attempt in range(1, TRACK_ATTEMPTS + 1):
+        try:
+            return _track_once(preset, params_file, duration, label, joint, period)
+        except MissingStates as exc:
+            if attempt == TRACK_ATTEMPTS:
+                raise RuntimeError(f"{exc} (in each of {TRACK_ATTEMPTS} runs)") from None
+            _say(f"  {label}: {exc}; running it again")
+    raise AssertionError("unreachable")
+
+
+def _track_once(
+    preset: str, params_file: Path, duration: float, label: str, joint: str, period: float
+) -> TrackingRun:
     import threading
 
     import rclpy
@@ -279,6 +306,7 @@ def track(
             if time.monotonic() - t0 > 60:
                 raise RuntimeError(f"tracking run {label}: controller_state not matched within 60 s")
             time.sleep(0.01)
+        time.sleep(MATCH_GRACE)  # the controller's writer matches this reader a moment later
         bring_plant.start()
         last_print = 0.0
         while True:
@@ -305,13 +333,16 @@ def track(
         f"{chr(13) if sys.stdout.isatty() else ''}[demo]   {label:<12} {duration:g} s simulated in {wall:.1f} s",
         flush=True,
     )
-    t_first = _stamp(states[0])
+    if not states:
+        raise MissingStates(f"tracking run {label}: no controller state was received")
+    # the lockstep clock starts at 0: index by simulated time, so states missed at the start count
+    t_first = min(_stamp(states[0]), period)
     by_k: dict[int, object] = {}
     for m in states:
         by_k.setdefault(int(round((_stamp(m) - t_first) / period)), m)
     missing = [k for k in range(n_periods + 1) if k not in by_k]
     if missing:
-        raise RuntimeError(
+        raise MissingStates(
             f"tracking run {label}: {len(missing)} of {n_periods + 1} controller states were not received "
             f"(first missing period {missing[0]}): the figures would not be of the whole run"
         )

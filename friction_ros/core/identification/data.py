@@ -155,6 +155,10 @@ def estimate_resolution(position: np.ndarray) -> float:
     return 0.0
 
 
+#: a gap between joint-state stamps above this (and 1e4 sample periods) is another clock [s]
+CLOCK_JUMP_SECONDS = 3600.0
+
+
 def prepare(
     t,
     position=None,
@@ -197,6 +201,24 @@ def prepare(
 
     ts = t[keep]
     pos, vel, eff = pick(position), pick(velocity), pick(effort)
+    # stamps from another clock (wall time among simulated time) would stretch the uniform grid
+    # over decades: keep the largest run of samples without such a jump and say what was left out
+    clock_note = ""
+    steps = np.diff(ts)
+    jump = max(CLOCK_JUMP_SECONDS, 1e4 * float(np.median(steps)))
+    cuts = np.nonzero(steps > jump)[0]
+    if cuts.size:
+        bounds = np.concatenate([[0], cuts + 1, [ts.size]])
+        b = int(np.argmax(np.diff(bounds)))
+        sl = slice(int(bounds[b]), int(bounds[b + 1]))
+        clock_note = (
+            f"{ts.size - (sl.stop - sl.start)} joint states stamped up to {float(steps[cuts].max()):.3g} s away "
+            "from the rest (a clock mix-up) were left out"
+        )
+        ts = ts[sl]
+        pos, vel, eff = (None if x is None else x[sl] for x in (pos, vel, eff))
+        if ts.size < 3:
+            raise ExcitationError("time: fewer than 3 joint states share one clock")
     if eff is None or not np.any(np.isfinite(eff)):
         if current is None:
             raise ExcitationError(
@@ -227,7 +249,7 @@ def prepare(
     ok = np.isfinite(eff)
     tau = np.interp(grid + torque_delay, ts[ok], eff[ok])
     resolution = 0.0
-    notes: list[str] = []
+    notes: list[str] = [clock_note] if clock_note else []
     if pos is not None and np.any(np.isfinite(pos)):
         p = interp(pos)
         resolution = estimate_resolution(pos[np.isfinite(pos)])
