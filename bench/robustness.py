@@ -27,8 +27,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import print_table, write_results  # noqa: E402
 
@@ -39,17 +37,10 @@ MODES = ("feedforward", "feedback", "blended")
 
 
 def encoder_cap(run, preset: str) -> float:
-    """The largest RMS reduction any controller can show on this run's measured error: even a joint
-    that tracked perfectly reads ``ref - q round(ref / q)`` through an encoder of resolution ``q``,
-    so ``100 (1 - RMS(that) / RMS(none))`` [%] (100 without an encoder)."""
+    """The demo's encoder cap of this run (``friction_ros.cli.demo.encoder_cap``)."""
     from friction_ros.core.presets import load_preset
 
-    q = demo._resolution(load_preset(preset))
-    if q <= 0:
-        return 100.0
-    ref = np.asarray(run.reference, dtype=float)
-    floor = float(np.sqrt(np.mean((ref - q * np.round(ref / q)) ** 2)))
-    return 100.0 * (1.0 - floor / run.rms) if run.rms > 0 else math.nan
+    return demo.encoder_cap(run, demo._resolution(load_preset(preset)))
 
 
 def main() -> int:

@@ -101,6 +101,7 @@ class DemoResult:
     gains: dict = field(default_factory=dict)
     reference: dict = field(default_factory=dict)
     runs: dict[str, TrackingRun] = field(default_factory=dict)
+    encoder_cap: float = 100.0  # largest reduction [%] the encoder lets the measured error show
     warnings: list[str] = field(default_factory=list)
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
@@ -145,6 +146,7 @@ class DemoResult:
             },
             "best": self.best,
             "reduction_percent": {k: self.reduction(k) for k in self.runs},
+            "encoder_cap_percent": self.encoder_cap,
             "warnings": self.warnings,
             "timings_s": self.timings,
         }
@@ -604,6 +606,14 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
                 f"{label} was enabled by the gate but tracked worse than no compensation "
                 f"({run.rms * 1e3:.3f} vs {base.rms * 1e3:.3f} mrad)"
             )
+    res.encoder_cap = encoder_cap(base, _resolution(preset))
+    if res.encoder_cap < ENCODER_CAP_WARN:
+        q = _resolution(preset)
+        res.warnings.append(
+            f"the encoder ({q:.3g} rad per count) caps what any compensation can show on the measured error at "
+            f"-{res.encoder_cap:.0f} %: perfect tracking of this reference still reads "
+            f"{base.rms * (1 - res.encoder_cap / 100) * 1e3:.3g} mrad RMS"
+        )
     if res.best == "none":
         res.warnings.append("no compensation mode is enabled: the parameter file compensates nothing")
     elif res.reduction(res.best) < 10.0:
@@ -627,6 +637,21 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     ]
     (results_dir / "demo_summary.json").write_text(json.dumps(res.summary(), indent=2, default=_json_default))
     return res
+
+
+#: an encoder cap below this [%] is named in the demo's warnings
+ENCODER_CAP_WARN = 90.0
+
+
+def encoder_cap(run: TrackingRun, resolution: float) -> float:
+    """The largest RMS reduction [%] any controller can show on this run's measured error: even a
+    joint that tracked perfectly reads ``ref - q round(ref / q)`` through an encoder of resolution
+    ``q``, so ``100 (1 - RMS(that) / RMS(run))`` (100 without an encoder)."""
+    if resolution <= 0 or not run.rms > 0:
+        return 100.0
+    ref = np.asarray(run.reference, dtype=float)
+    floor = float(np.sqrt(np.mean((ref - resolution * np.round(ref / resolution)) ** 2)))
+    return 100.0 * (1.0 - floor / run.rms)
 
 
 def map_error_vs_truth(fitted, truth, plateaus) -> dict:
