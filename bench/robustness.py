@@ -175,8 +175,7 @@ def main() -> int:
             ],
             [
                 "best enabled mode <= -90 % (abb_m19s), <= -50 % (others)",
-                ", ".join(summary["presets_meeting_reduction_goal"])
-                or "none"
+                (", ".join(summary["presets_meeting_reduction_goal"]) or "none")
                 + "".join(
                     f"; not {p}: best {min(c['best_reduction_percent'] for c in cs):.1f} %, encoder cap "
                     f"{min(c['encoder_cap_percent'] for c in cs):.1f} %"
