@@ -212,9 +212,8 @@ def _fit_direction(
     with ``e = exp(-(|v|/v_S)^delta)`` from ``joint`` (Coulomb: the median), by NNLS; ``fs``: the
     direction's breakaway level if measured."""
     if model == "coulomb":
-        fc = float(np.median(af))
-        s = float(np.std(af - fc, ddof=1) / np.sqrt(len(af))) if len(af) > 1 else 0.0
-        return {"fc": fc}, {"fc": s}
+        c, s, _ = _fit_magnitude(av, af, "coulomb")
+        return c, s
     if model == "coulomb_viscous":
         cols, names, target = [np.ones_like(av), av], ["fc", "fv"], af
     else:
