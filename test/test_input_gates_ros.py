@@ -21,6 +21,7 @@ pytestmark = pytest.mark.ros
 PID = {"p": 200.0, "i": 50.0, "d": 0.15}
 OFFSET = 0.1  # constant reference [rad]
 TORQUE = 5.0  # a valid plant command [N*m]
+PACE = 5  # valid samples sent before waiting for the controller (its reader keeps 10)
 
 
 def _status(diags, name: str) -> dict[str, str]:
@@ -68,6 +69,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
     enc = JointStateEncoder(["joint1"])
     valid: set[float] = set()  # positions of the valid (stamped or unstamped) samples
     bad: set[float] = set()  # positions of samples that must be rejected
+    paced_valid: set[float] = set()  # valid samples sent once the controller answered (none may be lost)
     k = [0]
 
     def pos() -> float:
@@ -80,10 +82,20 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
         pub.publish(enc.pack_ns(s, p, v, e))
         (valid if good else bad).add(p)
 
-    def run_valid(n, dt=0.002):
-        for _ in range(n):
+    def run_valid(n, dt=0.002, *, paced=True):
+        """``n`` valid samples at 500 Hz. Paced: after every ``PACE`` samples wait until the controller
+        answered the last one, so its keep-last-10 reader (a controller drops a stale backlog by
+        design) never overflows however slow this machine is: every valid sample must be used."""
+        for i in range(n):
             send()
+            if paced:
+                paced_valid.add(1e-5 * k[0])
             time.sleep(dt)
+            if paced and ((i + 1) % PACE == 0 or i == n - 1):
+                p = 1e-5 * k[0]
+                assert lis.wait_for(lambda p=p: bool(states) and states[-1].position == p, 20, g), (
+                    "the controller did not answer a valid sample"
+                )
 
     with Listener() as lis:
         states = lis.subscribe(ControllerState, "controller_state", RECORDED_QOS)
@@ -98,7 +110,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
             )
             t_end = time.monotonic() + 30
             while not (states and estimates) and time.monotonic() < t_end:  # writers matched too
-                run_valid(10)
+                run_valid(10, paced=False)
             assert states and estimates, "controller/estimator did not answer valid joint states"
             run_valid(100)
 
@@ -169,6 +181,8 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
     assert not set(used) & bad, "a rejected sample reached the controller"
     stamped_valid = len(valid)
     assert len(set(used)) >= 0.9 * stamped_valid, f"{len(set(used))} of {stamped_valid} valid samples used"
+    lost = paced_valid - set(used)
+    assert not lost, f"{len(lost)} of {len(paced_valid)} paced valid samples not used by the controller"
     replica = CompensatingController({"mode": "pid", "pid": PID})
     replica.pid.integral = states[0].i_term  # the warm-up samples before the first received state
     for m in states:
