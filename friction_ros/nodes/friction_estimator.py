@@ -23,6 +23,7 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
+from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.node_utils import (
     OK,
     RECORDED_QOS,
@@ -30,7 +31,6 @@ from friction_ros.nodes.node_utils import (
     STATE_QOS,
     WARN,
     DiagnosticsPublisher,
-    JointStateDecoder,
     Param,
     add_runtime_validation,
     apply_scheduling,
