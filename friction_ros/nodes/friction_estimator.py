@@ -159,9 +159,11 @@ class FrictionEstimatorNode(Node):
             return
         if status == DUPLICATE:
             return  # lockstep re-send
-        if gate.log_line:
-            log = self.get_logger().warning if status == RESYNC else self.get_logger().info
-            log(gate.log_line)
+        if gate.log_line:  # one call site per severity: rclpy refuses a severity change at a call site
+            if status == RESYNC:
+                self.get_logger().warning(gate.log_line)
+            else:
+                self.get_logger().info(gate.log_line)
         t_ns = gate.stamp_ns
         if status == RESYNC:
             self.estimator.reset()  # new time base or position reference (a bag loop): start over
