@@ -1,7 +1,7 @@
 """drive_interface's wire shortcuts: pre-serialised state messages and the joint_commands reader.
 
 Both must agree exactly with rclpy's own (de)serialiser: StatePackets is checked against
-``deserialize_message``; the command path (a raw rcl subscription read by node_utils'
+``deserialize_message``; the command path (a raw rcl subscription read by friction_ros.core.wire's
 JointStateDecoder, as the node takes it) against messages that went through the middleware.
 """
 
@@ -21,8 +21,8 @@ from rclpy.serialization import deserialize_message
 from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 
+from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.drive_interface import StatePackets
-from friction_ros.nodes.node_utils import JointStateDecoder
 
 
 @pytest.mark.parametrize(

@@ -14,7 +14,8 @@ from ros_graph import Graph, Listener, write_params
 
 from friction_ros.cli.bringup import NodeSpec
 from friction_ros.core.control.controller import CompensatingController
-from friction_ros.nodes.node_utils import RECORDED_QOS, JointStateEncoder
+from friction_ros.core.wire import JointStateEncoder
+from friction_ros.nodes.node_utils import RECORDED_QOS
 
 pytestmark = pytest.mark.ros
 

@@ -57,56 +57,6 @@ def test_deadline_loop_ticks_at_its_period_between_executor_callbacks():
     assert np.median(np.diff(ticks)) == pytest.approx(0.005, abs=0.001)
 
 
-@pytest.mark.parametrize("names", [[], ["joint1"], ["a", "bb_joint", "ccc"]])
-@pytest.mark.parametrize("frame_id", ["", "base", "abcd1"])
-def test_joint_state_codec_matches_rclpy_serialisation(names, frame_id):
-    """The raw-bytes JointState path (hot loop) reads and writes exactly what rclpy does."""
-    import itertools
-
-    from rclpy.serialization import deserialize_message, serialize_message
-    from sensor_msgs.msg import JointState
-
-    from friction_ros.nodes.node_utils import JointStateDecoder, JointStateEncoder
-
-    decoder = JointStateDecoder()
-    fields_sets = itertools.chain.from_iterable(
-        itertools.combinations(JointStateEncoder.FIELDS, k) for k in range(4)
-    )
-    for fields in fields_sets:
-        enc = JointStateEncoder(names, fields, frame_id)
-        values = [0.5 + i for i in range(len(names) * len(fields))]
-        expected = JointState()
-        expected.header.stamp.sec, expected.header.stamp.nanosec = 12, 345
-        expected.header.frame_id = frame_id
-        expected.name = names
-        for i, f in enumerate(fields):
-            setattr(expected, f, values[i * len(names) : (i + 1) * len(names)])
-        data = enc.pack(12, 345, *values)
-        assert deserialize_message(data, JointState) == expected
-        for payload in (serialize_message(expected), data, data):  # compile, then the cached layout
-            sample = decoder.decode(payload)
-            assert (sample.sec, sample.nanosec, sample.stamp_ns) == (12, 345, 12_000_000_345)
-            assert (sample.frame_id, sample.name) == (frame_id, tuple(names))
-            for f in JointStateEncoder.FIELDS:
-                assert list(getattr(sample, f)) == list(getattr(expected, f))
-    # a different layout on the same decoder (names, lengths) is recompiled, not misread
-    other = JointStateEncoder(["x_joint", "y"], ("position",)).pack(1, 2, 3.0, 4.0)
-    s = decoder.decode(other)
-    assert s.name == ("x_joint", "y") and s.position == (3.0, 4.0) and s.velocity == ()
-
-
-def test_decoded_joint_sample_works_with_the_select_helpers():
-    from rclpy.serialization import serialize_message
-    from sensor_msgs.msg import JointState
-
-    from friction_ros.nodes.node_utils import JointStateDecoder, select_effort, select_joint
-
-    msg = JointState(name=["a", "joint1"], position=[0.1, 0.2], velocity=[1.0, 2.0], effort=[0.5, 1.5])
-    s = JointStateDecoder().decode(serialize_message(msg))
-    assert select_effort(s, "joint1") == 1.5 and select_effort(s, "other") is None
-    assert select_joint(s, "joint1") == (0.2, 2.0, 1.5) and select_joint(s, "b") is None
-
-
 def test_scheduling_parameters_pin_and_raise_every_thread_of_a_node(tmp_path):
     """drive_interface started with cpu_affinity / realtime_priority: all its threads (executor and
     the middleware's) end up on that CPU, with SCHED_FIFO where the machine permits it."""

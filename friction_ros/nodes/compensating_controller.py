@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import struct
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
@@ -44,6 +43,7 @@ from friction_ros.core.input_gate import (
 from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
+from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
 from friction_ros.nodes.node_utils import (
     ERROR,
     OK,
@@ -53,7 +53,6 @@ from friction_ros.nodes.node_utils import (
     WARN,
     CommandPublisher,
     DiagnosticsPublisher,
-    JointStateDecoder,
     Param,
     add_runtime_validation,
     apply_scheduling,
@@ -133,43 +132,12 @@ _STATE_FIELDS = tuple(
     for f in dataclasses.fields(ControllerTerms)
     if f.name not in ("time", "mode", "saturated", "compensation_fallback")
 )  # compensation_fallback is not in friction_msgs/ControllerState: diagnostics and the log carry it
-assert set(_STATE_FIELDS) == set(
-    "reference_position reference_velocity reference_acceleration position velocity error error_dot "
-    "p_term i_term d_term velocity_feedforward inertia_feedforward friction_feedforward "
-    "friction_feedback command_unlimited command".split()
-), "ControllerTerms and ControllerStateEncoder disagree"
-_MSG_FLOATS = tuple(
+assert set(_STATE_FIELDS) == set(CONTROLLER_STATE_FLOATS), (
+    "ControllerTerms and ControllerStateEncoder disagree"
+)
+assert CONTROLLER_STATE_FLOATS == tuple(
     k for k, t in ControllerState.get_fields_and_field_types().items() if t == "double"
-)  # friction_msgs/ControllerState float64 fields in message order (the order pack() expects)
-
-
-class ControllerStateEncoder:
-    """friction_msgs/ControllerState -> CDR bytes with one ``struct.pack`` (published as bytes).
-
-    The layout is fixed by the joint name and the mode string (XCDR1 little endian, alignment from
-    the end of the 4-byte encapsulation, zero padding): header stamp, empty frame_id, joint_name,
-    mode, 16 float64 in message order, saturated. Saves building a message object and rclpy's
-    conversion every period; subscribers see an ordinary ControllerState.
-    """
-
-    def __init__(self, joint: str):
-        self.joint = joint
-        self._by_mode: dict[str, tuple[struct.Struct, bytes]] = {}
-
-    def _layout(self, mode: str) -> tuple[struct.Struct, bytes]:
-        body = bytearray()
-        for text in ("", self.joint, mode):  # frame_id, joint_name, mode
-            body.extend(b"\0" * ((-(8 + len(body))) % 4))
-            raw = text.encode() + b"\0"
-            body.extend(struct.pack("<I", len(raw)) + raw)
-        body.extend(b"\0" * ((-(8 + len(body))) % 8))
-        st = struct.Struct(f"<4siI{len(body)}s{len(_MSG_FLOATS)}d?")
-        self._by_mode[mode] = (st, bytes(body))
-        return st, bytes(body)
-
-    def pack(self, sec: int, nanosec: int, mode: str, values, saturated: bool) -> bytes:
-        st, mid = self._by_mode.get(mode) or self._layout(mode)
-        return st.pack(b"\x00\x01\x00\x00", sec, nanosec, mid, *values, bool(saturated))
+), "friction_msgs/ControllerState and the wire encoder disagree"
 
 
 class CompensatingControllerNode(Node):

@@ -52,7 +52,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-import struct
 import threading
 import time
 
@@ -84,6 +83,7 @@ from friction_ros.core.can.axis import (
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
+from friction_ros.core.wire import DriveStateEncoder, JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.node_utils import (
     COMMAND_QOS,
     ERROR,
@@ -95,8 +95,6 @@ from friction_ros.nodes.node_utils import (
     DeadlineLoop,
     DiagnosticsPublisher,
     FixedRateLoop,
-    JointStateDecoder,
-    JointStateEncoder,
     Param,
     add_runtime_validation,
     apply_scheduling,
@@ -290,65 +288,20 @@ def open_bus(interface: str, channel: str, bitrate: int, filters: list[dict]) ->
 
 
 # ---- pre-serialized state messages ------------------------------------------------------------------
-class _Cdr:
-    """Writer of little-endian plain CDR (XCDR1: what ROS 2 middlewares put on the wire), used to
-    build a message template once; alignment is relative to the end of the 4-byte encapsulation header."""
-
-    def __init__(self):
-        self.buf = bytearray(b"\x00\x01\x00\x00")  # CDR_LE
-
-    def align(self, n: int) -> None:
-        self.buf += bytes(-(len(self.buf) - 4) % n)
-
-    def put(self, fmt: str, *values) -> int:
-        """Pack values of one primitive type (aligned to its size); return their offset."""
-        st = struct.Struct("<" + fmt)
-        self.align(struct.calcsize("<" + fmt[-1]))
-        off = len(self.buf)
-        self.buf += st.pack(*values)
-        return off
-
-    def string(self, text: str) -> None:
-        raw = text.encode() + b"\x00"
-        self.put("I", len(raw))
-        self.buf += raw
-
-    def header(self) -> int:
-        off = self.put("iI", 0, 0)  # stamp sec, nanosec
-        self.string("")  # frame_id
-        return off
-
-
 class StatePackets:
     """joint_states and drive_state as CDR bytes (rclpy ``publish_raw``; same wire types).
 
-    joint_states: node_utils' :class:`JointStateEncoder`; drive_state: a template serialised once and
-    patched in place (two ``struct.pack_into``). No message objects, no rclpy conversion, no
-    middleware serialisation per period. Both are checked once against rclpy's own deserialiser
-    (:meth:`verify`); the node falls back to publishing message objects if the check fails.
+    Both are packed by the wire encoders of :mod:`friction_ros.core.wire` (one ``struct.pack``
+    each): no message objects, no rclpy conversion, no middleware serialisation per period. Both are
+    checked once against rclpy's own deserialiser (:meth:`verify`); the node falls back to publishing
+    message objects if the check fails.
     """
-
-    _STAMP = struct.Struct("<iI")
-    _DS = struct.Struct(
-        "<6d3I?"
-    )  # motor_position .. bus_voltage, axis_state, axis_error, fault_flags, enabled
 
     def __init__(self, joint: str, protocol: str):
         self.joint, self.protocol = joint, protocol
         self.set_joint = JointStateEncoder([joint]).pack  # (sec, nanosec, position, velocity, effort)
-        w = _Cdr()
-        self.ds_stamp = w.header()
-        w.string(joint)
-        w.string(protocol)
-        self.ds_block = w.put("6d", *([0.0] * 6))
-        w.buf += bytes(self._DS.size - 48)
-        self.ds = w.buf
-
-    def set_drive(self, sec: int, nsec: int, *values) -> bytes:
-        buf = self.ds
-        self._STAMP.pack_into(buf, self.ds_stamp, sec, nsec)
-        self._DS.pack_into(buf, self.ds_block, *values)
-        return bytes(buf)
+        # (sec, nanosec, motor_position .. bus_voltage, axis_state, axis_error, fault_flags, enabled)
+        self.set_drive = DriveStateEncoder(joint, protocol).pack
 
     def verify(self) -> str:
         """Empty string when both templates deserialise to exactly the values packed, else why not."""
@@ -372,7 +325,6 @@ class StatePackets:
             )
         except Exception as exc:
             return f"{type(exc).__name__}: {exc}"
-        self.set_drive(0, 0, *([0.0] * 6), 0, 0, 0, False)
         return "" if ok_js and ok_ds else "round trip through rclpy's deserialiser differs"
 
 

@@ -23,6 +23,7 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
+from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.node_utils import (
     OK,
     RECORDED_QOS,
@@ -30,7 +31,6 @@ from friction_ros.nodes.node_utils import (
     STATE_QOS,
     WARN,
     DiagnosticsPublisher,
-    JointStateDecoder,
     Param,
     add_runtime_validation,
     apply_scheduling,
@@ -159,9 +159,11 @@ class FrictionEstimatorNode(Node):
             return
         if status == DUPLICATE:
             return  # lockstep re-send
-        if gate.log_line:
-            log = self.get_logger().warning if status == RESYNC else self.get_logger().info
-            log(gate.log_line)
+        if gate.log_line:  # one call site per severity: rclpy refuses a severity change at a call site
+            if status == RESYNC:
+                self.get_logger().warning(gate.log_line)
+            else:
+                self.get_logger().info(gate.log_line)
         t_ns = gate.stamp_ns
         if status == RESYNC:
             self.estimator.reset()  # new time base or position reference (a bag loop): start over

@@ -21,9 +21,7 @@ from __future__ import annotations
 
 import gc
 import math
-import operator
 import signal
-import struct
 import sys
 import threading
 import time
@@ -54,6 +52,7 @@ from rclpy.qos import (
 from rclpy.signals import SignalHandlerOptions
 
 from friction_ros.core.validation import ParameterError
+from friction_ros.core.wire import JointStateEncoder
 
 COMMAND_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
@@ -702,249 +701,12 @@ def declare_section(
     return unflatten(values).get(prefix, {})
 
 
-class JointSample:
-    """A decoded sensor_msgs/JointState (attribute names as the message; sequences are tuples).
-
-    ``select_joint`` / ``select_effort`` accept it like the message. ``stamp_ns`` is the header stamp
-    in integer nanoseconds.
-    """
-
-    __slots__ = ("sec", "nanosec", "stamp_ns", "frame_id", "name", "position", "velocity", "effort")
-
-    def __init__(self, sec, nanosec, frame_id, name, position, velocity, effort):
-        self.sec = sec
-        self.nanosec = nanosec
-        self.stamp_ns = sec * 1_000_000_000 + nanosec
-        self.frame_id = frame_id
-        self.name = name
-        self.position = position
-        self.velocity = velocity
-        self.effort = effort
-
-    def stamp(self):
-        """The header stamp as builtin_interfaces/Time."""
-        from builtin_interfaces.msg import Time
-
-        return Time(sec=self.sec, nanosec=self.nanosec)
-
-
-_CDR_LE = b"\x00\x01\x00\x00"  # RTPS encapsulation: little-endian plain CDR (XCDR1), no options
-
-
-class JointStateEncoder:
-    """Serialise sensor_msgs/JointState for fixed joint names to CDR bytes in one ``struct.pack``.
-
-    Hot-loop replacement for building a JointState object and letting rclpy convert and serialise it
-    (~10 us of Python per message before the C conversion): ``Publisher.publish(bytes)`` sends the
-    bytes as they are (rclpy ``publish_raw``), so the wire type stays sensor_msgs/JointState and
-    every subscriber (rclpy, C++, rosbag2) reads it as usual. Layout: XCDR1 little endian as Fast DDS
-    writes it, alignment relative to the byte after the 4-byte encapsulation, zero padding.
-    ``fields`` are the sequences that carry one value per joint (the others are empty);
-    ``pack(sec, nanosec, *values)`` takes their values in message order (position, velocity, effort).
-    """
-
-    FIELDS = ("position", "velocity", "effort")
-
-    def __init__(self, names: Iterable[str], fields: Iterable[str] = FIELDS, frame_id: str = ""):
-        self.names = tuple(names)
-        wanted = set(fields)
-        self.fields = tuple(f for f in self.FIELDS if f in wanted)
-        n = self.n = len(self.names)
-        body = bytearray()  # constant bytes since the last run of doubles
-        off = 8  # offset from the end of the encapsulation (the alignment origin); stamp is 0..8
-        fmt = "<4siI"
-        chunks: list[bytes] = []
-
-        def pad(align: int) -> None:
-            nonlocal off
-            k = (-off) % align
-            body.extend(b"\0" * k)
-            off += k
-
-        def u32(x: int) -> None:
-            nonlocal off
-            pad(4)
-            body.extend(struct.pack("<I", x))
-            off += 4
-
-        def string(text: str) -> None:
-            nonlocal off
-            raw = text.encode() + b"\0"
-            u32(len(raw))
-            body.extend(raw)
-            off += len(raw)
-
-        string(frame_id)
-        u32(n)
-        for name in self.names:
-            string(name)
-        for f in self.FIELDS:
-            count = n if f in self.fields else 0
-            u32(count)
-            if count:
-                pad(8)
-                chunks.append(bytes(body))
-                fmt += f"{len(body)}s{count}d"
-                body.clear()
-                off += 8 * count
-        if body:  # counts of trailing empty sequences
-            chunks.append(bytes(body))
-            fmt += f"{len(body)}s"
-        self._struct = struct.Struct(fmt)
-        self._chunks = tuple(chunks)
-        self._all1 = n == 1 and len(self.fields) == 3
-        self.size = self._struct.size
-
-    def pack(self, sec: int, nanosec: int, *values: float) -> bytes:
-        """CDR bytes of the message with stamp (sec, nanosec) and ``values`` (n per field, in order)."""
-        c = self._chunks
-        if len(c) == 1:  # one field (commands: effort only)
-            return self._struct.pack(_CDR_LE, sec, nanosec, c[0], *values)
-        if self._all1:  # one joint, all fields (joint states)
-            p, v, e = values
-            return self._struct.pack(_CDR_LE, sec, nanosec, c[0], p, c[1], v, c[2], e)
-        n = self.n
-        args: list = [_CDR_LE, sec, nanosec]
-        for i, ch in enumerate(c):
-            args.append(ch)
-            args.extend(values[i * n : (i + 1) * n])
-        return self._struct.pack(*args)
-
-    def pack_ns(self, stamp_ns: int, *values: float) -> bytes:
-        sec, nanosec = divmod(stamp_ns, 1_000_000_000)
-        return self.pack(sec, nanosec, *values)
-
-
-class JointStateDecoder:
-    """CDR bytes of sensor_msgs/JointState (a ``raw=True`` subscription) -> :class:`JointSample`.
-
-    The layout of the last message (string lengths and contents, sequence lengths) is compiled into
-    one ``struct.Struct``; a message with the same layout is decoded with one ``unpack_from`` and one
-    comparison of its length/name fields (~1.5 us instead of ~17 us for rclpy's deserialisation into
-    a message object). Anything else (new layout, big endian, XCDR2) is parsed once to compile its
-    layout or, failing that, handed to rclpy's own deserialisation.
-    """
-
-    def __init__(self):
-        self._struct: struct.Struct | None = None
-        self._check = None  # itemgetter of the length/name fields
-        self._consts: tuple = ()
-        self._frame_id = ""
-        self._names: tuple[str, ...] = ()
-        self._slices = ((0, 0), (0, 0), (0, 0))
-
-    def decode(self, data: bytes) -> JointSample:
-        st = self._struct
-        if st is not None and data[:2] == b"\x00\x01" and len(data) >= st.size:
-            v = st.unpack_from(data)
-            if self._check(v) == self._consts:
-                (a0, b0), (a1, b1), (a2, b2) = self._slices
-                return JointSample(v[0], v[1], self._frame_id, self._names, v[a0:b0], v[a1:b1], v[a2:b2])
-        return self._compile(data)
-
-    def _compile(self, data: bytes) -> JointSample:
-        if data[:2] != b"\x00\x01":
-            return self._fallback(data)
-        fmt = ["<4xiI"]
-        items: list[str] = []  # kind of each unpacked item after sec/nanosec: c(onst) or d(ouble run)
-        consts: list = []
-        pos = 8  # offset after the encapsulation (the alignment origin)
-
-        def skip(align: int) -> None:
-            nonlocal pos
-            k = (-pos) % align
-            if k:
-                fmt.append(f"{k}x")
-                pos += k
-
-        def u32() -> int:
-            nonlocal pos
-            skip(4)
-            (x,) = struct.unpack_from("<I", data, 4 + pos)
-            fmt.append("I")
-            items.append("c")
-            consts.append(x)
-            pos += 4
-            return x
-
-        def string() -> str:
-            nonlocal pos
-            n = u32()
-            raw = bytes(data[4 + pos : 4 + pos + n])
-            if len(raw) != n or n > 4096:
-                raise struct.error("bad string")
-            fmt.append(f"{n}s")
-            items.append("c")
-            consts.append(raw)
-            pos += n
-            return raw[:-1].decode() if n else ""
-
-        try:
-            frame_id = string()
-            count = u32()
-            if count > 4096:
-                raise struct.error("too many names")
-            names = tuple(string() for _ in range(count))
-            runs = []
-            for _ in range(3):
-                count = u32()
-                if count > 65536:
-                    raise struct.error("sequence too long")
-                if count:
-                    skip(8)
-                    fmt.append(f"{count}d")
-                    items.extend("d" * count)
-                    pos += 8 * count
-                runs.append(count)
-            st = struct.Struct("".join(fmt))
-            if st.size > len(data):
-                raise struct.error("payload too short")
-            v = st.unpack_from(data)
-        except (struct.error, UnicodeDecodeError):
-            return self._fallback(data)
-        const_idx = [2 + i for i, k in enumerate(items) if k == "c"]
-        slices = []
-        # runs of doubles appear in field order; their start indices in the unpacked tuple
-        starts = [2 + i for i, k in enumerate(items) if k == "d" and (i == 0 or items[i - 1] != "d")]
-        it = iter(starts)
-        for count in runs:
-            if count:
-                a = next(it)
-                slices.append((a, a + count))
-            else:
-                slices.append((0, 0))
-        self._struct = st
-        self._check = operator.itemgetter(*const_idx)
-        self._consts = self._check(v)
-        self._frame_id = frame_id
-        self._names = names
-        self._slices = tuple(slices)
-        (a0, b0), (a1, b1), (a2, b2) = self._slices
-        return JointSample(v[0], v[1], frame_id, names, v[a0:b0], v[a1:b1], v[a2:b2])
-
-    @staticmethod
-    def _fallback(data: bytes) -> JointSample:
-        from rclpy.serialization import deserialize_message
-        from sensor_msgs.msg import JointState
-
-        m = deserialize_message(data, JointState)
-        return JointSample(
-            m.header.stamp.sec,
-            m.header.stamp.nanosec,
-            m.header.frame_id,
-            tuple(m.name),
-            tuple(m.position),
-            tuple(m.velocity),
-            tuple(m.effort),
-        )
-
-
 class CommandPublisher:
     """``joint_commands`` publisher of one joint (sensor_msgs/JointState effort, COMMAND_QOS).
 
     Every command answers a joint state and carries its stamp (lockstep and latency measurement);
     the last command is kept so a duplicate state (a lockstep re-send) gets the same answer again
-    without recomputing. Commands are serialised by :class:`JointStateEncoder` and published as
+    without recomputing. Commands are serialised by :class:`~friction_ros.core.wire.JointStateEncoder` and published as
     bytes (same wire type; no message object per command).
     """
 

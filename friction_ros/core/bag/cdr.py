@@ -9,7 +9,9 @@
 Payloads carry the 4-byte RTPS encapsulation header: ``00 01`` little-endian CDR (XCDR1, what Fast DDS
 and rosbag2 write), ``00 00`` big-endian, ``00 06``/``00 07`` plain XCDR2 (8-byte types aligned to 4).
 Alignment is relative to the byte after the header; padding bytes are ignored (Fast DDS leaves them
-uninitialised). Trailing bytes after the last field are ignored.
+uninitialised). Trailing bytes after the last field are ignored. The primitives (encapsulation
+header, alignment, the writer :func:`encode` uses) are those of :mod:`friction_ros.core.wire.cdr`;
+the fast per-message codecs of the nodes are in :mod:`friction_ros.core.wire.messages`.
 """
 
 from __future__ import annotations
@@ -19,10 +21,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..wire.cdr import ORIGIN, Writer, encapsulation
 from .errors import CdrError, SchemaError
 from .msgdef import PRIMITIVES, STRINGS, MsgDef
-
-_ENCAPS = {0: (">", 8), 1: ("<", 8), 6: (">", 4), 7: ("<", 4)}
 
 
 class _Rec:
@@ -41,14 +42,14 @@ class _Cur:
 
     def __init__(self, buf, order: str, maxalign: int, rec: _Rec | None):
         self.buf = buf
-        self.pos = 4
+        self.pos = ORIGIN
         self.order = order
         self.maxalign = maxalign
         self.rec = rec
 
     def align(self, n: int) -> None:
         a = n if n < self.maxalign else self.maxalign
-        self.pos += (-(self.pos - 4)) % a
+        self.pos += (-(self.pos - ORIGIN)) % a
 
     def need(self, n: int, what: str) -> None:
         if self.pos + n > len(self.buf):
@@ -81,13 +82,13 @@ class _Cur:
 def _header(data) -> tuple[str, int]:
     if len(data) < 4:
         raise CdrError(f"payload of {len(data)} byte(s) is shorter than the 4-byte CDR header")
-    kind = data[1]
-    if data[0] != 0 or kind not in _ENCAPS:
+    enc = encapsulation(data)
+    if enc is None:
         raise CdrError(
             f"unsupported CDR encapsulation {bytes(data[:2]).hex()}: supported are 0000/0001 (CDR) and "
             "0006/0007 (plain XCDR2)"
         )
-    return _ENCAPS[kind]
+    return enc
 
 
 def _decode_struct(defs: Mapping[str, MsgDef], tname: str, cur: _Cur, path: str) -> dict:
@@ -278,21 +279,7 @@ def _add_generic(cols: _Columns, defs, tname: str, data, i: int) -> None:
 
 
 # ----------------------------------------------------------------------------------------- encoding
-class _Out:
-    __slots__ = ("buf",)
-
-    def __init__(self) -> None:
-        self.buf = bytearray(b"\x00\x01\x00\x00")
-
-    def align(self, n: int) -> None:
-        self.buf += b"\0" * ((-(len(self.buf) - 4)) % n)
-
-    def u32(self, v: int) -> None:
-        self.align(4)
-        self.buf += struct.pack("<I", v)
-
-
-def _encode_struct(defs: Mapping[str, MsgDef], tname: str, value: Mapping, out: _Out, path: str) -> None:
+def _encode_struct(defs: Mapping[str, MsgDef], tname: str, value: Mapping, out: Writer, path: str) -> None:
     md = defs[tname]
     if not md.fields:
         out.buf += b"\0"
@@ -323,10 +310,9 @@ def _encode_struct(defs: Mapping[str, MsgDef], tname: str, value: Mapping, out: 
                 if f.type == "wstring":
                     raw = str(s).encode("utf-16-le") + b"\0\0"
                     out.u32(len(raw) // 2)
+                    out.buf += raw
                 else:
-                    raw = str(s).encode() + b"\0"
-                    out.u32(len(raw))
-                out.buf += raw
+                    out.string(str(s))
         else:
             if f.array is None:
                 _encode_struct(defs, f.type, v or {}, out, p + ".")
@@ -340,6 +326,6 @@ def _encode_struct(defs: Mapping[str, MsgDef], tname: str, value: Mapping, out: 
 
 def encode(defs: Mapping[str, MsgDef], tname: str, value: Mapping) -> bytes:
     """Encode a (nested) dict or object with attributes as little-endian CDR with header; missing fields = 0/''."""
-    out = _Out()
+    out = Writer()
     _encode_struct(defs, tname, value, out, "")
     return bytes(out.buf)

@@ -1,0 +1,143 @@
+"""CDR primitives shared by every codec of the package (pure Python, no rclpy).
+
+What ROS 2 middlewares put on the wire and rosbag2 stores: a 4-byte RTPS encapsulation header
+(``00 01``: little-endian plain CDR, XCDR1), then the fields in message order, each aligned to its
+size (at most 8) relative to the byte after the header, zero padding. Strings are a uint32 length
+including the terminating NUL, the UTF-8 bytes and the NUL; sequences a uint32 count and the
+elements. builtin_interfaces/Time is int32 sec + uint32 nanosec; std_msgs/Header is a Time and the
+frame_id string.
+
+* :class:`Writer`: builds a message (or a template of one) field by field.
+* :func:`compile_template`: turns a template with variable slots into one ``struct.Struct`` and the
+  constant byte chunks between the slots, so a fast encoder packs a whole message with one call.
+* :func:`encapsulation`: byte order and maximum alignment of a payload from its header.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Sequence
+
+CDR_LE = b"\x00\x01\x00\x00"  # RTPS encapsulation: little-endian plain CDR (XCDR1), no options
+# encapsulation kind (second header byte) -> (struct byte order, maximum alignment)
+ENCAPSULATIONS = {0: (">", 8), 1: ("<", 8), 6: (">", 4), 7: ("<", 4)}
+ORIGIN = 4  # alignment origin: the byte after the encapsulation header
+U32 = struct.Struct("<I")
+TIME = struct.Struct("<iI")  # builtin_interfaces/Time: sec, nanosec
+
+
+def padding(offset: int, align: int) -> int:
+    """Bytes of padding before a field of alignment ``align`` at ``offset`` (from the origin)."""
+    return -offset % align
+
+
+def string_bytes(text: str) -> bytes:
+    """A CDR string without its length: UTF-8 and the terminating NUL."""
+    return text.encode() + b"\0"
+
+
+def encapsulation(data) -> tuple[str, int] | None:
+    """(byte order, maximum alignment) of a payload's encapsulation header; None if unsupported."""
+    if len(data) < 4 or data[0] != 0:
+        return None
+    return ENCAPSULATIONS.get(data[1])
+
+
+class Writer:
+    """Little-endian XCDR1 writer: the message grows in ``buf`` (header included).
+
+    Every ``put``-like method aligns first and returns the offset of what it wrote, so a template
+    can be written once with placeholder values and the offsets of the variable fields kept.
+    """
+
+    __slots__ = ("buf",)
+
+    def __init__(self) -> None:
+        self.buf = bytearray(CDR_LE)
+
+    def align(self, n: int) -> None:
+        self.buf += bytes(padding(len(self.buf) - ORIGIN, n))
+
+    def put(self, fmt: str, *values) -> int:
+        """Pack values of one primitive type (aligned to its size); return their offset."""
+        st = struct.Struct("<" + fmt)
+        self.align(struct.calcsize("<" + fmt[-1]))
+        off = len(self.buf)
+        self.buf += st.pack(*values)
+        return off
+
+    def u32(self, value: int) -> int:
+        self.align(4)
+        off = len(self.buf)
+        self.buf += U32.pack(value)
+        return off
+
+    def raw(self, data: bytes) -> None:
+        self.buf += data
+
+    def string(self, text: str) -> int:
+        raw = string_bytes(text)
+        off = self.u32(len(raw))
+        self.buf += raw
+        return off
+
+    def strings(self, texts: Sequence[str]) -> int:
+        """sequence<string>: count, then each string."""
+        off = self.u32(len(texts))
+        for t in texts:
+            self.string(t)
+        return off
+
+    def float64s(self, values: Sequence[float]) -> int:
+        """sequence<float64>: count, then the doubles (aligned to 8 only when there are any);
+        returns the offset of the first double."""
+        self.u32(len(values))
+        if values:
+            self.align(8)
+        off = len(self.buf)
+        self.buf += struct.pack(f"<{len(values)}d", *values)
+        return off
+
+    def time(self, sec: int = 0, nanosec: int = 0) -> int:
+        """builtin_interfaces/Time; returns its offset."""
+        self.align(4)
+        off = len(self.buf)
+        self.buf += TIME.pack(sec, nanosec)
+        return off
+
+    def header(self, sec: int = 0, nanosec: int = 0, frame_id: str = "") -> int:
+        """std_msgs/Header; returns the offset of its stamp."""
+        off = self.time(sec, nanosec)
+        self.string(frame_id)
+        return off
+
+    def bytes(self) -> bytes:
+        return bytes(self.buf)
+
+
+def compile_template(buf: bytes, slots: Iterable[tuple[int, str]]) -> tuple[struct.Struct, tuple[bytes, ...]]:
+    """One ``struct.Struct`` for a template with variable ``slots`` (offset, struct format).
+
+    The format is ``<`` + alternating ``Ns`` (a constant chunk of the template) and the slot formats,
+    adjacent slots merged; returns it and the chunks in order, so
+    ``st.pack(chunk0, *slot0_values, chunk1, ...)`` rebuilds the template with new values.
+    The chunk before the first slot includes the encapsulation header.
+    """
+    fmt = ["<"]
+    chunks: list[bytes] = []
+    pos = 0
+    for off, f in sorted(slots):
+        if off < pos:
+            raise ValueError(f"overlapping slots at offset {off}")
+        if off > pos:
+            chunks.append(bytes(buf[pos:off]))
+            fmt.append(f"{off - pos}s")
+        fmt.append(f)
+        pos = off + struct.calcsize("<" + f)
+    if pos < len(buf):
+        chunks.append(bytes(buf[pos:]))
+        fmt.append(f"{len(buf) - pos}s")
+    st = struct.Struct("".join(fmt))
+    if st.size != len(buf):
+        raise ValueError("slots do not tile the template")
+    return st, tuple(chunks)
