@@ -25,7 +25,6 @@ import struct
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -55,6 +54,7 @@ from friction_ros.nodes.node_utils import (
     DiagnosticsPublisher,
     JointStateDecoder,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -172,7 +172,7 @@ class ControllerStateEncoder:
         return st.pack(b"\x00\x01\x00\x00", sec, nanosec, mid, *values, bool(saturated))
 
 
-class CompensatingControllerNode(Node):
+class CompensatingControllerNode(ParameterNode):
     """Thin adapter over CompensatingController; see the module docstring."""
 
     def __init__(self):

@@ -98,6 +98,7 @@ from friction_ros.nodes.node_utils import (
     JointStateDecoder,
     JointStateEncoder,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -470,7 +471,7 @@ class AxisPort:
         )
 
 
-class DriveInterface(Node):
+class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
