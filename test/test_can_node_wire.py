@@ -1,7 +1,7 @@
 """drive_interface's wire shortcuts: pre-serialised state messages and the joint_commands reader.
 
 Both must agree exactly with rclpy's own (de)serialiser: StatePackets is checked against
-``deserialize_message``; the command path (a raw rcl subscription read by friction_ros.core.wire's
+``deserialize_message``; the command path (a raw subscription read by friction_ros.core.wire's
 JointStateDecoder, as the node takes it) against messages that went through the middleware.
 """
 
@@ -15,10 +15,9 @@ import time
 import pytest
 import rclpy
 from friction_msgs.msg import DriveState
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
-from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.wire import JointStateDecoder
@@ -51,9 +50,10 @@ def test_raw_commands_decode_like_the_middleware():
         b = rclpy.create_node("wire_pub", context=ctx)
         topic = f"wire_test_{os.getpid()}"
         qos = QoSProfile(depth=10)
-        check_is_valid_msg_type(JointState)
-        with a.handle:
-            sub = _rclpy.Subscription(a.handle, JointState, topic, qos.get_c_qos_profile())
+        received: list[bytes] = []
+        sub = a.create_subscription(JointState, topic, received.append, qos, raw=True)  # as the node
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(a)
         pub = b.create_publisher(JointState, topic, qos)
         rng = random.Random(6)
         dec = JointStateDecoder()
@@ -70,15 +70,17 @@ def test_raw_commands_decode_like_the_middleware():
             pub.publish(m)
             got = None
             for _ in range(500):
-                got = sub.take_message(JointState, True)
-                if got is not None:
+                executor.spin_once(timeout_sec=0.002)
+                if received:
+                    got = received.pop(0)
                     break
-                time.sleep(0.002)
             assert got is not None, "message not received"
-            cmd = dec.decode(got[0])
+            assert isinstance(got, bytes)
+            cmd = dec.decode(got)
             assert (list(cmd.name), tuple(cmd.effort)) == (list(m.name), tuple(m.effort))
-            ref = deserialize_message(got[0], JointState)
+            ref = deserialize_message(got, JointState)
             assert list(ref.effort) == list(m.effort)
-        sub.destroy_when_not_in_use()
+        executor.remove_node(a)
+        a.destroy_subscription(sub)
     finally:
         rclpy.shutdown(context=ctx)

@@ -24,7 +24,6 @@ import math
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
@@ -54,6 +53,7 @@ from friction_ros.nodes.node_utils import (
     CommandPublisher,
     DiagnosticsPublisher,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -140,7 +140,7 @@ assert CONTROLLER_STATE_FLOATS == tuple(
 ), "friction_msgs/ControllerState and the wire encoder disagree"
 
 
-class CompensatingControllerNode(Node):
+class CompensatingControllerNode(ParameterNode):
     """Thin adapter over CompensatingController; see the module docstring."""
 
     def __init__(self):

@@ -49,6 +49,7 @@ than one period whatever the interface reports, so stale-telemetry detection kee
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import math
 import re
@@ -59,11 +60,9 @@ import can
 import rclpy
 from friction_msgs.msg import DriveState
 from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message
-from rclpy.type_support import check_is_valid_msg_type
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
@@ -96,6 +95,7 @@ from friction_ros.nodes.node_utils import (
     DiagnosticsPublisher,
     FixedRateLoop,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -422,7 +422,7 @@ class AxisPort:
         )
 
 
-class DriveInterface(Node):
+class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
@@ -451,14 +451,13 @@ class DriveInterface(Node):
 
         self.pub_joint = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
         self.pub_drive = self.create_publisher(DriveState, "drive_state", SENSOR_QOS)
-        # joint_commands is taken by the control period itself (see _take_commands), not by the
-        # executor: an rcl subscription that no executor waits on, so a command costs no wake-up.
-        check_is_valid_msg_type(JointState)
+        # joint_commands as CDR bytes: the callback only keeps the newest message and when it
+        # arrived, the control period applies it (see _take_commands).
         self._cmd_decoder = JointStateDecoder()
-        with self.handle:
-            self.sub_cmd = _rclpy.Subscription(
-                self.handle, JointState, "joint_commands", COMMAND_QOS.get_c_qos_profile()
-            )
+        self._cmd_pending: collections.deque = collections.deque(maxlen=1)
+        self.sub_cmd = self.create_subscription(
+            JointState, "joint_commands", self._on_command_bytes, COMMAND_QOS, raw=True
+        )
         self.srv_enable = self.create_service(SetBool, "~/enable", self._on_enable)
         ids = ",".join(str(a.cfg.node_id) for a in self.axes)
         hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{ids}"
@@ -472,7 +471,7 @@ class DriveInterface(Node):
         self._js = JointState(
             name=list(self.joints), position=[0.0] * n, velocity=[0.0] * n, effort=[0.0] * n
         )
-        self._clock = self.get_clock()
+        self._ros_clock = self.get_clock()
         self._pack_joints = JointStateEncoder(
             self.joints
         ).pack  # (sec, nsec, *positions, *velocities, *efforts)
@@ -556,24 +555,32 @@ class DriveInterface(Node):
         self.get_logger().info(resp.message)
         return resp
 
-    def _take_commands(self, now: float, lo: float, off: float) -> None:
+    def _on_command_bytes(self, data: bytes) -> None:
+        """joint_commands callback (raw subscription): keep the newest message for the period.
+
+        A one-element deque: appending replaces an older message not applied yet, and append /
+        popleft are atomic, so the loop thread (``loop_spin`` > 0) may take while the executor
+        thread appends. The receive time is when the executor runs this callback: rclpy's
+        EventsExecutor cannot give a callback the middleware's message info (reception stamp),
+        it raises SystemError for a two-argument callback (rclpy 7.1).
+        """
+        self._cmd_pending.append((data, time.monotonic()))
+
+    def _take_commands(self, now: float, lo: float) -> None:
         """Apply the newest joint_commands message received since the previous period.
 
-        The subscription is keep-last 1 (COMMAND_QOS), so the middleware holds at most one
-        message: one take per period (a second, empty take would cost ~15 us of rclpy each period).
-
-        Taken as bytes and read by node_utils' :class:`JointStateDecoder` (no message object;
-        anything unusual goes through rclpy's deserialiser). Receive time = the middleware's
-        reception stamp (system clock) on the monotonic clock, clamped to [previous period, now]
-        like the CAN frames.
+        The subscription is keep-last 1 (COMMAND_QOS) and the callback keeps only the newest
+        message, so at most one message is decoded per period. It arrives as bytes and is read by
+        node_utils' :class:`JointStateDecoder` (no message object; anything unusual goes through
+        rclpy's deserialiser). Receive time = when the callback ran (monotonic clock), clamped to
+        [previous period, now] like the CAN frames.
         """
-        got = self.sub_cmd.take_message(JointState, True)
-        if got is None:
+        if not self._cmd_pending:
             return
-        t = got[1]["received_timestamp"] * 1e-9 + off
+        data, t = self._cmd_pending.popleft()
         t = now if t > now else lo if t < lo else t
         try:
-            cmd = self._cmd_decoder.decode(got[0])
+            cmd = self._cmd_decoder.decode(data)
         except Exception:  # undecodable: rejected like a NaN command (zero torque) on every drive
             self._command((), (math.nan,) * len(self.ports), t)
             return
@@ -749,7 +756,7 @@ class DriveInterface(Node):
         lo, self._rx_prev = self._rx_prev, now
         off = now - time.time()  # wall clock -> monotonic, for receive stamps
         self._drain(now, lo, off)
-        self._take_commands(now, lo, off)
+        self._take_commands(now, lo)
         ports = self.ports
         frames: list[Frame] = []
         samples = []
@@ -763,7 +770,7 @@ class DriveInterface(Node):
         if frames and not self.send_frames(frames):
             for port in ports:
                 port.flags |= FAULT_BUS
-        clock = self._clock
+        clock = self._ros_clock
         sec, nsec = divmod(
             clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns(), 1_000_000_000
         )
@@ -909,7 +916,7 @@ class DriveInterface(Node):
             return
         self._shutdown_done = True
         self.loop.stop()
-        self.sub_cmd.destroy_when_not_in_use()
+        self.destroy_subscription(self.sub_cmd)
         frames = [f for a in self.axes for f in a.shutdown_frames()]
         for _attempt in range(3):
             if self.send_frames(frames):

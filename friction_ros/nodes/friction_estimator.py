@@ -17,7 +17,6 @@ import math
 import time
 
 from friction_msgs.msg import FrictionEstimate
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
@@ -32,6 +31,7 @@ from friction_ros.nodes.node_utils import (
     WARN,
     DiagnosticsPublisher,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -92,7 +92,7 @@ UNITS = {
 SECTIONS = ("initial", "lugre")
 
 
-class FrictionEstimatorNode(Node):
+class FrictionEstimatorNode(ParameterNode):
     """Thin adapter over OnlineFrictionEstimator; see the module docstring."""
 
     def __init__(self):

@@ -40,7 +40,6 @@ import signal
 import time
 
 from friction_msgs.msg import ExperimentEvent
-from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.excitation import (
@@ -62,6 +61,7 @@ from friction_ros.nodes.node_utils import (
     CommandPublisher,
     DiagnosticsPublisher,
     Param,
+    ParameterNode,
     add_runtime_validation,
     declare,
     run_node,
@@ -158,12 +158,12 @@ NODE_PARAMS = [
 _RESULT = {"code": 0}
 
 
-def _profile_of(node: Node) -> str:
-    given = getattr(node, "_parameter_overrides", {}).get("profile")
+def _profile_of(node: ParameterNode) -> str:
+    given = node.given_parameters.get("profile")
     return given.value if given is not None and given.value in PROFILES else "default"
 
 
-class IdentificationExperiment(Node):
+class IdentificationExperiment(ParameterNode):
     """Thin adapter over :class:`ExcitationProgram`; see the module docstring."""
 
     def __init__(self):

@@ -167,7 +167,32 @@ class Param:
         return value
 
 
-def declare(node: Node, params: Iterable[Param], check_unknown: bool = True) -> dict[str, Any]:
+class ParameterNode(Node):
+    """A Node that knows which parameters it was given (parameter files, ``-p``, ``parameter_overrides``).
+
+    rclpy keeps those "overrides" to itself until a parameter of the same name is declared, but the
+    nodes need them earlier: to find the keys a nested YAML section has (:func:`section_specs`), to
+    choose defaults from a given value (the experiment's ``profile``) and to report given parameters
+    that no node declares (:func:`declare`). Public rclpy API only: the node is created with
+    ``automatically_declare_parameters_from_overrides``, reads the parameters rclpy declared that
+    way into :attr:`given_parameters` (name -> rclpy ``Parameter``) and undeclares them again, so
+    that :func:`declare` declares each one with its own descriptor (type, range, read-only) and the
+    given value, exactly as without the automatic declaration. The parameters rclpy declares for
+    itself (``use_sim_time``, the read-only ``start_type_description_service``) stay declared and
+    are not listed.
+    """
+
+    def __init__(self, node_name: str, **kwargs):
+        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
+        self.given_parameters: dict[str, rclpy.parameter.Parameter] = {}
+        for name in self.list_parameters([], 0).names:  # depth 0: every name
+            if name == "use_sim_time" or self.describe_parameter(name).read_only:
+                continue  # rclpy's own (time source, start_type_description_service)
+            self.given_parameters[name] = self.get_parameter(name)
+            self.undeclare_parameter(name)
+
+
+def declare(node: ParameterNode, params: Iterable[Param], check_unknown: bool = True) -> dict[str, Any]:
     """Declare ``params`` with descriptors and return their validated values.
 
     Raises ParameterError (the node refuses to start) when a value from a parameter file is invalid.
@@ -175,19 +200,21 @@ def declare(node: Node, params: Iterable[Param], check_unknown: bool = True) -> 
     """
     values: dict[str, Any] = {}
     specs = list(params)
-    overrides = getattr(node, "_parameter_overrides", {})
+    given = node.given_parameters
     for p in specs:
-        given = overrides.get(p.name)
-        if given is not None and isinstance(p.default, float) and given.type_ == given.Type.INTEGER:
-            # YAML "gain: 3" for a double parameter: accept it as 3.0 instead of a type error.
-            overrides[p.name] = rclpy.parameter.Parameter(p.name, value=float(given.value))
+        g = given.get(p.name)
+        given_value = p.default if g is None else g.value
         try:
-            node.declare_parameter(p.name, p.default, p.descriptor(), ignore_override=False)
+            if g is not None and isinstance(p.default, float) and g.type_ == g.Type.INTEGER:
+                # YAML "gain: 3" for a double parameter: accept it as 3.0 instead of a type error.
+                given_value = float(g.value)
+                node.declare_parameter(p.name, given_value, p.descriptor(), ignore_override=True)
+            else:  # rclpy applies the given value (checked against the default's type)
+                node.declare_parameter(p.name, p.default, p.descriptor(), ignore_override=False)
         except (
             rclpy.exceptions.InvalidParameterValueException,
             rclpy.exceptions.InvalidParameterTypeException,
         ) as exc:
-            given_value = overrides[p.name].value if p.name in overrides else p.default
             allowed = p.descriptor()
             rng = ""
             if allowed.floating_point_range:
@@ -205,8 +232,8 @@ def declare(node: Node, params: Iterable[Param], check_unknown: bool = True) -> 
         values[p.name] = p.check(value)
     if not check_unknown:
         return values
-    declared = set(node._parameters) | {"use_sim_time"}
-    unknown = sorted(k for k in overrides if k not in declared and not k.startswith("qos_overrides"))
+    declared = set(node.list_parameters([], 0).names) | {"use_sim_time"}
+    unknown = sorted(k for k in given if k not in declared and not k.startswith("qos_overrides"))
     if unknown:
         raise ParameterError(
             f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
@@ -667,14 +694,13 @@ def unflatten(flat: dict[str, Any]) -> dict[str, Any]:
     return nested
 
 
-def override_values(node: Node, prefix: str) -> dict[str, Any]:
+def override_values(node: ParameterNode, prefix: str) -> dict[str, Any]:
     """Values given for ``<prefix>.*`` in the node's parameter files / command line (dotted names)."""
-    overrides = getattr(node, "_parameter_overrides", {})
-    return {k: v.value for k, v in overrides.items() if k.startswith(prefix + ".")}
+    return {k: v.value for k, v in node.given_parameters.items() if k.startswith(prefix + ".")}
 
 
 def section_specs(
-    node: Node, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
+    node: ParameterNode, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
 ) -> list[Param]:
     """Param specs for every ``<prefix>.<key>`` of a nested core section (defaults + keys given in files).
 
@@ -694,7 +720,7 @@ def section_specs(
 
 
 def declare_section(
-    node: Node, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
+    node: ParameterNode, prefix: str, defaults: dict[str, Any], doc: str, read_only: bool = False
 ) -> dict[str, Any]:
     """Declare a section (see :func:`section_specs`) and return it as a nested dict."""
     values = declare(node, section_specs(node, prefix, defaults, doc, read_only), check_unknown=False)

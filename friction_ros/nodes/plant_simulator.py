@@ -25,7 +25,6 @@ import threading
 import time
 
 from builtin_interfaces.msg import Time
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
@@ -47,6 +46,7 @@ from friction_ros.nodes.node_utils import (
     LatencyHistogram,
     LoopStats,
     Param,
+    ParameterNode,
     add_runtime_validation,
     apply_scheduling,
     declare,
@@ -145,7 +145,7 @@ PARAMS = [
 ]
 
 
-class PlantSimulator(Node):
+class PlantSimulator(ParameterNode):
     """Thin adapter: commands in, GearheadServoPlant.step, joint states out."""
 
     def __init__(self):
