@@ -235,7 +235,7 @@ def run_rate(
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
 
-    from friction_ros.nodes.node_utils import COMMAND_QOS, STATE_QOS
+    from friction_ros.nodes.qos import COMMAND_QOS, STATE_QOS
 
     out = f"/tmp/can_bench_{uuid.uuid4().hex[:6]}.json"
     args = [

@@ -90,7 +90,7 @@ def soak(duration: float, load: int = 2, joints: dict[str, int] | None = None, k
     from rclpy.executors import SingleThreadedExecutor
     from sensor_msgs.msg import JointState
 
-    from friction_ros.nodes.node_utils import COMMAND_QOS, STATE_QOS
+    from friction_ros.nodes.qos import COMMAND_QOS, STATE_QOS
 
     names = list(joints) if joints else ["joint"]
     ids = list(joints.values()) if joints else [0]

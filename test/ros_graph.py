@@ -61,7 +61,7 @@ class Listener:
         self._thread = threading.Thread(target=self._spin, daemon=True)
 
     def subscribe(self, msg_type, topic: str, qos=None) -> list:
-        from friction_ros.nodes.node_utils import STATE_QOS
+        from friction_ros.nodes.qos import STATE_QOS
 
         box: list = []
         self.msgs[topic] = box
@@ -73,7 +73,7 @@ class Listener:
         return self.subs[topic].get_publisher_count()
 
     def publisher(self, msg_type, topic: str, qos=None):
-        from friction_ros.nodes.node_utils import STATE_QOS
+        from friction_ros.nodes.qos import STATE_QOS
 
         return self.node.create_publisher(msg_type, topic, qos or STATE_QOS)
 

@@ -279,7 +279,7 @@ def test_10k_burst_is_recorded_completely_or_its_drops_are_counted_exactly(node,
     log, the diagnostics and the bag's friction_ros_recording metadata record."""
     from diagnostic_msgs.msg import DiagnosticArray
 
-    from friction_ros.nodes.node_utils import RECORDED_QOS
+    from friction_ros.nodes.qos import RECORDED_QOS
 
     n = 10_000
     pre = f"/burst_{variant}"

@@ -29,7 +29,7 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
-from friction_ros.nodes.node_utils import COMMAND_QOS, SENSOR_QOS, STATE_QOS
+from friction_ros.nodes.qos import COMMAND_QOS, SENSOR_QOS, STATE_QOS
 
 HERE = Path(__file__).resolve().parent
 # Wall-clock tests across processes on a 2-core machine: a scheduler hiccup can spoil one run, so a

@@ -271,7 +271,7 @@ def test_two_drives_on_one_bus_one_node(channel):
     from sensor_msgs.msg import JointState
     from test_can_e2e import KT
 
-    from friction_ros.nodes.node_utils import COMMAND_QOS, SENSOR_QOS, STATE_QOS
+    from friction_ros.nodes.qos import COMMAND_QOS, SENSOR_QOS, STATE_QOS
 
     sniffer = Sniffer(channel)
     rows = sniffer.rows

@@ -46,7 +46,7 @@ def test_custom_messages_round_trip_between_processes():
     from friction_msgs import msg as fmsg
     from msg_samples import diff, fill
 
-    from friction_ros.nodes.node_utils import STATE_QOS
+    from friction_ros.nodes.qos import STATE_QOS
 
     publisher = textwrap.dedent(
         f"""
@@ -54,7 +54,7 @@ def test_custom_messages_round_trip_between_processes():
         sys.path.insert(0, {str(ROOT / "test")!r})
         from msg_samples import fill
         from friction_msgs import msg as fmsg
-        from friction_ros.nodes.node_utils import STATE_QOS
+        from friction_ros.nodes.qos import STATE_QOS
         rclpy.init()
         node = rclpy.create_node('roundtrip_pub')
         types = {MSG_TYPES!r}

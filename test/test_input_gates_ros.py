@@ -15,7 +15,7 @@ from ros_graph import Graph, Listener, write_params
 from friction_ros.cli.bringup import NodeSpec
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.wire import JointStateEncoder
-from friction_ros.nodes.node_utils import RECORDED_QOS
+from friction_ros.nodes.qos import RECORDED_QOS
 
 pytestmark = pytest.mark.ros
 
@@ -223,7 +223,7 @@ def test_plant_simulator_rejects_absurd_commands_and_keeps_running(tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState
 
-    from friction_ros.nodes.node_utils import COMMAND_QOS
+    from friction_ros.nodes.qos import COMMAND_QOS
 
     specs = [
         NodeSpec(

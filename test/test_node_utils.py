@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from friction_ros.core.validation import ParameterError
-from friction_ros.nodes.node_utils import DeadlineLoop, LatencyHistogram, Param, flatten, unflatten
+from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram
+from friction_ros.nodes.node_utils import Param, flatten, unflatten
 
 
 def test_latency_histogram_matches_exact_percentiles_within_one_bin_in_constant_memory():

@@ -12,7 +12,7 @@ from ros_graph import Graph, Listener, stamp_s, write_params
 
 from friction_ros.cli.bringup import NodeSpec
 from friction_ros.core.harness import run_closed_loop
-from friction_ros.nodes.node_utils import RECORDED_QOS
+from friction_ros.nodes.qos import RECORDED_QOS
 
 pytestmark = pytest.mark.ros
 

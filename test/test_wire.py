@@ -156,12 +156,12 @@ def test_joint_state_codec_matches_rclpy_serialisation(names, frame_id):
 
 
 def test_decoded_joint_sample_works_with_the_select_helpers():
-    from friction_ros.nodes.node_utils import select_effort, select_joint
+    from friction_ros.core.input_gate import select_command, select_sample
 
     msg = JointState(name=["a", "joint1"], position=[0.1, 0.2], velocity=[1.0, 2.0], effort=[0.5, 1.5])
     s = JointStateDecoder().decode(serialize_message(msg))
-    assert select_effort(s, "joint1") == 1.5 and select_effort(s, "other") is None
-    assert select_joint(s, "joint1") == (0.2, 2.0, 1.5) and select_joint(s, "b") is None
+    assert select_command(s, "joint1", math.inf)[0] == 1.5 and select_command(s, "other", math.inf)[0] is None
+    assert select_sample(s, "joint1")[0] == (0.2, 2.0, 1.5) and select_sample(s, "b")[0] is None
 
 
 @pytest.mark.parametrize("n", [0, 1, 2, 4])

@@ -26,11 +26,10 @@ from friction_ros.nodes.bag_common import (
     Spec,
     declare_params,
     fail,
-    install_stop_handlers,
     message_class,
     qos_from_dicts,
 )
-from friction_ros.nodes.node_utils import init_ros
+from friction_ros.nodes.runtime import start_process
 
 SPECS = [
     Spec("bag", "", "bag directory or .mcap file to replay (required)"),
@@ -160,10 +159,9 @@ def _parse_cli(argv: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    stop = install_stop_handlers()
-    reason = init_ros(argv)
-    if reason is not None:
-        return fail(ValueError(reason))
+    stop = start_process(argv)
+    if stop is None:
+        return 2
     node = None
     try:
         node = BagPlayer(overrides=_parse_cli(rclpy.utilities.remove_ros_args(argv)[1:]))

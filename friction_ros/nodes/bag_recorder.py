@@ -49,11 +49,11 @@ from friction_ros.nodes.bag_common import (
     Spec,
     declare_params,
     fail,
-    install_stop_handlers,
     message_class,
     qos_to_dict,
 )
-from friction_ros.nodes.node_utils import OK, WARN, DiagnosticsPublisher, init_ros
+from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.runtime import start_process
 
 SPECS = [
     Spec("topics", [], "topics to record (absolute names); empty with all_topics=false records nothing"),
@@ -320,13 +320,12 @@ def _parse_cli(argv: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    stop = install_stop_handlers()
-    reason = init_ros(argv)
-    if reason is not None:
-        return fail(ValueError(reason))
+    stop = start_process(argv)
+    if stop is None:
+        return 2
+    cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
     node = None
     try:
-        cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
         node = BagRecorder(overrides=cli)
     except (ValueError, OSError) as exc:
         if node is not None:

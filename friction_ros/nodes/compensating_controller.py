@@ -43,27 +43,21 @@ from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
+from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
+from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.node_utils import (
-    ERROR,
-    OK,
-    RECORDED_QOS,
     SCHEDULING_PARAMS,
-    STATE_QOS,
-    WARN,
-    CommandPublisher,
-    DiagnosticsPublisher,
     Param,
     ParameterNode,
     add_runtime_validation,
-    apply_scheduling,
     declare,
     gate_params,
     override_values,
-    run_node,
     section_specs,
-    stamp_to_ns,
     unflatten,
 )
+from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_PARAMS = [
     Param("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),

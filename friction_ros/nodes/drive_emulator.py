@@ -15,6 +15,7 @@ stops cleanly on Ctrl-C. Fault injection: ``--silent-after``, ``--error-after``,
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import signal
 import sys
@@ -22,8 +23,16 @@ import threading
 import time
 
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
-from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
+
+
+def emulated_drive(preset: str, direction: int = 1, zero_offset: float = 0.0, **config):
+    """``(plant, EmulatorConfig)`` of one emulated drive: the preset's plant behind a drive whose
+    joint conversion is the preset's (gear ratio, torque constant) with ``direction`` and
+    ``zero_offset``; ``config`` holds the other EmulatorConfig fields (protocol, ids, rates, faults)."""
+    plant, conv = plant_from_preset(preset)
+    conv = dataclasses.replace(conv, direction=direction, zero_offset=zero_offset)
+    return plant, EmulatorConfig(conversion=conv, **config)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -71,13 +80,13 @@ def main(argv: list[str] | None = None) -> int:
             raise ParameterError(f"--node-id {' '.join(map(str, ids))}: ids must differ")
         drives = []
         for node_id in ids:
-            plant, conv = plant_from_preset(a.preset)
-            conv = JointConversion(conv.gear_ratio, conv.torque_constant, a.direction, a.zero_offset)
-            cfg = EmulatorConfig(
+            plant, cfg = emulated_drive(
+                a.preset,
+                a.direction,
+                a.zero_offset,
                 protocol=a.protocol,
                 node_id=node_id,
                 mit_master_id=a.mit_master_id,
-                conversion=conv,
                 physics_rate_hz=a.physics_rate,
                 encoder_rate_hz=a.encoder_rate,
                 iq_rate_hz=a.iq_rate,
@@ -109,7 +118,7 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"drive_emulator: {a.protocol} node{'s' if len(ids) > 1 else ''} {', '.join(map(str, ids))} on "
         f"{a.interface}:{a.channel}, plant preset {a.preset} "
-        f"(gear_ratio {conv.gear_ratio:g}, torque_constant {conv.torque_constant:g})",
+        f"(gear_ratio {cfg.conversion.gear_ratio:g}, torque_constant {cfg.conversion.torque_constant:g})",
         flush=True,
     )
     for emu, _bus in drives:

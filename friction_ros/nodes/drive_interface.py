@@ -83,24 +83,17 @@ from friction_ros.core.can.frame import Frame
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import DriveStateEncoder, JointStateDecoder, JointStateEncoder
+from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.loops import DeadlineLoop, FixedRateLoop
 from friction_ros.nodes.node_utils import (
-    COMMAND_QOS,
-    ERROR,
-    OK,
-    RECORDED_QOS,
     SCHEDULING_PARAMS,
-    SENSOR_QOS,
-    WARN,
-    DeadlineLoop,
-    DiagnosticsPublisher,
-    FixedRateLoop,
     Param,
     ParameterNode,
     add_runtime_validation,
-    apply_scheduling,
     declare,
-    run_node,
 )
+from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, SENSOR_QOS
+from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 
 def _level(x) -> int:

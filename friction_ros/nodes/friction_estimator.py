@@ -23,24 +23,20 @@ from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.wire import JointStateDecoder
+from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.node_utils import (
-    OK,
-    RECORDED_QOS,
     SCHEDULING_PARAMS,
-    STATE_QOS,
-    WARN,
-    DiagnosticsPublisher,
     Param,
     ParameterNode,
     add_runtime_validation,
-    apply_scheduling,
     declare,
     gate_params,
     override_values,
-    run_node,
     section_specs,
     unflatten,
 )
+from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_PARAMS = [
     Param("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),

@@ -35,8 +35,6 @@ from __future__ import annotations
 
 import copy
 import math
-import os
-import signal
 import time
 
 from friction_msgs.msg import ExperimentEvent
@@ -52,24 +50,19 @@ from friction_ros.core.excitation import (
     ExcitationProgram,
     profile_defaults,
 )
+from friction_ros.core.input_gate import select_sample
+from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
+from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.node_utils import (
-    ERROR,
-    OK,
-    RECORDED_QOS,
-    STATE_QOS,
-    WARN,
-    CommandPublisher,
-    DiagnosticsPublisher,
     Param,
     ParameterNode,
     add_runtime_validation,
     declare,
-    run_node,
     section_specs,
-    select_joint,
-    stamp_to_ns,
     unflatten,
 )
+from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.runtime import request_stop, run_node
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
 MATCH_GRACE = 0.5  # s of wall time the recorders must stay matched before the program starts
@@ -241,7 +234,7 @@ class IdentificationExperiment(ParameterNode):
         return now - self._seen_since >= MATCH_GRACE
 
     def _on_state(self, msg: JointState) -> None:
-        sel = select_joint(msg, self.joint)
+        sel, reason, detail = select_sample(msg, self.joint)
         if sel is None:
             self.counts["rejected_states"] += 1
             now = time.monotonic()
@@ -252,6 +245,8 @@ class IdentificationExperiment(ParameterNode):
                     f"joint_states carry no joint {self.joint!r} (they carry: {seen}); set joint_name "
                     f"(friction-experiment --joint) to one of them ({self.counts['rejected_states']} "
                     "state(s) ignored so far)"
+                    if reason == "wrong_joint"
+                    else f"ignored joint_states: {detail} ({self.counts['rejected_states']} state(s) ignored so far)"
                 )
             return
         if not self._ready:
@@ -338,7 +333,7 @@ class IdentificationExperiment(ParameterNode):
             return
         if time.monotonic() - self._done_wall >= self.values["exit_delay"]:
             self._done_wall = math.inf  # once
-            os.kill(os.getpid(), signal.SIGTERM)  # run_node's handler: leave the loop, on_shutdown()
+            request_stop()  # run_node leaves its loop and calls on_shutdown()
 
     def _publish_diagnostics(self) -> None:
         st = self.program.status()

@@ -33,26 +33,18 @@ from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_
 from friction_ros.core.plant import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
+from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
 from friction_ros.nodes.node_utils import (
-    COMMAND_QOS,
-    ERROR,
-    OK,
-    RECORDED_QOS,
     SCHEDULING_PARAMS,
-    STATE_QOS,
-    WARN,
-    DeadlineLoop,
-    DiagnosticsPublisher,
-    LatencyHistogram,
-    LoopStats,
     Param,
     ParameterNode,
     add_runtime_validation,
-    apply_scheduling,
     declare,
     declare_section,
-    run_node,
 )
+from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 PARAMS = [
     Param(

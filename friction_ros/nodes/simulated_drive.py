@@ -22,8 +22,9 @@ import uuid
 
 import can
 
-from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
+from friction_ros.core.can.emulator import DriveEmulator
 from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.drive_emulator import emulated_drive
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -40,17 +41,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--loss", type=float, default=0.0, help="frame loss probability")
     a = ap.parse_args(own)
     try:
-        plant, conv = plant_from_preset(a.preset)
-        cfg = EmulatorConfig(
+        rates = {f"{k}_rate_hz": a.rate for k in ("physics", "encoder", "iq")}  # telemetry = physics rate
+        plant, cfg = emulated_drive(
+            a.preset,
             protocol=a.protocol,
             node_id=a.node_id,
-            conversion=conv,
-            physics_rate_hz=a.rate,
-            encoder_rate_hz=a.rate,
-            iq_rate_hz=a.rate,
             latency=a.latency,
             loss_probability=a.loss,
+            **rates,
         )
+        conv = cfg.conversion
     except (ParameterError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

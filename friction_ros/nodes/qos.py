@@ -1,0 +1,52 @@
+"""QoS profiles of the friction_ros topics (documented in README "Interfaces").
+
+* ``COMMAND_QOS``: reliable, keep-last **1**. A queued stale torque command is a safety bug
+  (ros_odrive #32): the newest command is the only one that matters.
+* ``STATE_QOS``: reliable, keep-last 10. Joint states, controller/estimator states and events are
+  recorded for identification, so they must not be dropped under load; the depth absorbs bursts.
+* ``RECORDED_QOS``: reliable, keep-last 5000, for the *publishers* of topics that are recorded or
+  evaluated (joint states, controller state, estimates, events). A reliable keep-last writer drops
+  what a slow reader has not acknowledged once its history is full, so the writer's depth is what
+  decides whether a recorder or an evaluator that falls behind (CPU contention, a burst) loses
+  samples: 5000 periods is 5 s at 1 kHz. Subscribers that control keep STATE_QOS (a controller
+  must not work through a backlog of stale states).
+* ``SENSOR_QOS``: best effort, keep-last 5 (rclpy's sensor-data profile) for high-rate telemetry
+  that may be lost (raw drive state).
+* ``LATCHED_QOS``: reliable, transient-local depth 1 for coefficients that late joiners need.
+"""
+
+from __future__ import annotations
+
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+    qos_profile_sensor_data,
+)
+
+COMMAND_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+STATE_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=10,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+RECORDED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=5000,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.VOLATILE,
+)
+SENSOR_QOS = qos_profile_sensor_data
+LATCHED_QOS = QoSProfile(
+    history=HistoryPolicy.KEEP_LAST,
+    depth=1,
+    reliability=ReliabilityPolicy.RELIABLE,
+    durability=DurabilityPolicy.TRANSIENT_LOCAL,
+)

@@ -1,0 +1,220 @@
+"""Process runtime of a node: rclpy start-up, ``main()``, executor, real-time scheduling."""
+
+from __future__ import annotations
+
+import gc
+import os
+import signal
+import sys
+import tempfile
+import threading
+from collections.abc import Callable
+from typing import Any
+
+import rclpy
+import rclpy.executors
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.loops import DeadlineLoop
+
+
+def set_realtime_priority(priority: int, logger=None) -> bool:
+    """Run every thread of this process (rclpy executor, DDS receive threads) with SCHED_FIFO ``priority``.
+
+    Threads started later inherit the policy from the thread that starts them. 0 leaves the normal
+    scheduler. Needs CAP_SYS_NICE (root, or ``rtprio`` in /etc/security/limits.conf); without it a
+    warning is logged and the node runs on as before. Linux RT throttling (sched_rt_runtime_us,
+    95 % by default) still leaves the rest of the system some CPU if a node spins.
+    """
+    if priority <= 0 or not hasattr(os, "sched_setscheduler"):
+        return False
+    param = os.sched_param(priority)
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setscheduler(int(tid), os.SCHED_FIFO, param)
+            except ProcessLookupError:
+                pass  # thread ended meanwhile
+    except (PermissionError, OSError) as exc:
+        if logger is not None:
+            logger.warning(
+                f"realtime_priority {priority}: SCHED_FIFO not permitted ({exc}); normal scheduling"
+            )
+        return False
+    return True
+
+
+def set_cpu_affinity(cpu: int, logger=None) -> bool:
+    """Pin every thread of this process to CPU ``cpu`` (-1: leave the affinity as it is).
+
+    On a small VM a wake-up across cores (DDS delivery to a process on the other core) costs an
+    inter-processor interrupt and VM exits: a JointState round trip between two rclpy processes
+    measured ~130 us across cores and ~60 us on one core (bench/loop.py docstring). Pinning plant
+    and controller to one core and the estimator to the other keeps the latency chain on one core.
+    """
+    if cpu < 0:
+        return False
+    try:
+        for tid in os.listdir("/proc/self/task"):
+            try:
+                os.sched_setaffinity(int(tid), {cpu})
+            except ProcessLookupError:
+                pass
+    except OSError as exc:
+        if logger is not None:
+            logger.warning(f"cpu_affinity {cpu} not applied ({exc})")
+        return False
+    return True
+
+
+def apply_scheduling(node: Node, values: dict[str, Any]) -> None:
+    """Apply the ``realtime_priority`` / ``cpu_affinity`` parameters (:data:`SCHEDULING_PARAMS`)."""
+    set_cpu_affinity(values.get("cpu_affinity", -1), node.get_logger())
+    set_realtime_priority(values.get("realtime_priority", 0), node.get_logger())
+
+
+def make_executor():
+    """The executor of every node: rclpy's EventsExecutor when available (several times less
+    overhead per callback than SingleThreadedExecutor, which is what lets the lockstep graph run
+    faster than real time), else SingleThreadedExecutor. FRICTION_ROS_EXECUTOR=single forces the latter."""
+    if os.environ.get("FRICTION_ROS_EXECUTOR", "events") == "events":
+        try:
+            from rclpy.experimental import EventsExecutor
+
+            return EventsExecutor()
+        except ImportError:
+            pass
+    return rclpy.executors.SingleThreadedExecutor()
+
+
+def _parameter_files(args: list[str]) -> list[str | None]:
+    """The ``--params-file`` arguments inside ``--ros-args`` sections (None for a missing name)."""
+    files: list[str | None] = []
+    in_ros = False
+    it = iter(args)
+    for a in it:
+        if a == "--ros-args":
+            in_ros = True
+        elif a == "--":
+            in_ros = False
+        elif in_ros and a == "--params-file":
+            files.append(next(it, None))
+    return files
+
+
+def init_ros(args: list[str] | None = None) -> str | None:
+    """``rclpy.init`` for a node process; returns None, or one line saying why it cannot start.
+
+    Parameter files are checked first (exists, YAML, node -> ``ros__parameters`` mappings:
+    :func:`~friction_ros.core.yaml_files.check_parameter_file`); anything rcl still refuses is
+    reported from rcl's own message, with rcl's log output held back so the reason is the one line
+    the user sees. SIGINT/SIGTERM are left to the caller (rclpy installs no handlers).
+    """
+
+    from friction_ros.core.yaml_files import check_parameter_file
+
+    args = list(sys.argv if args is None else args)
+    try:
+        for f in _parameter_files(args):
+            if f is None:
+                raise ParameterError("--params-file needs a file name")
+            check_parameter_file(f)
+    except ParameterError as exc:
+        return str(exc)
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+            failure = None
+        except Exception as exc:  # noqa: BLE001 - rclpy raises RCLError (not exported) for bad arguments
+            failure = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if failure is None:
+            held.seek(0)
+            text = held.read()
+            if text:
+                sys.stderr.write(text.decode(errors="replace"))
+            return None
+    for prefix in ("failed to initialize rcl: ",):
+        failure = failure.removeprefix(prefix)
+    return f"ROS arguments refused: {failure.split(', at ')[0]}"
+
+
+_STOP = threading.Event()  # set by SIGINT, SIGTERM or request_stop(): the node process ends
+
+
+def request_stop() -> None:
+    """End this node process from inside the node, as SIGTERM would: :func:`run_node` leaves its
+    loop, calls the node's ``on_shutdown()`` and returns its exit code."""
+    _STOP.set()
+
+
+def start_process(args: list[str] | None = None) -> threading.Event | None:
+    """Start a node process: SIGINT/SIGTERM handlers first, then :func:`init_ros`.
+
+    Returns the stop event (set by SIGINT, SIGTERM or :func:`request_stop`), or None after printing
+    the one line that says why rclpy cannot start (the caller exits with code 2). Our own signal
+    handling (rclpy installs none) keeps the context alive until the node has zeroed its outputs,
+    and a stop that arrives while the node is being built ends it quietly once it is built.
+    """
+    _STOP.clear()
+    signal.signal(signal.SIGTERM, lambda _signum, _frame: _STOP.set())
+    signal.signal(signal.SIGINT, lambda _signum, _frame: _STOP.set())
+    reason = init_ros(args)
+    if reason is not None:
+        print(f"error: {reason}", file=sys.stderr)
+        return None
+    return _STOP
+
+
+def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
+    """Standard ``main()`` of a friction_ros node.
+
+    Starts rclpy (:func:`init_ros`: a bad parameter file prints one line, exit code 2), builds the
+    node (a ParameterError/ValueError there prints one clear line and exits with code 2: the node
+    refuses to start), spins until Ctrl-C/SIGTERM, then calls the node's ``on_shutdown()`` (which
+    must leave actuators safe: zero torque, drive idle) before destroying it. SIGINT/SIGTERM are
+    handled from before rclpy starts: a stop that arrives while the node is being built ends it
+    quietly once it is built (on_shutdown() runs, no KeyboardInterrupt traceback).
+    """
+    stop = start_process(args)
+    if stop is None:
+        return 2
+    node = None
+    try:
+        node = factory()
+    except (ParameterError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    # Everything built so far (modules, node, core objects) lives for the whole run: keep it out of
+    # the cyclic collector so a full collection does not scan it (multi-ms pauses in the loop).
+    gc.collect()
+    gc.freeze()
+    executor = make_executor()
+    executor.add_node(node)
+    loop = getattr(node, "loop", None)
+    try:
+        if isinstance(loop, DeadlineLoop):
+            while not stop.is_set() and rclpy.ok():
+                loop.run_once(executor)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+    except rclpy.executors.ExternalShutdownException:
+        pass
+    finally:
+        shutdown = getattr(node, "on_shutdown", None)
+        if shutdown is not None:
+            try:
+                shutdown()
+            except Exception as exc:  # last line of defence: report, still tear down
+                print(f"error during shutdown of {node.get_name()}: {exc}", file=sys.stderr)
+        executor.remove_node(node)
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
