@@ -299,7 +299,8 @@ def node_work_per_cycle(n: int = 20_000) -> float:
     from friction_ros.core.can import odrive as od
     from friction_ros.core.can.axis import DriveAxis
     from friction_ros.core.wire import JointStateDecoder
-    from friction_ros.nodes.drive_interface import PARAMS, StatePackets, axis_config
+    from friction_ros.nodes.drive_interface import PARAMS, axis_config
+    from friction_ros.nodes.drive_state_publishers import StatePackets
 
     v = {p.name: p.default for p in PARAMS}
     v.update(node_id=1, enable_on_start=True, torque_constant=0.49)

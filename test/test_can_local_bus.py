@@ -383,7 +383,7 @@ def test_several_drives_parameters_per_joint_and_at_run_time(channel):
         assert node.joints == ["a", "b"] and (a.cfg.node_id, b.cfg.node_id) == (1, 2)
         assert (a.cfg.torque_limit, b.cfg.torque_limit) == (2.0, 2.0)
         assert (a.conv.gear_ratio, b.conv.gear_ratio, b.conv.direction) == (1.0, 9.0, -1)
-        assert [f["can_id"] for f in node._filters()] == [1 << 5, 2 << 5]
+        assert [f["can_id"] for f in node.link.filters] == [1 << 5, 2 << 5]
         r = node.set_parameters([Parameter("b.torque_limit", value=2.5)])[0]
         assert r.successful and (a.cfg.torque_limit, node.axes[1].cfg.torque_limit) == (2.0, 2.5)
         r = node.set_parameters([Parameter("b.torque_limit", value=-1.0)])[0]
@@ -585,7 +585,7 @@ def test_commands_for_other_joints_or_with_wrong_lengths_are_logged_and_counted(
     node = DriveInterface(context=ctx, parameter_overrides=overrides)
     try:
         axis = node.axis
-        node._on_command(JointState(name=["j1"], effort=[0.25]), now=1.0)
+        node.commands.on_message(JointState(name=["j1"], effort=[0.25]), now=1.0)
         assert axis._cmd == 0.25 and axis._cmd_time == 1.0
         for i, msg in enumerate(
             [
@@ -596,9 +596,9 @@ def test_commands_for_other_joints_or_with_wrong_lengths_are_logged_and_counted(
                 JointState(name=["other"], effort=[3.0]),  # within 1 s of the first: counted, not logged
             ]
         ):
-            node._on_command(msg, now=2.0 + i)
+            node.commands.on_message(msg, now=2.0 + i)
         assert axis._cmd == 0.25 and axis._cmd_time == 1.0  # all ignored: the previous command stands
-        assert (node.commands_foreign, node.commands_malformed) == (2, 3)
+        assert (node.commands.foreign, node.commands.malformed) == (2, 3)
         sent = []
         node.diag.publish = lambda level, message, values: sent.append(values)
         node._publish_diagnostics(time.monotonic())

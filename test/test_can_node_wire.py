@@ -21,7 +21,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.wire import JointStateDecoder
-from friction_ros.nodes.drive_interface import StatePackets
+from friction_ros.nodes.drive_state_publishers import StatePackets
 
 
 @pytest.mark.parametrize(

@@ -226,7 +226,7 @@ def test_controller_state_encoder_is_byte_identical_to_rclpy(joint, mode, satura
 @pytest.mark.parametrize("joint", ["", "j1", "abc", "élbow_joint_3"])
 @pytest.mark.parametrize("protocol", ["odrive_cansimple", "mit", ""])
 def test_drive_state_encoder_is_byte_identical_to_rclpy(joint, protocol):
-    from friction_ros.nodes.drive_interface import StatePackets
+    from friction_ros.nodes.drive_state_publishers import StatePackets
 
     vals = (0.5, -1.5, math.inf, -3.5, 4.5, 24.0, 8, 0xDEADBEEF, 33, True)
     m = DriveState(joint_name=joint, protocol=protocol)

@@ -1,0 +1,194 @@
+"""The CAN bus of drive_interface (python-can I/O): open, send, drain received frames, reopen.
+
+The control period reads the bus itself (no python-can Notifier, no reader thread): at each
+deadline :meth:`CanBusLink.receive` drains the frames received since the last period
+(``bus.recv(0)`` until empty) and feeds each to its axis. Frames are time-stamped with their
+receive time (``Message.timestamp``, the kernel's on SocketCAN) mapped onto the monotonic clock and
+clamped to [previous drain, now]: exact with sane timestamps, never off by more than one period
+whatever the interface reports, so stale-telemetry detection keeps its accuracy.
+
+Bus errors are counted; a dead bus (bus-off error frame, reader failure, ``error_limit``
+consecutive send failures) latches a bus fault on every drive and is reopened every
+``recovery_period`` until it works again (each axis then logs that its drive stays disabled until
+``~/enable``).
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+
+import can
+
+from friction_ros.core.can import odrive
+from friction_ros.core.can.axis import AxisConfig, DriveAxis
+from friction_ros.core.can.frame import Frame
+from friction_ros.core.validation import ParameterError
+
+CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
+RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 per ms)
+
+
+def can_filters(cfg: AxisConfig) -> list[dict]:
+    """Kernel receive filters for the frames of one drive."""
+    if cfg.protocol == "odrive_cansimple":
+        return [odrive.kernel_filter(cfg.node_id)]
+    return [{"can_id": cfg.mit_master_id, "can_mask": 0x7FF, "extended": False}]
+
+
+def bus_filters(configs: list[AxisConfig]) -> list[dict]:
+    """Kernel receive filters for every drive on the bus (each filter once)."""
+    out: list[dict] = []
+    for cfg in configs:
+        out += [f for f in can_filters(cfg) if f not in out]
+    return out
+
+
+def open_bus(interface: str, channel: str, bitrate: int, filters: list[dict]) -> can.BusABC:
+    """Open a python-can bus; a failure becomes one clear ValueError line."""
+    try:
+        return can.Bus(interface=interface, channel=channel, bitrate=bitrate, can_filters=filters)
+    except Exception as exc:
+        hint = ""
+        if interface == "socketcan":
+            hint = f"; bring the interface up first: sudo ip link set {channel} up type can bitrate {bitrate}"
+        raise ParameterError(
+            f"cannot open CAN bus interface={interface} channel={channel}: {type(exc).__name__}: {exc}{hint}"
+        ) from None
+
+
+class CanBusLink:
+    """One python-can bus shared by the ``axes`` of a node (frames routed by ``route``)."""
+
+    def __init__(
+        self,
+        interface: str,
+        channel: str,
+        bitrate: int,
+        axes: list[DriveAxis],
+        route: Callable[[int, bytes], DriveAxis],
+        error_limit: int,
+        recovery_period: float,
+        logger,
+    ):
+        self.interface, self.channel, self.bitrate = interface, channel, bitrate
+        self.axes, self.route, self.logger = axes, route, logger
+        self.error_limit = error_limit  # consecutive failed sends before the bus counts as dead
+        self.recovery_period = recovery_period  # wait before reopening a dead bus [s]
+        self.filters = bus_filters([a.cfg for a in axes])
+        self.error_frames = 0
+        self.send_errors = 0
+        self.reopens = 0
+        self.dead_since: float | None = None
+        self._consecutive_send_errors = 0
+        self._lock = threading.Lock()
+        self.bus = open_bus(interface, channel, bitrate, self.filters)
+        self._rx_ok = True  # False after a read failure until the bus is reopened
+        self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
+
+    def send(self, frames: list[Frame]) -> bool:
+        """Send ``frames``; False if any failed (counted; too many in a row: the bus is dead)."""
+        ok = True
+        for f in frames:
+            msg = can.Message(
+                arbitration_id=f.arbitration_id,
+                data=f.data,
+                is_extended_id=f.is_extended,
+                is_remote_frame=f.is_remote,
+                dlc=f.length,
+            )
+            try:
+                with self._lock:
+                    self.bus.send(msg, timeout=0.001)
+                self._consecutive_send_errors = 0
+            except Exception as exc:  # can.CanError, OSError (ENOBUFS), closed bus ...
+                ok = False
+                self.send_errors += 1
+                self._consecutive_send_errors += 1
+                if self._consecutive_send_errors >= self.error_limit:
+                    self.dead(f"{self._consecutive_send_errors} consecutive send failures: {exc}")
+        return ok
+
+    def dead(self, reason: str) -> None:
+        """Latch a bus fault on every drive (logged by each axis' fault log) and reopen the bus."""
+        if self.dead_since is None:
+            self.dead_since = time.monotonic()
+            reason += f"; reopening the bus every {self.recovery_period:g} s"
+        for a in self.axes:
+            a.report_bus_fault(reason)
+
+    def receive(self, now: float) -> float:
+        """Reopen a dead bus when it is time, then feed every frame received since the previous
+        call to its axis. Returns the time of the previous call (the lower bound of this period)."""
+        if self.dead_since is not None:
+            self._recover(now)
+        lo, self._rx_prev = self._rx_prev, now
+        self._drain(now, lo, now - time.time())  # wall clock -> monotonic, for receive stamps
+        return lo
+
+    def _recover(self, now: float) -> None:
+        if now - self.dead_since < self.recovery_period:
+            return
+        try:
+            with self._lock:
+                self.bus.shutdown()
+                self.bus = open_bus(self.interface, self.channel, self.bitrate, self.filters)
+            self._rx_ok = True
+            self._rx_prev = now
+            self.reopens += 1
+            self._consecutive_send_errors = 0
+            self.dead_since = None
+            for a in self.axes:  # each axis logs "bus cleared ...; drive stays disabled until ~/enable"
+                a.clear_bus_fault()
+        except Exception as exc:
+            self.dead_since = now
+            self.logger.error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)
+
+    def _drain(self, now: float, lo: float, off: float) -> None:
+        """Feed every frame received since the previous period to its axis.
+
+        Receive time = the frame's own timestamp (wall clock in python-can, the kernel's on
+        SocketCAN) on the monotonic clock (``+ off``), clamped to [``lo`` = previous period, now].
+        """
+        if not self._rx_ok:
+            return
+        bus, route = self.bus, self.route
+        try:
+            for _ in range(RX_BATCH_MAX):
+                msg = bus.recv(0.0)
+                if msg is None:
+                    return
+                if msg.is_error_frame:
+                    self.error_frames += 1
+                    if msg.arbitration_id & CAN_ERR_BUSOFF:
+                        self.dead("bus-off error frame received")
+                    continue
+                t = msg.timestamp + off
+                arb, data = msg.arbitration_id, msg.data
+                route(arb, data).on_frame(
+                    arb,
+                    data,
+                    msg.is_remote_frame,
+                    msg.is_extended_id,
+                    False,
+                    now if t > now else lo if t < lo else t,
+                )
+        except Exception as exc:  # can.CanOperationError, OSError, closed bus ...
+            self._rx_ok = False
+            self.dead(f"CAN reader failed: {type(exc).__name__}: {exc}")
+
+    def state(self) -> str:
+        """The bus state for diagnostics (python-can's, or ``dead (reopening)``)."""
+        if self.dead_since is not None:
+            return "dead (reopening)"
+        try:
+            return self.bus.state.name.lower()
+        except Exception:
+            return "unknown"
+
+    def close(self) -> None:
+        try:
+            self.bus.shutdown()
+        except Exception as exc:
+            self.logger.warning(f"closing the CAN bus: {exc}")
