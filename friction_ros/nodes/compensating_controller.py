@@ -178,7 +178,7 @@ class CompensatingControllerNode(ParameterNode):
         self.state_pub = self.create_publisher(ControllerState, "controller_state", RECORDED_QOS)
         self._state_encoder = ControllerStateEncoder(self.joint)
         self._decoder = JointStateDecoder()
-        # raw: joint states decoded by node_utils' JointState codec (no message object per period)
+        # raw: joint states decoded by the wire module's JointStateDecoder (no message object per period)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
         self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS)

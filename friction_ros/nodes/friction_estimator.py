@@ -122,7 +122,7 @@ class FrictionEstimatorNode(ParameterNode):
         )
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         self._diag_rejected = 0
-        # raw: joint states decoded by node_utils' JointState codec (no message object per sample)
+        # raw: joint states decoded by the wire module's JointStateDecoder (no message object per sample)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.diag = DiagnosticsPublisher(self, "friction_estimator", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)

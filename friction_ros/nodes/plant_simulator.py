@@ -156,7 +156,7 @@ class PlantSimulator(ParameterNode):
         self.lockstep = self.p["mode"] == "lockstep"
         add_runtime_validation(self, PARAMS, self._apply)
 
-        # joint states and commands are (de)serialised by node_utils' JointState codec and sent as
+        # joint states and commands are (de)serialised by the wire module's JointState codec and sent as
         # bytes: same wire type, no message objects in the 1 kHz path
         self._encoder = JointStateEncoder([self.joint])
         self._decoder = JointStateDecoder()
