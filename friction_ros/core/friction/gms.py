@@ -37,16 +37,57 @@ class GMS(DynamicModel):
     name = "gms"
     KIND = K.K_GMS
     COEFS = (
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level of s(v)"),
-        Coef("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v)"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
-        Coef("attraction", lo=0.0, lo_open=True, unit="N*m/s", doc="attraction parameter C"),
-        Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
-        Coef("k", lo=0.0, lo_open=True, unit="N*m/rad", is_list=True, doc="element stiffnesses"),
-        Coef("alpha", lo=0.0, lo_open=True, hi=1.0, is_list=True, doc="element weights (sum 1)"),
+        Coef(
+            "fc",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="Coulomb level of s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 003 eq. (3), A.2.4)",
+        ),
+        Coef(
+            "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v), s(0) = Fs (seed 003 eq. (3))"
+        ),
+        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of s(v) (seed 003 eq. (3))"),
+        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (seed 003 eq. (3))"),
+        Coef(
+            "attraction",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/s",
+            doc="attraction parameter C: slip dF_i/dt = C (alpha_i sgn(v) - F_i / |s(v)|) (seed 003 eq. (3))",
+        ),
+        Coef(
+            "fv",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient: F = sum_i F_i + fv v (seed 003 eq. (2))",
+        ),
+        Coef(
+            "k",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/rad",
+            is_list=True,
+            doc="element stiffnesses k_i: stick dF_i/dt = k_i v (seed 003 eq. (2))",
+        ),
+        Coef(
+            "alpha",
+            lo=0.0,
+            lo_open=True,
+            hi=1.0,
+            is_list=True,
+            doc="element weights alpha_i [-] (sum 1): element i slips at |F_i| = alpha_i s(v) (seed 003 eq. (3))",
+        ),
         # appended last so positional users of param_names / param_vector() keep their indices
-        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="presliding micro-damping (0 = none)"),
+        Coef(
+            "sigma1",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="presliding micro-damping, shared as sigma_i = sigma1 k_i / sum_j k_j (0 = none; "
+            "extract C.6, Lampaert et al.)",
+        ),
     )
 
     def _validate(self):

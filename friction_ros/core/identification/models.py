@@ -10,8 +10,13 @@ the inertia ``J`` enter linearly and are solved exactly by non-negative least sq
 candidate ``theta`` (variable projection). The regressors ``phi_j`` of the dynamic models come from
 the compiled kernels in :mod:`kernels`; the normalised forms are documented there.
 
-Physical coefficient names follow the friction library's ``to_config()`` keys where known; the
-conversion to a library model is in :func:`friction_ros.core.identification.export.library_config`.
+The physical coefficients returned by :meth:`FitSpec.coefficients` carry the friction library's
+names (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k, alpha``: the ``to_config()``
+keys, units and equations in docs/coefficients.md) plus the inertia ``J`` [kg*m^2]; only the
+normalised search variables of ``theta`` (``r = fc/fs``, ``sigma_n = sigma/fc``,
+``sigma0_n = sigma0/fs``, ``attraction_n = attraction/fs``, ``x_i = alpha_i fs/k_i``, ``s_damp``)
+and the Stribeck step ``dfs = fs - fc`` are names of their own. The library config is assembled in
+:func:`friction_ros.core.identification.export.library_config`.
 """
 
 from __future__ import annotations
@@ -248,10 +253,10 @@ class FitSpec:
                 "delta": delta,
                 "sigma0": s0 * fs,
                 "sigma1": lin["sigma1"],
-                "sigma2": fv,
+                "fv": fv,
             }
         elif f == "gms":
-            r, vs, delta, ct = theta[:4]
+            r, vs, delta, attraction_n = theta[:4]
             xs = theta[4 : 4 + self.n_elements]
             betas = np.array([lin[f"beta{i + 1}"] for i in range(self.n_elements)])
             fs = float(betas.sum())
@@ -263,7 +268,7 @@ class FitSpec:
                 "fs": fs,
                 "vs": vs,
                 "delta": delta,
-                "c": ct * fs,
+                "attraction": attraction_n * fs,
                 "fv": fv,
                 "k": k[order].tolist(),
                 "alpha": alpha[order].tolist(),
@@ -358,7 +363,7 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
         return FitSpec(
             f"gms{ne}{'d' if damped else ''}",
             "gms",
-            ["r", "vs", "delta", "c_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
+            ["r", "vs", "delta", "attraction_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
             arr(lo),
             arr(hi),
             arr(lg),
