@@ -18,7 +18,7 @@ class GMS(DynamicModel):
     """GMS with N Maxwell-slip elements (seed 003 eqs. (2)-(3), sign fixed per extract A.2.4):
 
     stick:  dF_i/dt = k_i v
-    slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|)
+    slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|), C = attraction
     s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v + F_damp;  sum_i alpha_i = 1.
     Optional presliding micro-damping (extract C.6, Lampaert et al.: F = sum_i (k_i z_i + sigma_i
     dz_i/dt) + sigma_2 v) with one coefficient ``sigma1`` shared in proportion to the element
@@ -154,7 +154,7 @@ class GMS(DynamicModel):
     def _simulate_batch_numpy(self, pm, v, dt):
         self.batch_kernel_params(pm)
         n = self.n_elements
-        fc, fs, vs, de, c, fv = (pm[:, j] for j in range(6))
+        fc, fs, vs, de, attraction, fv = (pm[:, j] for j in range(6))
         k = pm[:, 6 : 6 + n]
         al = pm[:, 6 + n : 6 + 2 * n]
         sig = pm[:, 6 + 2 * n] if pm.shape[1] > 6 + 2 * n else np.zeros(pm.shape[0])
@@ -174,7 +174,7 @@ class GMS(DynamicModel):
                 fst = f + k * vt * dt
                 brk = stuck & (fst * sv >= lim)
                 tgt = lim * sv
-                fsl = tgt + (f - tgt) * np.exp(-c[:, None] * dt / s)
+                fsl = tgt + (f - tgt) * np.exp(-attraction[:, None] * dt / s)
                 f = np.where(stuck, np.where(brk, tgt, fst), fsl)
                 stuck = stuck & ~brk
             out[:, t] = f.sum(axis=1) + fv * vt + damp * (f - f_old).sum(axis=1) / dt
