@@ -17,8 +17,8 @@ Pipeline per sample (effort = motor torque on the joint side, velocity measured)
                                      vs and delta fixed (linear in fc, fs, fv)  (seed 004 eq. (5))
      ``asymmetric_stribeck``         the same with a set per direction (``positive.fc`` ...)
 
-   The coefficient names are those of the friction library model the estimate is
-   (:meth:`OnlineFrictionEstimator.model_config`), flattened as in the FrictionEstimate message
+   The coefficients carry the names of the friction library model that
+   :meth:`OnlineFrictionEstimator.model_config` returns, flattened as in the FrictionEstimate message
    (:mod:`friction_ros.core.coefficient_exchange`): ``fc`` [N*m], ``fs`` [N*m], ``fv`` [N*m*s/rad],
    and for the asymmetric models ``positive.fc``, ``negative.fv`` ... (units and equations:
    docs/coefficients.md). ``initial`` gives their start values in the library config's layout,
