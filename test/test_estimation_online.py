@@ -89,7 +89,10 @@ def test_rls_asymmetric_coulomb_viscous_with_dob(factor):
             "friction_motor": {"model": "coulomb_viscous", **truth},
         }
     )
-    init = {"fc_pos": 0.4 * factor, "fc_neg": 0.4 * factor, "fv_pos": 0.05 * factor, "fv_neg": 0.05 * factor}
+    init = {
+        "positive": {"fc": 0.4 * factor, "fv": 0.05 * factor},
+        "negative": {"fc": 0.4 * factor, "fv": 0.05 * factor},
+    }
     est = OnlineFrictionEstimator(
         {
             "method": "disturbance_observer",
@@ -102,10 +105,14 @@ def test_rls_asymmetric_coulomb_viscous_with_dob(factor):
     )
     run_closed_loop(p, {"pid": {"p": 50.0, "d": 0.5}, "inertia": J}, EXCITE, 8.0, estimator=est)
     c = est.coefficients
-    assert c["fc_pos"] == pytest.approx(0.4, rel=0.05) and c["fc_neg"] == pytest.approx(0.4, rel=0.05)
-    assert c["fv_pos"] == pytest.approx(0.05, rel=0.05) and c["fv_neg"] == pytest.approx(0.05, rel=0.05)
+    assert c["positive.fc"] == pytest.approx(0.4, rel=0.05) and c["negative.fc"] == pytest.approx(
+        0.4, rel=0.05
+    )
+    assert c["positive.fv"] == pytest.approx(0.05, rel=0.05) and c["negative.fv"] == pytest.approx(
+        0.05, rel=0.05
+    )
     cfg = est.model_config()
-    assert cfg["model"] == "asymmetric" and cfg["positive"]["fc"] == pytest.approx(c["fc_pos"])
+    assert cfg["model"] == "asymmetric" and cfg["positive"]["fc"] == pytest.approx(c["positive.fc"])
 
 
 def test_estimate_fields_and_adoption_by_controller():

@@ -42,7 +42,7 @@ from friction_ros.core.validation import check_real
 
 MODES = ("feedforward", "feedback", "blended")
 #: force-level coefficients (scaled by the perturbation); shapes (vs, delta, alpha) are kept
-FORCE_KEYS = ("fc", "fs", "fv", "fl", "sigma", "sigma0", "sigma1", "sigma2", "k", "attraction")
+FORCE_KEYS = ("fc", "fs", "fv", "fl", "sigma", "sigma0", "sigma1", "k", "attraction")
 DYNAMIC_KEYS = ("sigma0", "sigma1", "k", "sigma")
 
 

@@ -9,12 +9,20 @@ Pipeline per sample (effort = motor torque on the joint side, velocity measured)
    * linear in the parameters, fitted by RLS with forgetting and excitation gating
      (:mod:`.rls`), regressors in the filtered velocity ``v_f``:
 
-     ``viscous``                     F = fv v
-     ``coulomb_viscous``             F = fc sgn(v) + fv v
-     ``asymmetric_coulomb_viscous``  F = fc_pos + fv_pos v (v > 0);  -fc_neg + fv_neg v (v < 0)
+     ``viscous``                     F = fv v  (seed 004 eq. (2))
+     ``coulomb_viscous``             F = fc sgn(v) + fv v  (seed 004 eq. (3))
+     ``asymmetric_coulomb_viscous``  F = positive.fc + positive.fv v (v > 0);
+                                     F = -negative.fc + negative.fv v (v < 0)  (seed 004 B.3)
      ``stribeck``                    F = [fc + (fs - fc) E(v)] sgn(v) + fv v, E = exp(-|v/vs|^delta),
-                                     vs and delta fixed (linear in fc, fs, fv)
-     ``asymmetric_stribeck``         the same with a set per direction
+                                     vs and delta fixed (linear in fc, fs, fv)  (seed 004 eq. (5))
+     ``asymmetric_stribeck``         the same with a set per direction (``positive.fc`` ...)
+
+   The coefficients carry the names of the friction library model that
+   :meth:`OnlineFrictionEstimator.model_config` returns, flattened as in the FrictionEstimate message
+   (:mod:`friction_ros.core.coefficient_exchange`): ``fc`` [N*m], ``fs`` [N*m], ``fv`` [N*m*s/rad],
+   and for the asymmetric models ``positive.fc``, ``negative.fv`` ... (units and equations:
+   docs/coefficients.md). ``initial`` gives their start values in the library config's layout,
+   e.g. ``initial: {positive: {fc: 0.4, fv: 0.05}, negative: {fc: 0.4, fv: 0.05}}``.
 
    * ``lugre``: LuGre state observer with fixed coefficients (``lugre`` model config):
      ``dz/dt = v - sigma0 |v| z / g(v) + L (y - F_hat) / sigma0``, F_hat = sigma0 z + sigma1 dz/dt
@@ -60,9 +68,16 @@ ESTIMATOR_MODELS = (
 _COEF_NAMES = {
     "viscous": ["fv"],
     "coulomb_viscous": ["fc", "fv"],
-    "asymmetric_coulomb_viscous": ["fc_pos", "fc_neg", "fv_pos", "fv_neg"],
+    "asymmetric_coulomb_viscous": ["positive.fc", "negative.fc", "positive.fv", "negative.fv"],
     "stribeck": ["fc", "fs", "fv"],
-    "asymmetric_stribeck": ["fc_pos", "fs_pos", "fv_pos", "fc_neg", "fs_neg", "fv_neg"],
+    "asymmetric_stribeck": [
+        "positive.fc",
+        "positive.fs",
+        "positive.fv",
+        "negative.fc",
+        "negative.fs",
+        "negative.fv",
+    ],
 }
 
 ESTIMATOR_DEFAULTS: dict[str, Any] = {
@@ -71,7 +86,7 @@ ESTIMATOR_DEFAULTS: dict[str, Any] = {
     "inertia": 0.0,  # required > 0 for the disturbance observer
     "filter_time_constant": 0.005,
     "observer_bandwidth": 200.0,
-    "initial": None,  # {coefficient: value}; missing -> 0
+    "initial": None,  # {coefficient: value} in the library config's layout; missing -> 0
     "vs": 0.05,
     "delta": 2.0,
     "forgetting_factor": 0.999,
@@ -103,6 +118,18 @@ class FrictionEstimateData:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+def _dotted(mapping: Mapping[str, Any], prefix: str = ""):
+    """(dotted name, value) of the leaves of a nested mapping: ``{positive: {fc: x}}`` ->
+    ``("positive.fc", x)``, the names :func:`~friction_ros.core.coefficient_exchange.to_fields` gives."""
+    if not isinstance(mapping, Mapping):
+        raise ParameterError(f"estimator.initial = {mapping!r} must be a mapping of coefficient values")
+    for k, v in mapping.items():
+        if isinstance(v, Mapping):
+            yield from _dotted(v, f"{prefix}{k}.")
+        else:
+            yield f"{prefix}{k}", v
 
 
 def regressor(model: str, v: float, vs: float = 0.05, delta: float = 2.0) -> np.ndarray:
@@ -173,7 +200,7 @@ class OnlineFrictionEstimator:
             self.coefficient_names = list(m.param_names)
         else:
             names = _COEF_NAMES[self.model_name]
-            init = dict(cfg["initial"] or {})
+            init = dict(_dotted(cfg["initial"] or {}))
             check_keys(f"{n}.initial", init, names)
             vals = [check_real(f"{n}.initial.{k}", init.get(k, 0.0)) for k in names]
             self.rls = RecursiveLeastSquares(names, vals, cfg["forgetting_factor"], cfg["initial_covariance"])
@@ -238,8 +265,8 @@ class OnlineFrictionEstimator:
             return {
                 "model": "asymmetric",
                 "base": "coulomb_viscous",
-                "positive": {"fc": c["fc_pos"], "fv": c["fv_pos"]},
-                "negative": {"fc": c["fc_neg"], "fv": c["fv_neg"]},
+                "positive": {"fc": c["positive.fc"], "fv": c["positive.fv"]},
+                "negative": {"fc": c["negative.fc"], "fv": c["negative.fv"]},
             }
 
         def strib(fc, fs, fv):
@@ -250,8 +277,8 @@ class OnlineFrictionEstimator:
         return {
             "model": "asymmetric",
             "base": "stribeck",
-            "positive": strib(c["fc_pos"], c["fs_pos"], c["fv_pos"]),
-            "negative": strib(c["fc_neg"], c["fs_neg"], c["fv_neg"]),
+            "positive": strib(c["positive.fc"], c["positive.fs"], c["positive.fv"]),
+            "negative": strib(c["negative.fc"], c["negative.fs"], c["negative.fv"]),
         }
 
     # -- the update ----------------------------------------------------------------------------------

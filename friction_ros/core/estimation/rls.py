@@ -11,7 +11,7 @@ that is not excited (e.g. the negative Coulomb level while the joint only moves 
 covariance (no covariance wind-up). Samples are skipped altogether when the excitation check
 fails (|v| below ``min_velocity``: at rest or in presliding the static maps do not apply), so the
 estimate cannot drift while the joint rests. The coefficient standard deviation is
-``sqrt(diag(P) * sigma2)`` with ``sigma2`` an exponentially weighted residual variance.
+``sqrt(diag(P) * residual_variance)``, ``residual_variance`` being the exponentially weighted residual variance.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ class RecursiveLeastSquares:
         n = len(self.names)
         self._th = [float(x) for x in self._theta0]
         self._P = [[self.initial_covariance if i == j else 0.0 for j in range(n)] for i in range(n)]
-        self.sigma2 = 0.0
+        self.residual_variance = 0.0
         self.samples = 0
         self.updates = 0
 
@@ -118,13 +118,15 @@ class RecursiveLeastSquares:
         self._P = P
         # residual variance (EW, same memory as the forgetting factor, at least 100 samples)
         a = max(1.0 - lam, 0.01)
-        self.sigma2 = r * r if self.updates == 0 else (1.0 - a) * self.sigma2 + a * r * r
+        self.residual_variance = (
+            r * r if self.updates == 0 else (1.0 - a) * self.residual_variance + a * r * r
+        )
         self.updates += 1
         return r
 
     def std_list(self) -> list[float]:
         """One-sigma standard deviation of each coefficient (list of floats)."""
-        s2 = self.sigma2
+        s2 = self.residual_variance
         return [math.sqrt(max(self._P[i][i], 0.0) * s2) for i in range(len(self._th))]
 
     @property

@@ -195,19 +195,20 @@ def gms_update(p, o, st, v, h):
     State ``st`` = [F_1..F_N, stuck_1..stuck_N] (stuck as 1.0/0.0), updated in place.
     Stick: dF_i/dt = k_i v (exact: F_i += k_i v h); an element breaks away when
     |F_i| >= alpha_i s(v) in the direction of motion and is then held at alpha_i s(v) sgn(v).
-    Slip: dF_i/dt = C (alpha_i sgn(v) - F_i / s(v)), solved exactly (relaxation rate C/s).
+    Slip: dF_i/dt = C (alpha_i sgn(v) - F_i / s(v)), C = ``attraction``, solved exactly (relaxation
+    rate C/s).
     A slipping element sticks again on reversal (F_i v < 0) or at v = 0.
     Presliding micro-damping (extract C.6, Lampaert: F = sum_i (k_i z_i + sigma_i dz_i/dt) + fv v)
     with stiffness-proportional sigma_i = sigma1 k_i / sum_j k_j, i.e. with dz_i/dt = (dF_i/dt) / k_i
     the damping force is (sigma1 / sum_j k_j) sum_i dF_i/dt, evaluated over the step as
     sum_i (F_i(t+h) - F_i(t)) / h (= sigma1 v while every element sticks).
-    p = n, fc, fs, vs, delta, C, fv, k_1..k_n, alpha_1..alpha_n, sigma1 (GMS.sigma1, default 0)
+    p = n, fc, fs, vs, delta, attraction, fv, k_1..k_n, alpha_1..alpha_n, sigma1 (GMS.sigma1, default 0)
     """
     n = int(p[o])
     s = stribeck_s(abs(v), p[o + 1], p[o + 2], p[o + 3], p[o + 4])
-    c = p[o + 5]
+    attraction = p[o + 5]
     sv = sgn(v)
-    decay = math.exp(-c * h / s)
+    decay = math.exp(-attraction * h / s)
     sig = p[o + 7 + 2 * n]
     total = 0.0
     dsum = 0.0

@@ -20,9 +20,21 @@ class Dahl(DynamicModel):
     KIND = K.K_DAHL
     STATE_NAMES = ("F",)
     COEFS = (
-        Coef("sigma", lo=0.0, lo_open=True, unit="N*m/rad", doc="rest stiffness"),
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
-        Coef("alpha", 1.0, lo=0.0, lo_open=True, doc="shape exponent"),
+        Coef(
+            "sigma",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/rad",
+            doc="rest stiffness: dF/dx = sigma at F = 0 (seed 004 eq. (9))",
+        ),
+        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level: F -> Fc sgn(v) (seed 004 eq. (9))"),
+        Coef(
+            "alpha",
+            1.0,
+            lo=0.0,
+            lo_open=True,
+            doc="shape exponent [-]: |1 - F sgn(v)/Fc|^alpha (seed 004 eq. (9))",
+        ),
     )
 
     def _steady(self, v):

@@ -18,7 +18,7 @@ class GMS(DynamicModel):
     """GMS with N Maxwell-slip elements (seed 003 eqs. (2)-(3), sign fixed per extract A.2.4):
 
     stick:  dF_i/dt = k_i v
-    slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|)
+    slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|), C = attraction
     s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v + F_damp;  sum_i alpha_i = 1.
     Optional presliding micro-damping (extract C.6, Lampaert et al.: F = sum_i (k_i z_i + sigma_i
     dz_i/dt) + sigma_2 v) with one coefficient ``sigma1`` shared in proportion to the element
@@ -37,16 +37,57 @@ class GMS(DynamicModel):
     name = "gms"
     KIND = K.K_GMS
     COEFS = (
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level of s(v)"),
-        Coef("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v)"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
-        Coef("attraction", lo=0.0, lo_open=True, unit="N*m/s", doc="attraction parameter C"),
-        Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
-        Coef("k", lo=0.0, lo_open=True, unit="N*m/rad", is_list=True, doc="element stiffnesses"),
-        Coef("alpha", lo=0.0, lo_open=True, hi=1.0, is_list=True, doc="element weights (sum 1)"),
+        Coef(
+            "fc",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="Coulomb level of s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 003 eq. (3), A.2.4)",
+        ),
+        Coef(
+            "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v), s(0) = Fs (seed 003 eq. (3))"
+        ),
+        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of s(v) (seed 003 eq. (3))"),
+        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (seed 003 eq. (3))"),
+        Coef(
+            "attraction",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/s",
+            doc="attraction parameter C: slip dF_i/dt = C (alpha_i sgn(v) - F_i / |s(v)|) (seed 003 eq. (3))",
+        ),
+        Coef(
+            "fv",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient: F = sum_i F_i + fv v (seed 003 eq. (2))",
+        ),
+        Coef(
+            "k",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/rad",
+            is_list=True,
+            doc="element stiffnesses k_i: stick dF_i/dt = k_i v (seed 003 eq. (2))",
+        ),
+        Coef(
+            "alpha",
+            lo=0.0,
+            lo_open=True,
+            hi=1.0,
+            is_list=True,
+            doc="element weights alpha_i [-] (sum 1): element i slips at |F_i| = alpha_i s(v) (seed 003 eq. (3))",
+        ),
         # appended last so positional users of param_names / param_vector() keep their indices
-        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="presliding micro-damping (0 = none)"),
+        Coef(
+            "sigma1",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="presliding micro-damping, shared as sigma_i = sigma1 k_i / sum_j k_j (0 = none; "
+            "extract C.6, Lampaert et al.)",
+        ),
     )
 
     def _validate(self):
@@ -113,7 +154,7 @@ class GMS(DynamicModel):
     def _simulate_batch_numpy(self, pm, v, dt):
         self.batch_kernel_params(pm)
         n = self.n_elements
-        fc, fs, vs, de, c, fv = (pm[:, j] for j in range(6))
+        fc, fs, vs, de, attraction, fv = (pm[:, j] for j in range(6))
         k = pm[:, 6 : 6 + n]
         al = pm[:, 6 + n : 6 + 2 * n]
         sig = pm[:, 6 + 2 * n] if pm.shape[1] > 6 + 2 * n else np.zeros(pm.shape[0])
@@ -133,7 +174,7 @@ class GMS(DynamicModel):
                 fst = f + k * vt * dt
                 brk = stuck & (fst * sv >= lim)
                 tgt = lim * sv
-                fsl = tgt + (f - tgt) * np.exp(-c[:, None] * dt / s)
+                fsl = tgt + (f - tgt) * np.exp(-attraction[:, None] * dt / s)
                 f = np.where(stuck, np.where(brk, tgt, fst), fsl)
                 stuck = stuck & ~brk
             out[:, t] = f.sum(axis=1) + fv * vt + damp * (f - f_old).sum(axis=1) / dt

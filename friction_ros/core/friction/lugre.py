@@ -1,4 +1,4 @@
-"""LuGre model (Canudas de Wit, Olsson, Astrom, Lischinsky 1995)."""
+"""LuGre model (Canudas de Wit, Olsson, Astrom, Lischinsky 1995, IEEE Trans. Automatic Control 40(3))."""
 
 from __future__ import annotations
 
@@ -25,14 +25,47 @@ class LuGre(DynamicModel):
     KIND = K.K_LUGRE
     STATE_NAMES = ("z",)
     COEFS = (
-        Coef("sigma0", lo=0.0, lo_open=True, unit="N*m/rad", doc="bristle stiffness"),
-        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="micro-damping"),
-        Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient (sigma2)"),
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
-        Coef("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
-        Coef("vd", 0.0, lo=0.0, unit="rad/s", doc="micro-damping decay velocity (0: constant sigma1)"),
+        Coef(
+            "sigma0",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/rad",
+            doc="bristle stiffness: sigma0 z in F and sigma0 |v| z / g(v) in dz/dt (seed 004 eqs. (10)-(11))",
+        ),
+        Coef(
+            "sigma1",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="bristle micro-damping: sigma1 dz/dt in F (seed 004 eq. (11))",
+        ),
+        Coef(
+            "fv",
+            0.0,
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient (the papers' sigma2): fv v in F (seed 004 eq. (11))",
+        ),
+        Coef(
+            "fc",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="Coulomb level of g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (10))",
+        ),
+        Coef(
+            "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of g(v), g(0) = Fs (seed 004 eq. (10))"
+        ),
+        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of g(v) (seed 004 eq. (10))"),
+        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of g(v) [-] (seed 004 eq. (10))"),
+        Coef(
+            "vd",
+            0.0,
+            lo=0.0,
+            unit="rad/s",
+            doc="micro-damping decay velocity: sigma1(v) = sigma1 exp(-(v/vd)^2), 0: constant sigma1 "
+            "(Canudas de Wit et al. 1995)",
+        ),
     )
 
     def _validate(self):

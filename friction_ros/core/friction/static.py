@@ -13,11 +13,41 @@ from friction_ros.core.validation import ParameterError
 from . import _kernels as K
 from .base import Coef, StaticModel, stribeck_np
 
-_FC = Coef("fc", lo=0.0, unit="N*m", doc="Coulomb (kinetic) friction level")
-_FS = Coef("fs", lo=0.0, unit="N*m", doc="static friction (stiction) level")
-_VS = Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity")
-_DELTA = Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck shape exponent")
-_FV = Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient")
+# The coefficients the static maps share; each model's docstring gives the equation it uses them in.
+_FC = Coef(
+    "fc",
+    lo=0.0,
+    unit="N*m",
+    doc="Coulomb (kinetic) friction level Fc: F = Fc sgn(v) (seed 004 eq. (1)), the high-speed "
+    "level of the Stribeck curve s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (5))",
+)
+_FS = Coef(
+    "fs",
+    lo=0.0,
+    unit="N*m",
+    doc="static friction (stiction) level Fs: s(0) = Fs in the Stribeck curve (seed 004 eq. (5))",
+)
+_VS = Coef(
+    "vs",
+    lo=0.0,
+    lo_open=True,
+    unit="rad/s",
+    doc="Stribeck velocity vs: exp(-|v/vs|^delta) in the Stribeck curve (seed 004 eq. (5))",
+)
+_DELTA = Coef(
+    "delta",
+    2.0,
+    lo=0.0,
+    lo_open=True,
+    doc="Stribeck shape exponent delta [-]: exp(-|v/vs|^delta) (seed 004 eq. (5); 1 Tustin, 2 Gaussian)",
+)
+_FV = Coef(
+    "fv",
+    0.0,
+    lo=0.0,
+    unit="N*m*s/rad",
+    doc="viscous coefficient Fv: the term Fv v (seed 004 eqs. (2), (3), (5))",
+)
 
 
 class ZeroFriction(StaticModel):
@@ -46,7 +76,7 @@ class Viscous(StaticModel):
 
     name = "viscous"
     KIND = K.K_VISCOUS
-    COEFS = (Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),)
+    COEFS = (Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient Fv: F = Fv v (seed 004 eq. (2))"),)
 
     def _steady(self, v):
         return self._c["fv"] * v
@@ -57,7 +87,15 @@ class CoulombViscous(StaticModel):
 
     name = "coulomb_viscous"
     KIND = K.K_COULOMB_VISCOUS
-    COEFS = (_FC, Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"))
+    COEFS = (
+        _FC,
+        Coef(
+            "fv",
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient Fv: F = Fc sgn(v) + Fv v (seed 004 eq. (3))",
+        ),
+    )
 
     def _steady(self, v):
         return self._c["fc"] * np.sign(v) + self._c["fv"] * v
@@ -142,7 +180,13 @@ class StribeckEps(StaticModel):
         _VS,
         _DELTA,
         _FV,
-        Coef("eps", lo=0.0, lo_open=True, unit="rad/s", doc="linear-zone half width"),
+        Coef(
+            "eps",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="linear-zone half width: F = (v/eps) s(v) + Fv v for |v| <= eps (seed 003 A.2.2)",
+        ),
     )
 
     def _validate(self):
@@ -164,11 +208,22 @@ class GAExponential(StaticModel):
     name = "ga_exponential"
     KIND = K.K_GA_EXPONENTIAL
     COEFS = (
-        Coef("fs", lo=0.0, unit="N*m", doc="static level F_ST"),
-        Coef("gamma", lo=0.0, lo_open=True, unit="s/rad", doc="inverse Stribeck velocity"),
-        Coef("delta", lo=0.0, lo_open=True, doc="shape exponent"),
-        Coef("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+        Coef("fs", lo=0.0, unit="N*m", doc="static level F_ST (seed 001 eq. (21), Table 5.2)"),
+        Coef(
+            "gamma",
+            lo=0.0,
+            lo_open=True,
+            unit="s/rad",
+            doc="inverse Stribeck velocity: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
+        ),
+        Coef(
+            "delta",
+            lo=0.0,
+            lo_open=True,
+            doc="shape exponent [-]: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
+        ),
+        Coef("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin (seed 001 eq. (21), Table 5.2)"),
+        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (21))"),
     )
 
     def _steady(self, v):
@@ -185,11 +240,17 @@ class GATustin(StaticModel):
     name = "ga_tustin"
     KIND = K.K_GA_TUSTIN
     COEFS = (
-        Coef("ff0", lo=0.0, unit="N*m", doc="static friction constant"),
-        Coef("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction"),
-        Coef("vc", lo=0.0, lo_open=True, unit="rad/s", doc="threshold velocity"),
-        Coef("x", lo=0.0, lo_open=True, doc="Armstrong exponent"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+        Coef("ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (seed 001 eq. (22))"),
+        Coef("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction Ffc (seed 001 eq. (22))"),
+        Coef(
+            "vc",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="threshold velocity Vc: 1 - exp(-(|v|/Vc)^x) (seed 001 eq. (22))",
+        ),
+        Coef("x", lo=0.0, lo_open=True, doc="Armstrong exponent [-]: (|v|/Vc)^x (seed 001 eq. (22))"),
+        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (22))"),
     )
 
     def _steady(self, v):
@@ -209,11 +270,13 @@ class GANonLinear(StaticModel):
     name = "ga_nonlinear"
     KIND = K.K_GA_NONLINEAR
     COEFS = (
-        Coef("alpha0", lo=0.0, unit="N*m"),
-        Coef("alpha1", lo=0.0, unit="N*m"),
-        Coef("alpha2", lo=0.0, unit="N*m"),
-        Coef("beta1", lo=0.0, unit="s/rad"),
-        Coef("beta2", lo=0.0, unit="s/rad"),
+        Coef("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (seed 001 eq. (23))"),
+        Coef("alpha1", lo=0.0, unit="N*m", doc="decaying level: alpha1 exp(-beta1 |v|) (seed 001 eq. (23))"),
+        Coef(
+            "alpha2", lo=0.0, unit="N*m", doc="rising level: alpha2 (1 - exp(-beta2 |v|)) (seed 001 eq. (23))"
+        ),
+        Coef("beta1", lo=0.0, unit="s/rad", doc="decay rate of the alpha1 term (seed 001 eq. (23))"),
+        Coef("beta2", lo=0.0, unit="s/rad", doc="rise rate of the alpha2 term (seed 001 eq. (23))"),
     )
 
     def _steady(self, v):
@@ -232,11 +295,11 @@ class GADupont(StaticModel):
     name = "ga_dupont"
     KIND = K.K_GA_DUPONT
     COEFS = (
-        Coef("c0", lo=0.0, unit="N*m"),
-        Coef("c1", lo=0.0, unit="N*m*s/rad"),
-        Coef("c2", lo=0.0, unit="N*m"),
-        Coef("c3", lo=0.0, lo_open=True, unit="rad/s"),
-        Coef("c4", lo=0.0, lo_open=True),
+        Coef("c0", lo=0.0, unit="N*m", doc="constant level c0 (seed 001 eq. (24))"),
+        Coef("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (seed 001 eq. (24))"),
+        Coef("c2", lo=0.0, unit="N*m", doc="Stribeck level: c2 exp(-(|v|/c3)^c4) (seed 001 eq. (24))"),
+        Coef("c3", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity c3 (seed 001 eq. (24))"),
+        Coef("c4", lo=0.0, lo_open=True, doc="Stribeck exponent c4 [-] (seed 001 eq. (24))"),
     )
 
     def _steady(self, v):
@@ -255,10 +318,15 @@ class GASevenParameter(StaticModel):
     name = "ga_seven_parameter"
     KIND = K.K_GA_SEVEN
     COEFS = (
-        Coef("fc", lo=0.0, unit="N*m"),
-        Coef("fv", lo=0.0, unit="N*m*s/rad"),
-        Coef("fs", lo=0.0, unit="N*m", doc="Stribeck magnitude F_s,inf (added to fc at rest)"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s"),
+        Coef("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (seed 001 eq. (25))"),
+        Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: Fv |v| (seed 001 eq. (25))"),
+        Coef(
+            "fs",
+            lo=0.0,
+            unit="N*m",
+            doc="Stribeck magnitude F_s,inf, added to fc at rest: Fs / (1 + (v/vs)^2) (seed 001 eq. (25))",
+        ),
+        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity: (v/vs)^2 (seed 001 eq. (25))"),
     )
 
     def _steady(self, v):
@@ -276,8 +344,20 @@ class Polynomial(StaticModel):
     name = "polynomial"
     KIND = K.K_POLYNOMIAL
     COEFS = (
-        Coef("pos", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn for v > 0"),
-        Coef("neg", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn of |F| for v < 0"),
+        Coef(
+            "pos",
+            lo=None,
+            unit="N*m",
+            is_list=True,
+            doc="coefficients c0..cn of F = sum_j c_j v^j for v > 0 (c_j in N*m*(s/rad)^j; seed 004 eq. (8))",
+        ),
+        Coef(
+            "neg",
+            lo=None,
+            unit="N*m",
+            is_list=True,
+            doc="coefficients c0..cn of |F| = sum_j c_j |v|^j for v < 0 (as pos; seed 004 eq. (8))",
+        ),
     )
 
     def _validate(self):
@@ -309,9 +389,20 @@ class LoadDependent(StaticModel):
     load_dependent = True
     COEFS = (
         _FC,
-        Coef("fl", 0.0, lo=0.0, doc="friction per unit transmitted torque [-]"),
+        Coef(
+            "fl",
+            0.0,
+            lo=0.0,
+            doc="friction per unit transmitted torque [-]: (fc + fl |tau_load|) (anchors 3.1, BAM M3-M6)",
+        ),
         _FV,
-        Coef("veps", 0.0, lo=0.0, unit="rad/s", doc="smoothing velocity of the sign"),
+        Coef(
+            "veps",
+            0.0,
+            lo=0.0,
+            unit="rad/s",
+            doc="smoothing velocity of the sign: v / (veps + |v|) (anchors 3.1)",
+        ),
     )
 
     def _steady(self, v, load=0.0):

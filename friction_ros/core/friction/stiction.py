@@ -59,7 +59,13 @@ class Karnopp(GKF):
         _VS,
         _DELTA,
         _FV,
-        Coef("dv", lo=0.0, lo_open=True, unit="rad/s", doc="zero-velocity band"),
+        Coef(
+            "dv",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="half width of the zero-velocity band |v| < dv where the body sticks (Karnopp 1985; extract C.1)",
+        ),
     )
 
     @property

@@ -5,15 +5,19 @@ Library configs (``model.to_config()`` form, validated with ``model_from_config`
 * ``coulomb``/``coulomb_viscous``/``stribeck`` fitted in the time domain with a linear zone
   ``eps`` -> ``stribeck_eps`` (seed 003 A.2.2; Coulomb as fs = fc); from plateaus -> the plain
   library model (``asymmetric`` wrapper when the directions differ);
-* ``dahl`` -> ``dahl`` (alpha = 1), ``lugre`` -> ``lugre`` (sigma2 -> fv), ``gms<N>`` -> ``gms``
-  (C -> attraction), ``gms<N>d`` -> ``gms`` with ``sigma1``;
+* ``dahl`` -> ``dahl`` (alpha = 1; the fitted ``fv`` has no place in the library's Dahl),
+  ``lugre`` -> ``lugre``, ``gms<N>`` -> ``gms``, ``gms<N>d`` -> ``gms`` with ``sigma1``: the fitted
+  coefficients already carry the library's names (docs/coefficients.md), so the config is the
+  library model's coefficients picked from the fit (``fs`` held >= ``fc``, GMS ``alpha`` summing
+  exactly to 1);
 * ``anfis``/``nusvr`` have no library model: no config (JSON summary only).
 
 Parameter file (``node_name: ros__parameters:``):
 
 * ``compensating_controller``: ``inertia`` and ``friction.model`` (the config dict);
 * ``friction_estimator``: ``inertia``, the nearest estimator ``model`` (lugre, stribeck,
-  coulomb_viscous or their asymmetric forms) with ``initial`` coefficients (and ``lugre`` config);
+  coulomb_viscous or their asymmetric forms) with ``initial`` coefficients in the library config's
+  layout (``positive: {fc, fv}`` ...) (and ``lugre`` config);
 * ``plant_simulator``: a preset section with ``plant.motor_inertia`` and ``friction_motor``
   (loadable by :func:`friction_ros.core.presets.preset_from_config`).
 """
@@ -23,6 +27,8 @@ from __future__ import annotations
 from typing import Any
 
 import yaml
+
+from friction_ros.core.friction import MODEL_CLASSES
 
 
 def library_config(
@@ -45,34 +51,21 @@ def library_config(
     if name == "dahl":
         return {"model": "dahl", "sigma": c["sigma"], "fc": c["fc"], "alpha": 1.0}
     if name == "lugre":
-        return {
-            "model": "lugre",
-            "sigma0": c["sigma0"],
-            "sigma1": c["sigma1"],
-            "fv": c["sigma2"],
-            "fc": c["fc"],
-            "fs": max(c["fs"], c["fc"]),
-            "vs": c["vs"],
-            "delta": c["delta"],
-        }
+        return {"model": "lugre", **_library_coefficients("lugre", c)}
     if name.startswith("gms"):
+        out = {"model": "gms", **_library_coefficients("gms", c)}
         alpha = [float(a) for a in c["alpha"]]
         alpha[-1] = 1.0 - sum(alpha[:-1])  # exact sum 1 after rounding
-        out = {
-            "model": "gms",
-            "fc": c["fc"],
-            "fs": max(c["fs"], c["fc"]),
-            "vs": c["vs"],
-            "delta": c["delta"],
-            "attraction": c["c"],
-            "fv": c["fv"],
-            "k": [float(k) for k in c["k"]],
-            "alpha": alpha,
-        }
-        if "sigma1" in c:  # gms<N>d: presliding micro-damping
-            out["sigma1"] = float(c["sigma1"])
+        out.update(k=[float(k) for k in c["k"]], alpha=alpha)
         return out
     return None
+
+
+def _library_coefficients(model: str, c: dict) -> dict:
+    """The fitted coefficients that ``model`` has, in the library's order, with ``fs >= fc``."""
+    out = {co.name: c[co.name] for co in MODEL_CLASSES[model].COEFS if co.name in c}
+    out["fs"] = max(out["fs"], out["fc"])
+    return out
 
 
 def _static(name: str, c: dict, eps: float, bare: bool = False) -> dict:
@@ -117,7 +110,10 @@ def estimator_section(config: dict, inertia: float) -> dict:
             out.update(
                 {
                     "model": "asymmetric_coulomb_viscous",
-                    "initial": {"fc_pos": p["fc"], "fc_neg": n["fc"], "fv_pos": p["fv"], "fv_neg": n["fv"]},
+                    "initial": {
+                        "positive": {"fc": p["fc"], "fv": p["fv"]},
+                        "negative": {"fc": n["fc"], "fv": n["fv"]},
+                    },
                 }
             )
             return out
@@ -128,12 +124,8 @@ def estimator_section(config: dict, inertia: float) -> dict:
                     "vs": p["vs"],
                     "delta": p["delta"],
                     "initial": {
-                        "fc_pos": p["fc"],
-                        "fs_pos": p["fs"],
-                        "fv_pos": p["fv"],
-                        "fc_neg": n["fc"],
-                        "fs_neg": n["fs"],
-                        "fv_neg": n["fv"],
+                        "positive": {"fc": p["fc"], "fs": p["fs"], "fv": p["fv"]},
+                        "negative": {"fc": n["fc"], "fs": n["fs"], "fv": n["fv"]},
                     },
                 }
             )

@@ -7,24 +7,26 @@ so the linear coefficients (static level, element weights, micro-damping, viscou
 inertia J) are solved exactly by (non-negative) least squares outside the kernel. This keeps the
 global search low-dimensional and removes the scale ambiguities between them.
 
-Normalised model forms (derivations from the standard equations, see models.py):
+Normalised model forms (derivations from the standard equations, see models.py). The coefficient
+names are the friction library's (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k,
+alpha``, see docs/coefficients.md); ``F_C = fc``, ``F_S = fs``, ``C = attraction``:
 
-* Stribeck shape (seed 004 eq. 5, seed 003 A.2.2): ``s~(v) = r + (1 - r) exp(-|v/v_s|^delta)``,
-  ``r = F_C / F_S``, so ``s(v) = F_S s~(v)``.
-* Dahl (seed 004 eq. 9, alpha = 1): ``G = F/F_C``, ``dG/dx = sigma~ (1 - G sgn v)``,
-  ``sigma~ = sigma / F_C``; exact update for piecewise-constant v:
-  ``G+ = sgn v + (G - sgn v) exp(-sigma~ |v| dt)``.
-* LuGre (seed 004 eqs. 10-11): ``w = sigma0 z / F_S``, ``dw/dt = sigma~0 v - sigma~0 |v| w / s~(v)``
-  with ``sigma~0 = sigma0 / F_S``; exact exponential update with rate ``a = sigma~0 |v| / s~``;
-  ``dz/dt = (v - |v| w / s~)``; ``F = F_S w + sigma1 dz/dt + sigma2 v``.
-* GMS-N (seed 003 A.2.4, sign-corrected eq. 3): element ``i`` force ``F_i = F_S alpha_i G_i``;
-  stick ``dG_i/dt = v / x_i`` (``x_i = alpha_i F_S / k_i`` is the element's breakaway
-  displacement), slip ``dG_i/dt = C~ (sgn v - G_i / s~(v))`` with ``C~ = C / F_S`` (exact
-  exponential update), stick -> slip when ``|G_i| >= s~`` in the direction of motion, slip ->
-  stick on a velocity reversal or v = 0. ``F = sum_i beta_i G_i + sigma2 v`` with
-  ``beta_i = F_S alpha_i``. Optional presliding damping (library GMS ``sigma1``, stiffness-
-  proportional): ``F = sum_i beta_i (G_i + s dG_i/dt) + sigma2 v`` with one more nonlinear
-  coefficient, the time constant ``s = sigma1 / sum_j k_j``.
+* Stribeck shape (seed 004 eq. 5, seed 003 A.2.2): ``s~(v) = r + (1 - r) exp(-|v/vs|^delta)``,
+  ``r = fc / fs``, so ``s(v) = fs s~(v)``.
+* Dahl (seed 004 eq. 9, alpha = 1): ``G = F/fc``, ``dG/dx = sigma_n (1 - G sgn v)``,
+  ``sigma_n = sigma / fc``; exact update for piecewise-constant v:
+  ``G+ = sgn v + (G - sgn v) exp(-sigma_n |v| dt)``.
+* LuGre (seed 004 eqs. 10-11): ``w = sigma0 z / fs``, ``dw/dt = sigma0_n v - sigma0_n |v| w / s~(v)``
+  with ``sigma0_n = sigma0 / fs``; exact exponential update with rate ``a = sigma0_n |v| / s~``;
+  ``dz/dt = (v - |v| w / s~)``; ``F = fs w + sigma1 dz/dt + fv v``.
+* GMS-N (seed 003 A.2.4, sign-corrected eq. 3): element ``i`` force ``F_i = fs alpha_i G_i``;
+  stick ``dG_i/dt = v / x_i`` (``x_i = alpha_i fs / k_i`` is the element's breakaway
+  displacement), slip ``dG_i/dt = attraction_n (sgn v - G_i / s~(v))`` with
+  ``attraction_n = attraction / fs`` (exact exponential update), stick -> slip when
+  ``|G_i| >= s~`` in the direction of motion, slip -> stick on a velocity reversal or v = 0.
+  ``F = sum_i beta_i G_i + fv v`` with ``beta_i = fs alpha_i``. Optional presliding damping
+  (library GMS ``sigma1``, stiffness-proportional): ``F = sum_i beta_i (G_i + s dG_i/dt) + fv v``
+  with one more nonlinear coefficient, the time constant ``s = sigma1 / sum_j k_j``.
 
 All kernels use ``prange`` over the population (both cores) and ``cache=True``.
 """
@@ -89,7 +91,7 @@ def _symmetrise(gram, m):
 # ---------------------------------------------------------------------------------- Dahl
 @njit(cache=True)
 def dahl_features(theta, v, dt):
-    """Regressor columns [G] of the normalised Dahl model for one parameter row [sigma~]."""
+    """Regressor columns [G] of the normalised Dahl model for one parameter row [sigma_n]."""
     n = v.shape[0]
     out = np.empty((n, 1))
     st = theta[0]
@@ -150,7 +152,7 @@ def _lugre_step(w, vk, r, vs, delta, s0, dt):
 
 @njit(cache=True)
 def lugre_features(theta, v, dt):
-    """Regressor columns [w, dz/dt] of the normalised LuGre model; theta = [r, vs, delta, sigma~0]."""
+    """Regressor columns [w, dz/dt] of the normalised LuGre model; theta = [r, vs, delta, sigma0_n]."""
     n = v.shape[0]
     out = np.empty((n, 2))
     r, vs, delta, s0 = theta[0], theta[1], theta[2], theta[3]
@@ -191,10 +193,10 @@ def lugre_gram(P, vm, v, a, tau, dt, sos):
 
 # ---------------------------------------------------------------------------------- GMS
 @njit(cache=True, inline="always")
-def _gms_step(G, stuck, vk, s, ct, xs, dt):
+def _gms_step(G, stuck, vk, s, attraction_n, xs, dt):
     ne = G.shape[0]
     sv = _sgn(vk)
-    decay = math.exp(-ct * dt / s)
+    decay = math.exp(-attraction_n * dt / s)
     for i in range(ne):
         if stuck[i]:
             G[i] += vk * dt / xs[i]
@@ -212,12 +214,12 @@ def _gms_step(G, stuck, vk, s, ct, xs, dt):
 
 @njit(cache=True)
 def gms_features(theta, v, dt, damped=False):
-    """Regressor columns of normalised GMS-N; theta = [r, vs, delta, C~, x_1..x_N] (+ [s] if
+    """Regressor columns of normalised GMS-N; theta = [r, vs, delta, attraction_n, x_1..x_N] (+ [s] if
     ``damped``): G_i, or G_i + s dG_i/dt with presliding damping (see :func:`gms_gram`)."""
     n = v.shape[0]
     ne = theta.shape[0] - 4 - (1 if damped else 0)
     out = np.empty((n, ne))
-    r, vs, delta, ct = theta[0], theta[1], theta[2], theta[3]
+    r, vs, delta, attraction_n = theta[0], theta[1], theta[2], theta[3]
     xs = theta[4 : 4 + ne].copy()
     sd = theta[4 + ne] / dt if damped else 0.0
     G = np.zeros(ne)
@@ -226,7 +228,7 @@ def gms_features(theta, v, dt, damped=False):
     for k in range(n):
         vk = v[k]
         s = _shape(vk, r, vs, delta)
-        _gms_step(G, stuck, vk, s, ct, xs, dt)
+        _gms_step(G, stuck, vk, s, attraction_n, xs, dt)
         for i in range(ne):
             if damped:
                 out[k, i] = G[i] + sd * (G[i] - Gp[i])
@@ -251,7 +253,7 @@ def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
     m = ne + 3
     grams = np.zeros((npop, m, m))
     for p in prange(npop):
-        r, vs, delta, ct = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
+        r, vs, delta, attraction_n = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
         xs = P[p, 4 : 4 + ne].copy()
         sd = P[p, 4 + ne] / dt if damped else 0.0
         G = np.zeros(ne)
@@ -263,7 +265,7 @@ def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
         for k in range(n):
             vk = vm[k]
             s = _shape(vk, r, vs, delta)
-            _gms_step(G, stuck, vk, s, ct, xs, dt)
+            _gms_step(G, stuck, vk, s, attraction_n, xs, dt)
             for i in range(ne):
                 if damped:
                     feats[i] = G[i] + sd * (G[i] - Gp[i])

@@ -2,16 +2,22 @@
 
 Every model predicts the measured joint torque as (seed 003 A.3, eq. 1 with tau_0 = 0)
 
-    tau_hat = J a + F_hat(v trajectory),      F_hat = sum_j beta_j phi_j(v; theta) + F_v v
+    tau_hat = J a + F_hat(v trajectory),      F_hat = sum_j beta_j phi_j(v; theta) + fv v
 
 where ``theta`` are the few coefficients that enter nonlinearly (searched globally, then refined)
-and ``beta`` (static level, element weights, micro-damping), the viscous coefficient ``F_v`` and
+and ``beta`` (static level, element weights, micro-damping), the viscous coefficient ``fv`` and
 the inertia ``J`` enter linearly and are solved exactly by non-negative least squares for every
 candidate ``theta`` (variable projection). The regressors ``phi_j`` of the dynamic models come from
 the compiled kernels in :mod:`kernels`; the normalised forms are documented there.
 
-Physical coefficient names follow the friction library's ``to_config()`` keys where known; the
-conversion to a library model is in :func:`friction_ros.core.identification.export.library_config`.
+The physical coefficients returned by :meth:`FitSpec.coefficients` carry the friction library's
+names (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k, alpha``: the ``to_config()``
+keys, units and equations in docs/coefficients.md) plus the inertia ``J`` [kg*m^2]; only the
+normalised search variables of ``theta`` (``r = fc/fs`` [-], ``sigma_n = sigma/fc`` [1/rad],
+``sigma0_n = sigma0/fs`` [1/rad], ``attraction_n = attraction/fs`` [1/s],
+``x_i = alpha_i fs/k_i`` [rad], ``s_damp = sigma1 / sum_j k_j`` [s]; equations in :mod:`kernels`)
+and the Stribeck step ``dfs = fs - fc`` [N*m] are names of their own. The library config is assembled in
+:func:`friction_ros.core.identification.export.library_config`.
 """
 
 from __future__ import annotations
@@ -135,7 +141,7 @@ class FitSpec:
         """Gram matrices of L [phi, v, a, tau] for every row of P (npop x m x m).
 
         ``sos``: second-order sections of a causal filter ``L`` applied to every column alike (the
-        model is linear in beta, so ``L tau = sum beta_j L phi_j + F_v L v + J L a`` holds exactly);
+        model is linear in beta, so ``L tau = sum beta_j L phi_j + fv L v + J L a`` holds exactly);
         None = no filter. The states are driven by the unfiltered ``v``.
         """
         P = np.ascontiguousarray(P, dtype=float)
@@ -188,14 +194,14 @@ class FitSpec:
 
     def fix_steady_state(self, static: dict) -> None:
         """Two-stage identification (anchors 3.3; seed 004 B.3): hold the whole steady-state curve
-        at a static fit's ``F_C, F_S, v_S, delta, F_v`` (from constant-velocity plateaus, where the
+        at a static fit's ``fc, fs, vs, delta, fv`` (from constant-velocity plateaus, where the
         friction is measured directly) and leave only the presliding/dynamic coefficients and ``J``
         to the time-domain search.
 
-        Nonlinear ``r = F_C/F_S, v_S, delta``: bounds narrowed to +-0.1 % around the static values
-        (not clipped to the free-fit bounds: a linear axis' v_S can be far below 1e-3 m/s). Linear:
-        ``F_S`` (LuGre ``fs``; GMS the sum of the element weights) and ``F_v`` by constraints. Left
-        free, the time domain trades ``F_C``/``F_v`` against ``J`` and the filter lag: 2-9 % sliding
+        Nonlinear ``r = fc/fs, vs, delta``: bounds narrowed to +-0.1 % around the static values
+        (not clipped to the free-fit bounds: a linear axis' vs can be far below 1e-3 m/s). Linear:
+        ``fs`` (LuGre ``fs``; GMS the sum of the element weights) and ``fv`` by constraints. Left
+        free, the time domain trades ``fc``/``fv`` against ``J`` and the filter lag: 2-9 % sliding
         map error on the presets against 0.1-0.2 % for the plateau fit."""
         fs = float(static.get("fs", static.get("fc", 0.0)))
         fc = float(static.get("fc", fs))
@@ -248,22 +254,22 @@ class FitSpec:
                 "delta": delta,
                 "sigma0": s0 * fs,
                 "sigma1": lin["sigma1"],
-                "sigma2": fv,
+                "fv": fv,
             }
         elif f == "gms":
-            r, vs, delta, ct = theta[:4]
+            r, vs, delta, attraction_n = theta[:4]
             xs = theta[4 : 4 + self.n_elements]
             betas = np.array([lin[f"beta{i + 1}"] for i in range(self.n_elements)])
             fs = float(betas.sum())
             alpha = betas / fs if fs > 0 else np.full(self.n_elements, 1.0 / self.n_elements)
-            k = betas / xs  # k_i = alpha_i F_S / x_i
+            k = betas / xs  # k_i = alpha_i fs / x_i
             order = np.argsort(xs)
             c = {
                 "fc": r * fs,
                 "fs": fs,
                 "vs": vs,
                 "delta": delta,
-                "c": ct * fs,
+                "attraction": attraction_n * fs,
                 "fv": fv,
                 "k": k[order].tolist(),
                 "alpha": alpha[order].tolist(),
@@ -305,8 +311,8 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
     for any practical purpose); each element regressor becomes ``G_i + s dG_i/dt``, so the element
     weights still enter linearly (see :mod:`kernels`).
 
-    Bounds of the dynamic models: F_C/F_S in [0.5, 1] (a static level at most twice the Coulomb
-    level) and v_S >= 1e-3 rad/s; without them the sparsely visited low-speed sliding region lets
+    Bounds of the dynamic models: fc/fs in [0.5, 1] (a static level at most twice the Coulomb
+    level) and vs >= 1e-3 rad/s; without them the sparsely visited low-speed sliding region lets
     the fit grow an unphysical Stribeck spike that costs nothing in NMSE but ruins compensation.
     """
     arr = np.array
@@ -358,7 +364,7 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
         return FitSpec(
             f"gms{ne}{'d' if damped else ''}",
             "gms",
-            ["r", "vs", "delta", "c_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
+            ["r", "vs", "delta", "attraction_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
             arr(lo),
             arr(hi),
             arr(lg),

@@ -636,7 +636,7 @@ def _wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> Model
             return c["fc"] * np.sign(v)
         if spec.family in ("coulomb", "stribeck"):
             return stribeck_map(v, {**c, "fs": c.get("fs", c["fc"])}) * np.abs(sat_sign(v, c.get("eps", eps)))
-        return stribeck_map(v, {**c, "fv": c.get("fv", c.get("sigma2", 0.0))})
+        return stribeck_map(v, c)
 
     ident = {}
     if ident_check:
