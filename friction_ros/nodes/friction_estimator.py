@@ -185,7 +185,7 @@ class FrictionEstimatorNode(ParameterNode):
         out.coefficient_names = names
         out.coefficients = coefs
         std = self.estimator.coefficient_std
-        out.coefficient_std = [float(std.get(n.split(".")[-1], math.nan)) for n in names] if std else []
+        out.coefficient_std = [float(std.get(n, math.nan)) for n in names] if std else []
         out.excitation_ok = e.excitation_ok
         out.converged = e.converged
         self.pub.publish(out)
