@@ -81,6 +81,7 @@ from friction_ros.core.can.axis import (
 )
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import DriveStateEncoder, JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.node_utils import (
@@ -88,19 +89,15 @@ from friction_ros.nodes.node_utils import (
     ERROR,
     OK,
     RECORDED_QOS,
-    SCHEDULING_PARAMS,
     SENSOR_QOS,
     WARN,
     DeadlineLoop,
     DiagnosticsPublisher,
     FixedRateLoop,
-    Param,
-    ParameterNode,
-    add_runtime_validation,
     apply_scheduling,
-    declare,
     run_node,
 )
+from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
 
 
 def _level(x) -> int:
@@ -113,15 +110,15 @@ RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 
 INTERFACES = tuple(sorted(can.VALID_INTERFACES))
 
 PARAMS = [
-    Param(
+    Field(
         "interface",
         "socketcan",
         "python-can interface (socketcan on robots; virtual in tests)",
         choices=INTERFACES,
         read_only=True,
     ),
-    Param("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
-    Param(
+    Field("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
+    Field(
         "bitrate",
         1000000,
         "bitrate for interfaces that set it (socketcan: set with ip link)",
@@ -130,11 +127,11 @@ PARAMS = [
         read_only=True,
         unit="bit/s",
     ),
-    Param("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
-    Param("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
-    Param("mit.master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
+    Field("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
+    Field("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
+    Field("mit.master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
     *[
-        Param(f"mit.{k}", float(getattr(mitc.MitRanges(), k)), f"MIT scaling range {k}", read_only=True)
+        Field(f"mit.{k}", float(getattr(mitc.MitRanges(), k)), f"MIT scaling range {k}", read_only=True)
         for k in (
             "p_min",
             "p_max",
@@ -148,8 +145,8 @@ PARAMS = [
             "t_max",
         )
     ],
-    Param("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
-    Param(
+    Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
+    Field(
         "control_rate_hz",
         1000.0,
         "publication and command rate",
@@ -158,33 +155,33 @@ PARAMS = [
         read_only=True,
         unit="Hz",
     ),
-    Param("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
-    Param("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
-    Param("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
-    Param("zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"),
-    Param(
+    Field("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
+    Field("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
+    Field("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
+    Field("zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"),
+    Field(
         "effort_source",
         "current",
         "joint effort from Iq*k_t*gear (current) or the drive's Torque_Estimate",
         choices=("current", "torque_estimate"),
         read_only=True,
     ),
-    Param(
+    Field(
         "request_telemetry",
         False,
         "ODrive: also send RTR requests for encoder + effort every period",
         read_only=True,
     ),
-    Param("torque_limit", 1.0, "|joint torque command| limit", lo=0.0, unit="N*m"),
-    Param("current_limit", 10.0, "|motor current| limit (also sent to the drive)", lo=0.0, unit="A"),
-    Param(
+    Field("torque_limit", 1.0, "|joint torque command| limit", lo=0.0, unit="N*m"),
+    Field("current_limit", 10.0, "|motor current| limit (also sent to the drive)", lo=0.0, unit="A"),
+    Field(
         "velocity_limit",
         10.0,
         "|joint velocity| above which no accelerating torque is sent",
         lo=0.0,
         unit="rad/s",
     ),
-    Param(
+    Field(
         "command_timeout",
         0.1,
         "watchdog: zero torque when no command arrived for this long",
@@ -192,7 +189,7 @@ PARAMS = [
         hi=10.0,
         unit="s",
     ),
-    Param(
+    Field(
         "telemetry_rate_hz",
         0.0,
         "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
@@ -202,7 +199,7 @@ PARAMS = [
         read_only=True,
         unit="Hz",
     ),
-    Param(
+    Field(
         "telemetry_timeout",
         0.0,
         f"stale telemetry fault when no encoder/effort frame for this long; 0 = automatic: "
@@ -211,10 +208,10 @@ PARAMS = [
         hi=10.0,
         unit="s",
     ),
-    Param(
+    Field(
         "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
     ),
-    Param(
+    Field(
         "loop_spin",
         0.0,
         "busy-wait before each period for timing accuracy (costs spin/period of a core)",
@@ -223,10 +220,10 @@ PARAMS = [
         read_only=True,
         unit="s",
     ),
-    Param("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
-    Param("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
-    Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
-    *SCHEDULING_PARAMS,
+    Field("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
+    Field("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
+    Field("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
+    *SCHEDULING,
 ]
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
@@ -368,11 +365,11 @@ def check_joint_names(joints: list[str]) -> None:
             raise ParameterError(f"joints[{i}] = {j!r} appears twice: joint names must differ")
 
 
-def axis_param_specs(joints: list[str], v: dict) -> list[Param]:
+def axis_param_specs(joints: list[str], v: dict) -> list[Field]:
     """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
     by = {p.name: p for p in PARAMS}
     return [
-        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], description=f"{j}: {by[k].description}")
+        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
         for j in joints
         for k in AXIS_KEYS
     ]
@@ -426,9 +423,11 @@ class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
-        self.v = v = declare(self, PARAMS, check_unknown=not joints)
+        self.v = v = flatten(
+            declare_config(self, Schema("drive_interface", PARAMS), check_unknown=not joints)
+        )
         self.axis_specs = axis_param_specs(joints, v)
-        per_joint = declare(self, self.axis_specs) if joints else {}
+        per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
         self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint)]
         self.axes = [p.axis for p in self.ports]
@@ -462,7 +461,6 @@ class DriveInterface(ParameterNode):
         ids = ",".join(str(a.cfg.node_id) for a in self.axes)
         hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{ids}"
         self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
-        add_runtime_validation(self, [*PARAMS, *self.axis_specs], self._apply)
         self.commands_foreign = 0  # for other joints only
         self.commands_malformed = 0  # array lengths that do not match
         self._ignored_last: dict[str, float] = {}

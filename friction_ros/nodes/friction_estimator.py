@@ -20,31 +20,30 @@ from friction_msgs.msg import FrictionEstimate
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.node_utils import (
     OK,
     RECORDED_QOS,
-    SCHEDULING_PARAMS,
     STATE_QOS,
     WARN,
     DiagnosticsPublisher,
-    Param,
-    ParameterNode,
-    add_runtime_validation,
     apply_scheduling,
-    declare,
-    gate_params,
-    override_values,
     run_node,
-    section_specs,
-    unflatten,
+)
+from friction_ros.nodes.parameters import (
+    SCHEDULING,
+    ParameterNode,
+    current_values,
+    declare_config,
+    input_gate_schema,
 )
 
-NODE_PARAMS = [
-    Param("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
-    Param(
+NODE_FIELDS = [
+    Field("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
+    Field(
         "control_period",
         0.001,
         "nominal sample period (used when stamps do not advance)",
@@ -53,16 +52,14 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "publish_every",
         10,
         "publish one estimate every N samples (every sample is still processed)",
         lo=1,
         hi=100000,
     ),
-    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    *gate_params(),
-    *SCHEDULING_PARAMS,
+    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
 DOCS = {
     "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
@@ -97,22 +94,25 @@ class FrictionEstimatorNode(ParameterNode):
 
     def __init__(self):
         super().__init__("friction_estimator")
-        specs = list(NODE_PARAMS)
-        for k, v in ESTIMATOR_DEFAULTS.items():
-            if k in SECTIONS:
-                continue
-            specs.append(
-                Param(k, float(v) if isinstance(v, float) else v, DOCS.get(k, k), unit=UNITS.get(k, ""))
+        estimator = [
+            Field(
+                k,
+                float(v) if isinstance(v, float) else v,
+                DOCS.get(k, k),
+                unit=UNITS.get(k, ""),
+                allow_inf=True,
             )
-        for s in SECTIONS:
-            if override_values(self, s):
-                specs += section_specs(self, s, {}, f"estimator {s}")
-        self.specs = specs
-        self.values = unflatten(declare(self, specs))
+            for k, v in ESTIMATOR_DEFAULTS.items()
+            if k not in SECTIONS
+        ]
+        sections = [Schema(s, doc=f"estimator {s}", open=True) for s in SECTIONS if self.given_section(s)]
+        schema = Schema(
+            "friction_estimator", [*NODE_FIELDS, *estimator, *sections, input_gate_schema(), *SCHEDULING]
+        )
+        self.values = declare_config(self, schema, self._apply)
         self.estimator = OnlineFrictionEstimator(
             self._core_config(self.values)
         )  # refuses to start if invalid
-        add_runtime_validation(self, specs, self._apply)
         self.joint = self.values["joint_name"]
         self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", RECORDED_QOS)
         self._decoder = JointStateDecoder()
@@ -141,8 +141,7 @@ class FrictionEstimatorNode(ParameterNode):
         return {k: values[k] for k in ESTIMATOR_DEFAULTS if k in values}
 
     def _apply(self, changes: dict) -> None:
-        flat = {**{p.name: self.get_parameter(p.name).value for p in self.specs}, **changes}
-        values = unflatten({k: (list(v) if hasattr(v, "tolist") else v) for k, v in flat.items()})
+        values = current_values(self, changes)
         est = OnlineFrictionEstimator(self._core_config(values))  # raises -> change rejected
         self.estimator, self.values = est, values
         self._publish_every = values["publish_every"]

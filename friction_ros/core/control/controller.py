@@ -51,6 +51,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from friction_ros.core.config import Field, Schema, unflatten
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
 from friction_ros.core.control.pid import PID_DEFAULTS, Pid
@@ -91,6 +92,62 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "sliding_mode": dict(SlidingMode.DEFAULTS),
 }
 _SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+
+# meaning and unit of the plain (not section) controller keys
+_TOP_DOCS = {
+    "mode": ("controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode", ""),
+    "feedforward_gain": ("velocity feedforward gain (command += gain * reference velocity)", "N*m*s/rad"),
+    "inertia": ("J_hat for the inertia feedforward J_hat * reference acceleration", "kg*m^2"),
+    "load_feedforward": ("constant torque added to the command: holds a known load such as gravity", "N*m"),
+    "limit_cycle_detection": ("switch friction compensation off (latched) when it causes a limit cycle", ""),
+    "limit_cycle_min_frequency": ("limit cycle: lowest oscillation frequency that counts", "Hz"),
+    "limit_cycle_min_amplitude": (
+        "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
+        "rad",
+    ),
+    "limit_cycle_window": ("limit cycle: averaging time constant of the detector", "s"),
+    "limit_cycle_hold": ("limit cycle: how long the oscillation must hold before the fallback", "s"),
+    "u_clamp_max": ("upper torque limit", "N*m"),
+    "u_clamp_min": ("lower torque limit", "N*m"),
+    "rate_limit": ("torque rate limit", "N*m/s"),
+    "velocity_source": (
+        "measured (joint_states velocity) or differentiated (filtered position difference)",
+        "",
+    ),
+    "velocity_filter_time_constant": ("velocity filter time constant", "s"),
+    "position_jump_limit": ("reject position samples that jump more than this (lost encoder bits)", "rad"),
+}
+
+
+def controller_parameter_schema(friction_model: bool = True, reference: bool = True) -> list[Field | Schema]:
+    """The compensating_controller's ROS layout of the controller (see :func:`config_from_ros_parameters`).
+
+    Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
+    ``friction`` (the library model config: ``model`` + its coefficients) and ``reference`` (the
+    built-in reference generator). ``friction_model`` / ``reference``: give ``friction.model``
+    (``none``) and ``reference.type`` (``constant``) defaults (a parameter file that sets any key of
+    the section brings its own).
+    """
+    items: list[Field | Schema] = []
+    for k, v in CONTROLLER_DEFAULTS.items():
+        if isinstance(v, dict):
+            continue
+        doc, unit = _TOP_DOCS[k]
+        choices = {"mode": CONTROLLER_MODES, "velocity_source": VELOCITY_SOURCES}.get(k, ())
+        default = float(v) if isinstance(v, int) and not isinstance(v, bool) else v
+        items.append(Field(k, default, doc, unit=unit, choices=choices, allow_inf=True))
+    for s in SCHEME_SECTIONS:
+        items.append(Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter"))
+    comp = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
+    items.append(Schema.from_defaults("compensation", comp, "friction compensation option"))
+    items.append(
+        Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
+    )
+    items.append(
+        Schema.from_defaults("reference", {"type": "constant"} if reference else {}, "reference generator")
+    )
+    return items
 
 
 @dataclass
@@ -121,33 +178,6 @@ class ControllerTerms:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def unflatten(params: Mapping[str, Any]) -> dict[str, Any]:
-    """Turn ROS-style dotted keys (``pid.p``, ``friction.model.fc``) into a nested dict."""
-    out: dict[str, Any] = {}
-    for key, value in params.items():
-        parts = str(key).split(".")
-        d = out
-        for p in parts[:-1]:
-            nxt = d.setdefault(p, {})
-            if not isinstance(nxt, dict):
-                raise ParameterError(f"{key}: {p!r} is both a value and a section")
-            d = nxt
-        d[parts[-1]] = value
-    return out
-
-
-def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Inverse of :func:`unflatten` (None values are dropped: ROS parameters cannot be None)."""
-    out: dict[str, Any] = {}
-    for k, v in config.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, Mapping):
-            out.update(flatten(v, key + "."))
-        elif v is not None:
-            out[key] = v
-    return out
 
 
 def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:

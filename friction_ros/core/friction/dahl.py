@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
+
 from . import _kernels as K
-from .base import Coef, DynamicModel
+from .base import DynamicModel
 
 
 class Dahl(DynamicModel):
@@ -20,9 +22,9 @@ class Dahl(DynamicModel):
     KIND = K.K_DAHL
     STATE_NAMES = ("F",)
     COEFS = (
-        Coef("sigma", lo=0.0, lo_open=True, unit="N*m/rad", doc="rest stiffness"),
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
-        Coef("alpha", 1.0, lo=0.0, lo_open=True, doc="shape exponent"),
+        Field("sigma", lo=0.0, lo_open=True, unit="N*m/rad", doc="rest stiffness"),
+        Field("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
+        Field("alpha", 1.0, lo=0.0, lo_open=True, doc="shape exponent"),
     )
 
     def _steady(self, v):

@@ -6,10 +6,11 @@ import math
 
 import numpy as np
 
+from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
 from . import _kernels as K
-from .base import Coef, DynamicModel, stribeck_np
+from .base import DynamicModel, stribeck_np
 
 ALPHA_SUM_TOL = 1e-6
 
@@ -37,16 +38,16 @@ class GMS(DynamicModel):
     name = "gms"
     KIND = K.K_GMS
     COEFS = (
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level of s(v)"),
-        Coef("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v)"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
-        Coef("attraction", lo=0.0, lo_open=True, unit="N*m/s", doc="attraction parameter C"),
-        Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
-        Coef("k", lo=0.0, lo_open=True, unit="N*m/rad", is_list=True, doc="element stiffnesses"),
-        Coef("alpha", lo=0.0, lo_open=True, hi=1.0, is_list=True, doc="element weights (sum 1)"),
+        Field("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level of s(v)"),
+        Field("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v)"),
+        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
+        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
+        Field("attraction", lo=0.0, lo_open=True, unit="N*m/s", doc="attraction parameter C"),
+        Field("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+        Field("k", lo=0.0, lo_open=True, unit="N*m/rad", is_list=True, doc="element stiffnesses"),
+        Field("alpha", lo=0.0, lo_open=True, hi=1.0, is_list=True, doc="element weights (sum 1)"),
         # appended last so positional users of param_names / param_vector() keep their indices
-        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="presliding micro-damping (0 = none)"),
+        Field("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="presliding micro-damping (0 = none)"),
     )
 
     def _validate(self):

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
+
 from . import _kernels as K
-from .base import Coef, DynamicModel, stribeck_np
+from .base import DynamicModel, stribeck_np
 
 
 class LuGre(DynamicModel):
@@ -25,14 +27,14 @@ class LuGre(DynamicModel):
     KIND = K.K_LUGRE
     STATE_NAMES = ("z",)
     COEFS = (
-        Coef("sigma0", lo=0.0, lo_open=True, unit="N*m/rad", doc="bristle stiffness"),
-        Coef("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="micro-damping"),
-        Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient (sigma2)"),
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
-        Coef("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
-        Coef("vd", 0.0, lo=0.0, unit="rad/s", doc="micro-damping decay velocity (0: constant sigma1)"),
+        Field("sigma0", lo=0.0, lo_open=True, unit="N*m/rad", doc="bristle stiffness"),
+        Field("sigma1", 0.0, lo=0.0, unit="N*m*s/rad", doc="micro-damping"),
+        Field("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient (sigma2)"),
+        Field("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level"),
+        Field("fs", lo=0.0, lo_open=True, unit="N*m", doc="static level"),
+        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity"),
+        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent"),
+        Field("vd", 0.0, lo=0.0, unit="rad/s", doc="micro-damping decay velocity (0: constant sigma1)"),
     )
 
     def _validate(self):

@@ -8,16 +8,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
 from . import _kernels as K
-from .base import Coef, StaticModel, stribeck_np
+from .base import StaticModel, stribeck_np
 
-_FC = Coef("fc", lo=0.0, unit="N*m", doc="Coulomb (kinetic) friction level")
-_FS = Coef("fs", lo=0.0, unit="N*m", doc="static friction (stiction) level")
-_VS = Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity")
-_DELTA = Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck shape exponent")
-_FV = Coef("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient")
+_FC = Field("fc", lo=0.0, unit="N*m", doc="Coulomb (kinetic) friction level")
+_FS = Field("fs", lo=0.0, unit="N*m", doc="static friction (stiction) level")
+_VS = Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity")
+_DELTA = Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck shape exponent")
+_FV = Field("fv", 0.0, lo=0.0, unit="N*m*s/rad", doc="viscous coefficient")
 
 
 class ZeroFriction(StaticModel):
@@ -46,7 +47,7 @@ class Viscous(StaticModel):
 
     name = "viscous"
     KIND = K.K_VISCOUS
-    COEFS = (Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),)
+    COEFS = (Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),)
 
     def _steady(self, v):
         return self._c["fv"] * v
@@ -57,7 +58,7 @@ class CoulombViscous(StaticModel):
 
     name = "coulomb_viscous"
     KIND = K.K_COULOMB_VISCOUS
-    COEFS = (_FC, Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"))
+    COEFS = (_FC, Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"))
 
     def _steady(self, v):
         return self._c["fc"] * np.sign(v) + self._c["fv"] * v
@@ -142,7 +143,7 @@ class StribeckEps(StaticModel):
         _VS,
         _DELTA,
         _FV,
-        Coef("eps", lo=0.0, lo_open=True, unit="rad/s", doc="linear-zone half width"),
+        Field("eps", lo=0.0, lo_open=True, unit="rad/s", doc="linear-zone half width"),
     )
 
     def _validate(self):
@@ -164,11 +165,11 @@ class GAExponential(StaticModel):
     name = "ga_exponential"
     KIND = K.K_GA_EXPONENTIAL
     COEFS = (
-        Coef("fs", lo=0.0, unit="N*m", doc="static level F_ST"),
-        Coef("gamma", lo=0.0, lo_open=True, unit="s/rad", doc="inverse Stribeck velocity"),
-        Coef("delta", lo=0.0, lo_open=True, doc="shape exponent"),
-        Coef("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+        Field("fs", lo=0.0, unit="N*m", doc="static level F_ST"),
+        Field("gamma", lo=0.0, lo_open=True, unit="s/rad", doc="inverse Stribeck velocity"),
+        Field("delta", lo=0.0, lo_open=True, doc="shape exponent"),
+        Field("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin"),
+        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
     )
 
     def _steady(self, v):
@@ -185,11 +186,11 @@ class GATustin(StaticModel):
     name = "ga_tustin"
     KIND = K.K_GA_TUSTIN
     COEFS = (
-        Coef("ff0", lo=0.0, unit="N*m", doc="static friction constant"),
-        Coef("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction"),
-        Coef("vc", lo=0.0, lo_open=True, unit="rad/s", doc="threshold velocity"),
-        Coef("x", lo=0.0, lo_open=True, doc="Armstrong exponent"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
+        Field("ff0", lo=0.0, unit="N*m", doc="static friction constant"),
+        Field("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction"),
+        Field("vc", lo=0.0, lo_open=True, unit="rad/s", doc="threshold velocity"),
+        Field("x", lo=0.0, lo_open=True, doc="Armstrong exponent"),
+        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient"),
     )
 
     def _steady(self, v):
@@ -209,11 +210,11 @@ class GANonLinear(StaticModel):
     name = "ga_nonlinear"
     KIND = K.K_GA_NONLINEAR
     COEFS = (
-        Coef("alpha0", lo=0.0, unit="N*m"),
-        Coef("alpha1", lo=0.0, unit="N*m"),
-        Coef("alpha2", lo=0.0, unit="N*m"),
-        Coef("beta1", lo=0.0, unit="s/rad"),
-        Coef("beta2", lo=0.0, unit="s/rad"),
+        Field("alpha0", lo=0.0, unit="N*m"),
+        Field("alpha1", lo=0.0, unit="N*m"),
+        Field("alpha2", lo=0.0, unit="N*m"),
+        Field("beta1", lo=0.0, unit="s/rad"),
+        Field("beta2", lo=0.0, unit="s/rad"),
     )
 
     def _steady(self, v):
@@ -232,11 +233,11 @@ class GADupont(StaticModel):
     name = "ga_dupont"
     KIND = K.K_GA_DUPONT
     COEFS = (
-        Coef("c0", lo=0.0, unit="N*m"),
-        Coef("c1", lo=0.0, unit="N*m*s/rad"),
-        Coef("c2", lo=0.0, unit="N*m"),
-        Coef("c3", lo=0.0, lo_open=True, unit="rad/s"),
-        Coef("c4", lo=0.0, lo_open=True),
+        Field("c0", lo=0.0, unit="N*m"),
+        Field("c1", lo=0.0, unit="N*m*s/rad"),
+        Field("c2", lo=0.0, unit="N*m"),
+        Field("c3", lo=0.0, lo_open=True, unit="rad/s"),
+        Field("c4", lo=0.0, lo_open=True),
     )
 
     def _steady(self, v):
@@ -255,10 +256,10 @@ class GASevenParameter(StaticModel):
     name = "ga_seven_parameter"
     KIND = K.K_GA_SEVEN
     COEFS = (
-        Coef("fc", lo=0.0, unit="N*m"),
-        Coef("fv", lo=0.0, unit="N*m*s/rad"),
-        Coef("fs", lo=0.0, unit="N*m", doc="Stribeck magnitude F_s,inf (added to fc at rest)"),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s"),
+        Field("fc", lo=0.0, unit="N*m"),
+        Field("fv", lo=0.0, unit="N*m*s/rad"),
+        Field("fs", lo=0.0, unit="N*m", doc="Stribeck magnitude F_s,inf (added to fc at rest)"),
+        Field("vs", lo=0.0, lo_open=True, unit="rad/s"),
     )
 
     def _steady(self, v):
@@ -276,8 +277,8 @@ class Polynomial(StaticModel):
     name = "polynomial"
     KIND = K.K_POLYNOMIAL
     COEFS = (
-        Coef("pos", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn for v > 0"),
-        Coef("neg", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn of |F| for v < 0"),
+        Field("pos", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn for v > 0"),
+        Field("neg", lo=None, unit="N*m", is_list=True, doc="coefficients c0..cn of |F| for v < 0"),
     )
 
     def _validate(self):
@@ -309,9 +310,9 @@ class LoadDependent(StaticModel):
     load_dependent = True
     COEFS = (
         _FC,
-        Coef("fl", 0.0, lo=0.0, doc="friction per unit transmitted torque [-]"),
+        Field("fl", 0.0, lo=0.0, doc="friction per unit transmitted torque [-]"),
         _FV,
-        Coef("veps", 0.0, lo=0.0, unit="rad/s", doc="smoothing velocity of the sign"),
+        Field("veps", 0.0, lo=0.0, unit="rad/s", doc="smoothing velocity of the sign"),
     )
 
     def _steady(self, v, load=0.0):
