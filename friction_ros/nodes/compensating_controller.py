@@ -88,6 +88,22 @@ NODE_FIELDS = [
 ]
 
 
+def parameter_schema(given_section=lambda prefix: {}) -> Schema:
+    """The node's parameters; ``given_section(prefix)``: keys given for a section (friction model
+    and reference defaults apply only when none is given)."""
+    return Schema(
+        "compensating_controller",
+        [
+            *NODE_FIELDS,
+            *controller_parameter_schema(
+                friction_model=not given_section("friction"), reference=not given_section("reference")
+            ),
+            input_gate_schema(),
+            *SCHEDULING,
+        ],
+    )
+
+
 # ControllerTerms fields copied into friction_msgs/ControllerState every period (hot path: no asdict)
 _STATE_FIELDS = tuple(
     f.name
@@ -107,19 +123,7 @@ class CompensatingControllerNode(ParameterNode):
 
     def __init__(self):
         super().__init__("compensating_controller")
-        schema = Schema(
-            "compensating_controller",
-            [
-                *NODE_FIELDS,
-                *controller_parameter_schema(
-                    friction_model=not self.given_section("friction"),
-                    reference=not self.given_section("reference"),
-                ),
-                input_gate_schema(),
-                *SCHEDULING,
-            ],
-        )
-        self.values = declare_config(self, schema, self._apply)
+        self.values = declare_config(self, parameter_schema(self.given_section), self._apply)
         self.controller, ref_cfg = controller_from_ros_parameters(self.values)  # ParameterError -> refuses
         self.reference = reference_from_config(ref_cfg)
         self.trajectory: TrajectoryReference | None = None

@@ -225,6 +225,13 @@ PARAMS = [
     Field("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
     *SCHEDULING,
 ]
+
+
+def parameter_schema() -> Schema:
+    """The node's parameters (one drive; with ``joints``, :data:`AXIS_KEYS` also per joint)."""
+    return Schema("drive_interface", PARAMS)
+
+
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
     "node_id",

@@ -89,27 +89,31 @@ UNITS = {
 SECTIONS = ("initial", "lugre")
 
 
+def parameter_schema(given_section=lambda prefix: {}) -> Schema:
+    """The node's parameters (estimator sections only when given: ``given_section(prefix)``)."""
+    estimator = [
+        Field(
+            k,
+            float(v) if isinstance(v, float) else v,
+            DOCS.get(k, k),
+            unit=UNITS.get(k, ""),
+            allow_inf=True,
+        )
+        for k, v in ESTIMATOR_DEFAULTS.items()
+        if k not in SECTIONS
+    ]
+    sections = [Schema(s, doc=f"estimator {s}", open=True) for s in SECTIONS if given_section(s)]
+    return Schema(
+        "friction_estimator", [*NODE_FIELDS, *estimator, *sections, input_gate_schema(), *SCHEDULING]
+    )
+
+
 class FrictionEstimatorNode(ParameterNode):
     """Thin adapter over OnlineFrictionEstimator; see the module docstring."""
 
     def __init__(self):
         super().__init__("friction_estimator")
-        estimator = [
-            Field(
-                k,
-                float(v) if isinstance(v, float) else v,
-                DOCS.get(k, k),
-                unit=UNITS.get(k, ""),
-                allow_inf=True,
-            )
-            for k, v in ESTIMATOR_DEFAULTS.items()
-            if k not in SECTIONS
-        ]
-        sections = [Schema(s, doc=f"estimator {s}", open=True) for s in SECTIONS if self.given_section(s)]
-        schema = Schema(
-            "friction_estimator", [*NODE_FIELDS, *estimator, *sections, input_gate_schema(), *SCHEDULING]
-        )
-        self.values = declare_config(self, schema, self._apply)
+        self.values = declare_config(self, parameter_schema(self.given_section), self._apply)
         self.estimator = OnlineFrictionEstimator(
             self._core_config(self.values)
         )  # refuses to start if invalid

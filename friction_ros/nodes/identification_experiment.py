@@ -160,22 +160,23 @@ def _profile_of(node: ParameterNode) -> str:
     return given.value if given is not None and given.value in PROFILES else "default"
 
 
+def parameter_schema(profile: str = "default") -> Schema:
+    """The node's parameters; program-level defaults follow the chosen ``profile``."""
+    base = profile_defaults(profile)
+    fields = [
+        dataclasses.replace(f, default=copy.deepcopy(base[f.name])) if f.name in ("sequence", "gap") else f
+        for f in NODE_FIELDS
+    ]
+    sections = [Schema.from_defaults(s, base[s], f"{s} parameter", read_only=True) for s in SECTIONS]
+    return Schema("identification_experiment", [*fields, *sections])
+
+
 class IdentificationExperiment(ParameterNode):
     """Thin adapter over :class:`ExcitationProgram`; see the module docstring."""
 
     def __init__(self):
         super().__init__("identification_experiment")
-        base = profile_defaults(_profile_of(self))
-        fields = [  # program-level defaults follow the chosen profile
-            dataclasses.replace(f, default=copy.deepcopy(base[f.name]))
-            if f.name in ("sequence", "gap")
-            else f
-            for f in NODE_FIELDS
-        ]
-        sections = [Schema.from_defaults(s, base[s], f"{s} parameter", read_only=True) for s in SECTIONS]
-        self.values = declare_config(
-            self, Schema("identification_experiment", [*fields, *sections]), self._apply
-        )
+        self.values = declare_config(self, parameter_schema(_profile_of(self)), self._apply)
         cfg = {s: self.values[s] for s in SECTIONS}
         cfg.update(
             program=self.values["program"],

@@ -140,19 +140,23 @@ NODE_FIELDS = [
 ]
 
 
+PRESET_SECTIONS = ("plant", "friction_motor", "friction_load")
+
+
+def parameter_schema() -> Schema:
+    """The node's parameters; the preset sections take the keys given in the parameter file (on top
+    of the preset; the plant's keys: :data:`friction_ros.core.plant.PLANT_SCHEMA`)."""
+    sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
+    return Schema("plant_simulator", [*NODE_FIELDS, *sections, *SCHEDULING])
+
+
 class PlantSimulator(ParameterNode):
     """Thin adapter: commands in, GearheadServoPlant.step, joint states out."""
 
     def __init__(self):
         super().__init__("plant_simulator")
-        sections = [
-            Schema(s, doc=f"preset {s} parameter", open=True, read_only=True)
-            for s in ("plant", "friction_motor", "friction_load")
-        ]
-        self.p = declare_config(
-            self, Schema("plant_simulator", [*NODE_FIELDS, *sections, *SCHEDULING]), self._apply
-        )
-        sections = {s.name: self.p.get(s.name, {}) for s in sections}
+        self.p = declare_config(self, parameter_schema(), self._apply)
+        sections = {s: self.p.get(s, {}) for s in PRESET_SECTIONS}
         self.preset = resolve_preset(self.p["preset"], sections)
         self.plant = self.preset.make_plant()
         self.scale = command_scale(self.plant)
