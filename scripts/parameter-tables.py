@@ -67,6 +67,8 @@ def render() -> str:
     from friction_ros.core.friction.registry import MODEL_CLASSES
     from friction_ros.core.plant import PLANT_SCHEMA
     from friction_ros.nodes import (
+        bag_player,
+        bag_recorder,
         compensating_controller,
         drive_interface,
         friction_estimator,
@@ -90,6 +92,8 @@ def render() -> str:
         drive_interface,
     ):
         schema = module.parameter_schema()
+        out += [f"## {schema.name}", "", *table(schema), ""]
+    for schema in (bag_recorder.SCHEMA, bag_player.SCHEMA):
         out += [f"## {schema.name}", "", *table(schema), ""]
     out += [
         "## plant (section of a preset / plant_simulator)",

@@ -66,21 +66,18 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 
-from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.axis import (
+    AXIS_SCHEMA,
     FAULT_BUS,
-    JITTER_MARGIN,
     LATCHING,
-    PROTOCOLS,
-    STALE_PERIODS,
     AxisConfig,
     DriveAxis,
+    axis_config,
     fault_text,
     frame_router,
 )
 from friction_ros.core.can.frame import Frame
-from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import DriveStateEncoder, JointStateDecoder, JointStateEncoder
@@ -109,7 +106,7 @@ CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
 RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 per ms)
 INTERFACES = tuple(sorted(can.VALID_INTERFACES))
 
-PARAMS = [
+NODE_FIELDS = [
     Field(
         "interface",
         "socketcan",
@@ -127,24 +124,6 @@ PARAMS = [
         read_only=True,
         unit="bit/s",
     ),
-    Field("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
-    Field("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
-    Field("mit.master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
-    *[
-        Field(f"mit.{k}", float(getattr(mitc.MitRanges(), k)), f"MIT scaling range {k}", read_only=True)
-        for k in (
-            "p_min",
-            "p_max",
-            "v_min",
-            "v_max",
-            "kp_min",
-            "kp_max",
-            "kd_min",
-            "kd_max",
-            "t_min",
-            "t_max",
-        )
-    ],
     Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
     Field(
         "control_rate_hz",
@@ -154,59 +133,6 @@ PARAMS = [
         hi=5000.0,
         read_only=True,
         unit="Hz",
-    ),
-    Field("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
-    Field("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
-    Field("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
-    Field("zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"),
-    Field(
-        "effort_source",
-        "current",
-        "joint effort from Iq*k_t*gear (current) or the drive's Torque_Estimate",
-        choices=("current", "torque_estimate"),
-        read_only=True,
-    ),
-    Field(
-        "request_telemetry",
-        False,
-        "ODrive: also send RTR requests for encoder + effort every period",
-        read_only=True,
-    ),
-    Field("torque_limit", 1.0, "|joint torque command| limit", lo=0.0, unit="N*m"),
-    Field("current_limit", 10.0, "|motor current| limit (also sent to the drive)", lo=0.0, unit="A"),
-    Field(
-        "velocity_limit",
-        10.0,
-        "|joint velocity| above which no accelerating torque is sent",
-        lo=0.0,
-        unit="rad/s",
-    ),
-    Field(
-        "command_timeout",
-        0.1,
-        "watchdog: zero torque when no command arrived for this long",
-        lo=1e-4,
-        hi=10.0,
-        unit="s",
-    ),
-    Field(
-        "telemetry_rate_hz",
-        0.0,
-        "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
-        "(MIT replies and RTR requests come once per period)",
-        lo=0.0,
-        hi=10000.0,
-        read_only=True,
-        unit="Hz",
-    ),
-    Field(
-        "telemetry_timeout",
-        0.0,
-        f"stale telemetry fault when no encoder/effort frame for this long; 0 = automatic: "
-        f"{STALE_PERIODS} telemetry periods + {JITTER_MARGIN * 1e3:g} ms jitter margin",
-        lo=0.0,
-        hi=10.0,
-        unit="s",
     ),
     Field(
         "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
@@ -223,13 +149,13 @@ PARAMS = [
     Field("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
     Field("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
     Field("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
-    *SCHEDULING,
 ]
 
 
 def parameter_schema() -> Schema:
-    """The node's parameters (one drive; with ``joints``, :data:`AXIS_KEYS` also per joint)."""
-    return Schema("drive_interface", PARAMS)
+    """The node's parameters: the bus and loop, one drive (:data:`~friction_ros.core.can.axis.AXIS_SCHEMA`;
+    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling."""
+    return Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING])
 
 
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
@@ -245,31 +171,6 @@ AXIS_KEYS = (
     "velocity_limit",
 )
 _JOINT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
-
-
-def axis_config(v: dict) -> AxisConfig:
-    """Build the core AxisConfig from validated parameter values (ParameterError on bad combos)."""
-    if v["direction"] not in (1, -1):
-        raise ParameterError(f"direction = {v['direction']} is not allowed: must be one of 1, -1")
-    for k in ("torque_limit", "current_limit", "velocity_limit"):
-        if not v[k] > 0:
-            raise ParameterError(f"{k} = {v[k]:g} is out of range: must be > 0")
-    ranges = mitc.MitRanges(**{f.name: v[f"mit.{f.name}"] for f in dataclasses.fields(mitc.MitRanges)})
-    return AxisConfig(
-        protocol=v["protocol"],
-        node_id=v["node_id"],
-        mit_master_id=v["mit.master_id"],
-        mit_ranges=ranges,
-        conversion=JointConversion(v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"]),
-        torque_limit=v["torque_limit"],
-        current_limit=v["current_limit"],
-        velocity_limit=v["velocity_limit"],
-        command_timeout=v["command_timeout"],
-        telemetry_period=1.0 / (v["telemetry_rate_hz"] or v["control_rate_hz"]),
-        telemetry_timeout=v["telemetry_timeout"],
-        effort_source=v["effort_source"],
-        request_telemetry=v["request_telemetry"],
-    )
 
 
 def can_filters(cfg: AxisConfig) -> list[dict]:
@@ -359,7 +260,7 @@ def declare_joints(node: Node) -> list[str]:
 
 
 def check_joint_names(joints: list[str]) -> None:
-    top = {p.name.split(".")[0] for p in PARAMS}
+    top = {name.split(".")[0] for name, _ in parameter_schema().fields()}
     for i, j in enumerate(joints):
         if not _JOINT_NAME.match(j):
             raise ParameterError(
@@ -374,7 +275,7 @@ def check_joint_names(joints: list[str]) -> None:
 
 def axis_param_specs(joints: list[str], v: dict) -> list[Field]:
     """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
-    by = {p.name: p for p in PARAMS}
+    by = dict(parameter_schema().fields())
     return [
         dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
         for j in joints
@@ -403,7 +304,7 @@ class AxisPort:
     def __init__(self, values: dict):
         self.values = values
         self.joint = values["joint_name"]
-        self.axis = DriveAxis(axis_config(values))
+        self.axis = DriveAxis(axis_config(values, values["control_rate_hz"]))
         self.packets = StatePackets(self.joint, values["protocol"])
         self.ds = DriveState(joint_name=self.joint, protocol=values["protocol"])
         self.flags = 0
@@ -430,9 +331,7 @@ class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
-        self.v = v = flatten(
-            declare_config(self, Schema("drive_interface", PARAMS), check_unknown=not joints)
-        )
+        self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
         self.axis_specs = axis_param_specs(joints, v)
         per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
@@ -539,7 +438,9 @@ class DriveInterface(ParameterNode):
                 if k.startswith(port.joint + ".") and multi:
                     vals[k[len(port.joint) + 1 :]] = val
             new_values.append(vals)
-        configs = [axis_config(vals) for vals in new_values]  # raises ParameterError -> rejected
+        configs = [
+            axis_config(vals, vals["control_rate_hz"]) for vals in new_values
+        ]  # raises ParameterError -> rejected
         for port, vals, cfg in zip(self.ports, new_values, configs):
             with port.axis._lock:
                 port.axis.cfg = cfg

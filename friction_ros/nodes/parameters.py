@@ -161,6 +161,7 @@ def declare_config(
     schema: Schema,
     apply: Callable[[dict[str, Any]], None] | None = None,
     check_unknown: bool = True,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Declare every field of ``schema`` as a ROS parameter and return the validated values, nested
     like the schema (``{"pid": {"p": 200.0}, ...}``).
@@ -170,12 +171,18 @@ def declare_config(
     With ``apply``, run-time changes of every parameter declared so far are validated with the same
     field checks; read-only ones are refused; ``apply({name: value})`` then receives an accepted
     change and may raise ParameterError (cross-parameter checks by the core), which rejects it.
+    ``overrides`` (name -> value, None: not given) are values from outside ROS (a tool's own
+    command-line options); they replace the parameter values, checked by the same fields.
     """
     specs = schema_fields(node, schema)
     for name, spec in specs:
         _declare_one(node, name, spec)
         node.parameter_fields[name] = spec
-    values = {name: spec.check(_plain(node.get_parameter(name).value), name) for name, spec in specs}
+    values = {name: spec.check(_value(node, name, spec), name) for name, spec in specs}
+    by_name = dict(specs)
+    for name, value in (overrides or {}).items():
+        if value is not None and name in by_name:
+            values[name] = by_name[name].check(_plain(value), name)
     if check_unknown:
         declared = set(node.list_parameters([], 0).names) | {"use_sim_time"}
         unknown = sorted(
@@ -189,6 +196,11 @@ def declare_config(
     if apply is not None:
         _add_runtime_validation(node, apply)
     return unflatten(values)
+
+
+def _value(node: ParameterNode, name: str, spec: Field) -> Any:
+    value = node.get_parameter(name).value
+    return spec.default if value is None else _plain(value)  # None: an empty array declared by type
 
 
 def _plain(value: Any) -> Any:
