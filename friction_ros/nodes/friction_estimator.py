@@ -21,7 +21,7 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
+from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.node_utils import (
@@ -61,51 +61,11 @@ NODE_FIELDS = [
     ),
     Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
-DOCS = {
-    "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
-    "model": "adapted model: viscous, coulomb_viscous, asymmetric_coulomb_viscous, stribeck, "
-    "asymmetric_stribeck, lugre (observer)",
-    "inertia": "J_hat of the joint (joint side)",
-    "filter_time_constant": "acceleration/velocity filter time constant",
-    "observer_bandwidth": "disturbance observer bandwidth",
-    "vs": "Stribeck velocity (fixed shape)",
-    "delta": "Stribeck exponent (fixed shape)",
-    "forgetting_factor": "RLS forgetting factor",
-    "initial_covariance": "RLS initial covariance",
-    "min_velocity": "excitation: adapt only while |v| >= this",
-    "min_samples": "excited samples before convergence can be declared",
-    "convergence_tolerance": "relative one-sigma std below which a coefficient counts as converged",
-    "std_floor": "absolute std floor for convergence",
-    "observer_gain": "LuGre observer correction gain",
-}
-UNITS = {
-    "inertia": "kg*m^2",
-    "filter_time_constant": "s",
-    "observer_bandwidth": "rad/s",
-    "vs": "rad/s",
-    "min_velocity": "rad/s",
-    "observer_gain": "1/s",
-}
-SECTIONS = ("initial", "lugre")
 
 
-def parameter_schema(given_section=lambda prefix: {}) -> Schema:
-    """The node's parameters (estimator sections only when given: ``given_section(prefix)``)."""
-    estimator = [
-        Field(
-            k,
-            float(v) if isinstance(v, float) else v,
-            DOCS.get(k, k),
-            unit=UNITS.get(k, ""),
-            allow_inf=True,
-        )
-        for k, v in ESTIMATOR_DEFAULTS.items()
-        if k not in SECTIONS
-    ]
-    sections = [Schema(s, doc=f"estimator {s}", open=True) for s in SECTIONS if given_section(s)]
-    return Schema(
-        "friction_estimator", [*NODE_FIELDS, *estimator, *sections, input_gate_schema(), *SCHEDULING]
-    )
+def parameter_schema() -> Schema:
+    """The node's parameters: its own, the estimator's (:data:`ESTIMATOR_SCHEMA`), the input gate."""
+    return Schema("friction_estimator", [*NODE_FIELDS, *ESTIMATOR_SCHEMA, input_gate_schema(), *SCHEDULING])
 
 
 class FrictionEstimatorNode(ParameterNode):
@@ -113,7 +73,7 @@ class FrictionEstimatorNode(ParameterNode):
 
     def __init__(self):
         super().__init__("friction_estimator")
-        self.values = declare_config(self, parameter_schema(self.given_section), self._apply)
+        self.values = declare_config(self, parameter_schema(), self._apply)
         self.estimator = OnlineFrictionEstimator(
             self._core_config(self.values)
         )  # refuses to start if invalid
@@ -142,7 +102,7 @@ class FrictionEstimatorNode(ParameterNode):
 
     @staticmethod
     def _core_config(values: dict) -> dict:
-        return {k: values[k] for k in ESTIMATOR_DEFAULTS if k in values}
+        return {k: values[k] for k in ESTIMATOR_SCHEMA.items if k in values}
 
     def _apply(self, changes: dict) -> None:
         values = current_values(self, changes)

@@ -199,8 +199,11 @@ def declare_config(
 
 
 def _value(node: ParameterNode, name: str, spec: Field) -> Any:
-    value = node.get_parameter(name).value
-    return spec.default if value is None else _plain(value)  # None: an empty array declared by type
+    try:
+        value = node.get_parameter(name).value
+    except rclpy.exceptions.ParameterUninitializedException:  # an empty array declared by its type
+        return spec.default
+    return spec.default if value is None else _plain(value)
 
 
 def _plain(value: Any) -> Any:
