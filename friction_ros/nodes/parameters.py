@@ -80,7 +80,11 @@ class ParameterNode(Node):
 
 
 def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
-    """The ROS parameter descriptor of a field: type, description with unit, choices, range, read-only."""
+    """The ROS parameter descriptor of a field: type, description with unit, choices, range, read-only.
+
+    A field that admits infinity gets no ROS range (a ROS range cannot hold it); its range is
+    checked by the field itself.
+    """
     name = spec.name if name is None else name
     d = ParameterDescriptor(
         name=name,
@@ -89,7 +93,7 @@ def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
         additional_constraints=("one of: " + ", ".join(spec.choices)) if spec.choices else "",
         read_only=spec.read_only,
     )
-    if not spec.is_list and (spec.lo is not None or spec.hi is not None):
+    if not spec.is_list and not spec.allow_inf and (spec.lo is not None or spec.hi is not None):
         lo = -sys.float_info.max if spec.lo is None else spec.lo
         hi = sys.float_info.max if spec.hi is None else spec.hi
         if spec.kind is int:
