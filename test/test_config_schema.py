@@ -51,3 +51,43 @@ def test_plant_schema_documents_every_plant_parameter_with_its_unit():
     assert names["motor_inertia"].required and names["motor_inertia"].unit == "kg*m^2"
     assert names["gear_efficiency"].range_text().startswith("in (0, 1]")
     assert all(f.doc for f in names.values())
+
+
+def test_every_key_of_the_shipped_parameter_files_is_declared_by_its_nodes_schema():
+    """The YAML layout is the schema's: each key is a field, or lies in an open section (friction
+    model coefficients, preset sections) whose object checks it."""
+    from pathlib import Path
+
+    import yaml
+
+    from friction_ros.core.config import flatten
+    from friction_ros.nodes import (
+        compensating_controller,
+        drive_interface,
+        friction_estimator,
+        identification_experiment,
+        plant_simulator,
+    )
+
+    schemas = {
+        m.parameter_schema().name: m.parameter_schema()
+        for m in (
+            compensating_controller,
+            friction_estimator,
+            identification_experiment,
+            plant_simulator,
+            drive_interface,
+        )
+    }
+    checked = 0
+    for path in sorted((Path(__file__).resolve().parents[1] / "params").glob("*.yaml")):
+        for node, body in (yaml.safe_load(path.read_text()) or {}).items():
+            schema = schemas.get(node.rsplit("/", 1)[-1])
+            if schema is None or not isinstance(body, dict):
+                continue
+            names = {n for n, _ in schema.fields()}
+            opens = [p for p, s in schema.sections() if s.open]
+            for key in flatten(body.get("ros__parameters") or {}):
+                assert key in names or any(key.startswith(p + ".") for p in opens), (path.name, node, key)
+                checked += 1
+    assert checked > 50
