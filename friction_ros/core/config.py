@@ -7,8 +7,11 @@ validates a nested config dict once (:meth:`Schema.validate`), with one-line
 :class:`~friction_ros.core.validation.ParameterError` messages that name the parameter, the value
 and what is allowed.
 
-The friction models list their coefficients as fields (``FrictionModel.COEFS``), the plant its
-parameters (:data:`friction_ros.core.plant.PLANT_SCHEMA`), the nodes their ROS parameters; the
+The friction models list their coefficients as fields (``FrictionModel.COEFS``); the plant
+(:data:`friction_ros.core.plant.PLANT_SCHEMA`), the controller
+(:data:`friction_ros.core.control.controller.CONTROLLER_FIELDS`), the online estimator
+(:data:`friction_ros.core.estimation.estimator.ESTIMATOR_SCHEMA`) and a CAN drive axis
+(:data:`friction_ros.core.can.axis.AXIS_SCHEMA`) have schemas next to the code they configure. The
 ROS adapter derives parameter declarations, descriptors and run-time validation from the same
 schemas (``friction_ros.nodes.parameters.declare_config``) and ``scripts/parameter-tables.py``
 writes ``docs/parameters.md`` from them.
@@ -92,10 +95,6 @@ class Field:
         if self.kind in (int, float) and (self.lo is not None or self.hi is not None):
             return range_text(self.lo, self.hi, self.lo_open, self.hi_open)
         return ""
-
-    def with_name(self, name: str) -> Field:
-        """The same field under another (e.g. dotted) name."""
-        return Field(**{**self.__dict__, "name": name})
 
     def check(self, value: Any, key: str | None = None) -> Any:
         """Return ``value`` validated and normalised (int -> float for float fields, tuple -> list).
@@ -187,26 +186,6 @@ class Schema:
 
     def __iter__(self) -> Iterator[Field | Schema]:
         return iter(self.items.values())
-
-    def __getitem__(self, name: str) -> Field | Schema:
-        node: Any = self
-        for part in name.split("."):
-            node = node.items[part]
-        return node
-
-    def __contains__(self, name: str) -> bool:
-        try:
-            self[name]
-        except (KeyError, AttributeError):
-            return False
-        return True
-
-    def extend(self, items: Iterable[Field | Schema], name: str | None = None) -> Schema:
-        """A new schema with ``items`` appended (a field of the same name replaces the old one)."""
-        merged = dict(self.items)
-        for item in items:
-            merged[item.name] = item
-        return Schema(name or self.name, merged.values(), self.doc, self.open, self.read_only)
 
     def fields(self, prefix: str = "") -> Iterator[tuple[str, Field]]:
         """``(dotted name, field)`` of every field, sections expanded, in order."""
