@@ -297,14 +297,15 @@ def node_work_per_cycle(n: int = 20_000) -> float:
     from sensor_msgs.msg import JointState
 
     from friction_ros.core.can import odrive as od
-    from friction_ros.core.can.axis import DriveAxis
+    from friction_ros.core.can.axis import DriveAxis, axis_config
+    from friction_ros.core.config import flatten
     from friction_ros.core.wire import JointStateDecoder
-    from friction_ros.nodes.drive_interface import PARAMS, axis_config
+    from friction_ros.nodes.drive_interface import parameter_schema
     from friction_ros.nodes.drive_state_publishers import StatePackets
 
-    v = {p.name: p.default for p in PARAMS}
+    v = flatten(parameter_schema().defaults())
     v.update(node_id=1, enable_on_start=True, torque_constant=0.49)
-    axis = DriveAxis(axis_config(v))
+    axis = DriveAxis(axis_config(v, v["control_rate_hz"]))
     axis.request_enable()
     packets, decoder = StatePackets("j1", "odrive_cansimple"), JointStateDecoder()
     raw = serialize_message(JointState(name=["j1"], effort=[0.1]))

@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
+from friction_ros.core.config import Field, flatten, unflatten
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram
-from friction_ros.nodes.node_utils import Param, flatten, unflatten
 
 
 def test_latency_histogram_matches_exact_percentiles_within_one_bin_in_constant_memory():
@@ -33,10 +33,10 @@ def test_flatten_unflatten_round_trip():
 @pytest.mark.parametrize(
     "spec, value, message",
     [
-        (Param("gain", 1.0, "g", lo=0.0, hi=10.0), 20.0, r"gain = 20 is out of range: must be in \[0, 10\]"),
-        (Param("mode", "a", "m", choices=("a", "b")), "c", "must be one of a, b"),
-        (Param("gain", 1.0, "g"), "x", "has type str: must be float"),
-        (Param("gain", 1.0, "g"), math.nan, "nan is not a number"),
+        (Field("gain", 1.0, "g", lo=0.0, hi=10.0), 20.0, r"gain = 20 is out of range: must be in \[0, 10\]"),
+        (Field("mode", "a", "m", choices=("a", "b")), "c", "must be one of a, b"),
+        (Field("gain", 1.0, "g"), "x", "has type str: must be float"),
+        (Field("gain", 1.0, "g"), math.nan, "nan is not a number"),
     ],
 )
 def test_param_check_names_the_parameter_and_the_allowed_values(spec, value, message):

@@ -36,17 +36,11 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.friction import _kernels as K
 from friction_ros.core.friction import model_from_config
 from friction_ros.core.friction._kernels import jit
-from friction_ros.core.validation import (
-    ParameterError,
-    check_bool,
-    check_choice,
-    check_int,
-    check_keys,
-    check_real,
-)
+from friction_ros.core.validation import ParameterError, check_real
 
 ACTUATION_MODES = ("current", "torque", "voltage")
 _COMMAND_UNITS = {"current": "A", "torque": "N*m", "voltage": "V"}
@@ -92,42 +86,94 @@ def voltage_params_from_transfer_function(k: float, tau: float, resistance: floa
 # ---------------------------------------------------------------------------------------------------
 # parameters
 # ---------------------------------------------------------------------------------------------------
-_SPECS: dict[str, tuple] = {
-    # name: (default, lo, lo_open, unit, doc)
-    "motor_inertia": (None, 0.0, True, "kg*m^2", "rotor (+ motor-side) inertia"),
-    "transmission_inertia": (0.0, 0.0, False, "kg*m^2", "gear / lead screw inertia on the motor side"),
-    "load_inertia": (0.0, 0.0, False, "kg*m^2 or kg", "load inertia (mass for linear axes) at the joint"),
-    "gear_ratio": (1.0, 0.0, True, "", "motor revolutions per output revolution"),
-    "gear_efficiency": (1.0, 0.0, True, "", "transmission efficiency (0, 1]"),
-    "lead_pitch": (0.0, 0.0, False, "m/rev", "lead-screw pitch; 0 = rotary joint"),
-    "motor_damping": (0.0, 0.0, False, "N*m*s/rad", "viscous damping at the motor"),
-    "load_damping": (0.0, 0.0, False, "N*m*s/rad or N*s/m", "viscous damping at the joint"),
-    "load_stiffness": (0.0, 0.0, False, "N*m/rad or N/m", "stiffness of the joint to ground"),
-    "gravity_force": (0.0, None, False, "N*m or N", "constant gravity load acting towards -q"),
-    "load_torque": (0.0, None, False, "N*m or N", "constant external load along +q"),
-    "backlash": (0.0, 0.0, False, "rad or m", "total backlash gap at the joint"),
-    "coupling_stiffness": (0.0, 0.0, False, "N*m/rad or N/m", "transmission stiffness (0 = rigid)"),
-    "coupling_damping": (0.0, 0.0, False, "N*m*s/rad or N*s/m", "transmission damping"),
-    "torque_constant": (None, 0.0, True, "N*m/A", "motor torque constant Kt"),
-    "current_time_constant": (0.0, 0.0, False, "s", "current-loop first-order lag (current/torque modes)"),
-    "amplifier_gain": (1.0, 0.0, True, "A/V", "current per unit command (current mode)"),
-    "current_limit": (0.0, 0.0, False, "A", "|i| limit (0 = none)"),
-    "resistance": (1.0, 0.0, True, "Ohm", "armature resistance (voltage mode)"),
-    "inductance": (0.0, 0.0, False, "H", "armature inductance (voltage mode; 0 = algebraic)"),
-    "back_emf_constant": (0.0, 0.0, False, "V*s/rad", "back-EMF constant Ke (voltage mode)"),
-    "voltage_limit": (0.0, 0.0, False, "V", "|u| limit (0 = none)"),
-    "internal_dt": (1e-4, 0.0, True, "s", "maximum internal integration step"),
-    "encoder_cpr": (0, 0, False, "counts/rev", "quadrature counts per encoder revolution (0 = ideal)"),
-    "encoder_ratio": (1.0, 0.0, True, "", "encoder revolutions per revolution of its shaft (belt)"),
-    "velocity_filter_hz": (0.0, 0.0, False, "Hz", "first-order low-pass on the differenced velocity"),
-    "current_noise_std": (0.0, 0.0, False, "A", "white current-sensor noise"),
-    "current_offset": (0.0, None, False, "A", "current-sensor offset"),
-    "measurement_delay": (0.0, 0.0, False, "s", "sensor delay (rounded to control periods)"),
-    "actuation_delay": (0.0, 0.0, False, "s", "command delay (rounded to control periods)"),
-    "seed": (0, 0, False, "", "random seed of the sensor noise"),
-}
-_CHOICES = {"actuation": ("current", ACTUATION_MODES), "encoder_location": ("motor", ENCODER_LOCATIONS)}
-_INTS = ("encoder_cpr", "seed")
+PLANT_SCHEMA = Schema(
+    "plant",
+    [
+        Field(
+            "motor_inertia",
+            None,
+            "rotor (+ motor-side) inertia",
+            lo=0.0,
+            lo_open=True,
+            unit="kg*m^2",
+            kind=float,
+        ),
+        Field(
+            "transmission_inertia", 0.0, "gear / lead screw inertia on the motor side", lo=0.0, unit="kg*m^2"
+        ),
+        Field(
+            "load_inertia",
+            0.0,
+            "load inertia (mass for linear axes) at the joint",
+            lo=0.0,
+            unit="kg*m^2 or kg",
+        ),
+        Field("gear_ratio", 1.0, "motor revolutions per output revolution", lo=0.0, lo_open=True),
+        Field("gear_efficiency", 1.0, "transmission efficiency (0, 1]", lo=0.0, lo_open=True, hi=1.0),
+        Field("lead_pitch", 0.0, "lead-screw pitch; 0 = rotary joint", lo=0.0, unit="m/rev"),
+        Field("motor_damping", 0.0, "viscous damping at the motor", lo=0.0, unit="N*m*s/rad"),
+        Field("load_damping", 0.0, "viscous damping at the joint", lo=0.0, unit="N*m*s/rad or N*s/m"),
+        Field("load_stiffness", 0.0, "stiffness of the joint to ground", lo=0.0, unit="N*m/rad or N/m"),
+        Field("gravity_force", 0.0, "constant gravity load acting towards -q", unit="N*m or N"),
+        Field("load_torque", 0.0, "constant external load along +q", unit="N*m or N"),
+        Field("backlash", 0.0, "total backlash gap at the joint", lo=0.0, unit="rad or m"),
+        Field("coupling_stiffness", 0.0, "transmission stiffness (0 = rigid)", lo=0.0, unit="N*m/rad or N/m"),
+        Field("coupling_damping", 0.0, "transmission damping", lo=0.0, unit="N*m*s/rad or N*s/m"),
+        Field(
+            "torque_constant",
+            None,
+            "motor torque constant Kt",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m/A",
+            kind=float,
+        ),
+        Field(
+            "current_time_constant",
+            0.0,
+            "current-loop first-order lag (current/torque modes)",
+            lo=0.0,
+            unit="s",
+        ),
+        Field(
+            "amplifier_gain", 1.0, "current per unit command (current mode)", lo=0.0, lo_open=True, unit="A/V"
+        ),
+        Field("current_limit", 0.0, "|i| limit (0 = none)", lo=0.0, unit="A"),
+        Field("resistance", 1.0, "armature resistance (voltage mode)", lo=0.0, lo_open=True, unit="Ohm"),
+        Field("inductance", 0.0, "armature inductance (voltage mode; 0 = algebraic)", lo=0.0, unit="H"),
+        Field("back_emf_constant", 0.0, "back-EMF constant Ke (voltage mode)", lo=0.0, unit="V*s/rad"),
+        Field("voltage_limit", 0.0, "|u| limit (0 = none)", lo=0.0, unit="V"),
+        Field("internal_dt", 1e-4, "maximum internal integration step", lo=0.0, lo_open=True, unit="s"),
+        Field(
+            "encoder_cpr", 0, "quadrature counts per encoder revolution (0 = ideal)", lo=0, unit="counts/rev"
+        ),
+        Field(
+            "encoder_ratio",
+            1.0,
+            "encoder revolutions per revolution of its shaft (belt)",
+            lo=0.0,
+            lo_open=True,
+        ),
+        Field(
+            "velocity_filter_hz", 0.0, "first-order low-pass on the differenced velocity", lo=0.0, unit="Hz"
+        ),
+        Field("current_noise_std", 0.0, "white current-sensor noise", lo=0.0, unit="A"),
+        Field("current_offset", 0.0, "current-sensor offset", unit="A"),
+        Field("measurement_delay", 0.0, "sensor delay (rounded to control periods)", lo=0.0, unit="s"),
+        Field("actuation_delay", 0.0, "command delay (rounded to control periods)", lo=0.0, unit="s"),
+        Field("seed", 0, "random seed of the sensor noise", lo=0),
+        Field(
+            "actuation",
+            "current",
+            "what the command sets: current [A], torque [N*m] or voltage [V]",
+            choices=ACTUATION_MODES,
+        ),
+        Field("stick_logic", True, "exact sticking at rest (GKF / Karnopp rule)"),
+        Field("encoder_location", "motor", "shaft the encoder reads", choices=ENCODER_LOCATIONS),
+    ],
+    doc="gearhead servo plant (SI; joint units are rad or m)",
+)
+"""Parameters of :class:`PlantParams` (the ``plant`` section of a preset / plant_simulator)."""
 
 
 @dataclass
@@ -176,19 +222,8 @@ class PlantParams:
     extra: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
-        for name, (_d, lo, lo_open, unit, _doc) in _SPECS.items():
-            val = getattr(self, name)
-            if name in _INTS:
-                setattr(self, name, check_int(f"plant.{name}", val, lo))
-            else:
-                setattr(self, name, check_real(f"plant.{name}", val, lo, lo_open=lo_open, unit=unit))
-        if self.gear_efficiency > 1.0:
-            raise ParameterError(
-                f"plant.gear_efficiency = {self.gear_efficiency:g} is out of range: must be > 0 and <= 1"
-            )
-        for name, (_d, choices) in _CHOICES.items():
-            check_choice(f"plant.{name}", getattr(self, name), choices)
-        self.stick_logic = check_bool("plant.stick_logic", self.stick_logic)
+        for name, spec in PLANT_SCHEMA.fields():
+            setattr(self, name, spec.check(getattr(self, name), f"plant.{name}"))
         if self.backlash > 0 and self.coupling_stiffness == 0:
             raise ParameterError(
                 f"plant.coupling_stiffness = 0 with plant.backlash = {self.backlash:g}: must be > 0 when "
@@ -227,13 +262,7 @@ class PlantParams:
         cls, plant: Mapping[str, Any], friction_motor: Any = None, friction_load: Any = None
     ) -> PlantParams:
         plant = dict(plant or {})
-        allowed = [f.name for f in fields(cls) if f.name not in ("extra", "friction_motor", "friction_load")]
-        check_keys("plant", plant, allowed)
-        for req in ("motor_inertia", "torque_constant"):
-            if req not in plant:
-                raise ParameterError(
-                    f"plant.{req} is missing: required ({_SPECS[req][4]}, > 0 {_SPECS[req][3]})"
-                )
+        PLANT_SCHEMA.check_given(plant)
         return cls(**plant, friction_motor=friction_motor, friction_load=friction_load)
 
     def to_config(self) -> dict:

@@ -15,13 +15,16 @@ class ParameterError(ValueError):
     """A parameter is missing, of the wrong type or outside its allowed range."""
 
 
-def _fmt_range(lo: float | None, hi: float | None, lo_open: bool, hi_open: bool) -> str:
-    parts = []
+def range_text(lo: float | None, hi: float | None, lo_open: bool = False, hi_open: bool = False) -> str:
+    """``in [lo, hi], i.e. >= lo and <= hi`` (round brackets for open bounds), ``>= lo``, ``<= hi``, or ``finite``."""
+    if lo is not None and hi is not None:
+        interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        return f"in {interval}, i.e. {'>' if lo_open else '>='} {lo:g} and {'<' if hi_open else '<='} {hi:g}"
     if lo is not None:
-        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+        return f"{'>' if lo_open else '>='} {lo:g}"
     if hi is not None:
-        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
-    return " and ".join(parts) if parts else "finite"
+        return f"{'<' if hi_open else '<='} {hi:g}"
+    return "finite"
 
 
 def check_real(
@@ -37,7 +40,7 @@ def check_real(
 ) -> float:
     """Return ``value`` as float, or raise ParameterError naming ``name`` and the allowed range."""
     unit_s = f" [{unit}]" if unit else ""
-    allowed = _fmt_range(lo, hi, lo_open, hi_open)
+    allowed = range_text(lo, hi, lo_open, hi_open)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         try:
             import numpy as np
@@ -48,10 +51,14 @@ def check_real(
                 raise TypeError
         except TypeError:
             raise ParameterError(
-                f"{name} = {value!r} has type {type(value).__name__}: must be a number {allowed}{unit_s}"
+                f"{name} = {value!r} has type {type(value).__name__}: must be float"
+                + ("" if allowed == "finite" else f" {allowed}")
+                + unit_s
             ) from None
     x = float(value)
-    if math.isnan(x) or (math.isinf(x) and not allow_inf):
+    if math.isnan(x):
+        raise ParameterError(f"{name} = nan is not finite (nan is not a number): must be {allowed}{unit_s}")
+    if math.isinf(x) and not allow_inf:
         raise ParameterError(f"{name} = {x} is not finite: must be a number {allowed}{unit_s}")
     bad = (lo is not None and (x <= lo if lo_open else x < lo)) or (
         hi is not None and (x >= hi if hi_open else x > hi)
@@ -63,14 +70,14 @@ def check_real(
 
 def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = None) -> int:
     """Return ``value`` as int, or raise ParameterError naming the allowed range."""
-    allowed = _fmt_range(lo, hi, False, False)
+    allowed = "" if lo is None and hi is None else " " + range_text(lo, hi)
     if isinstance(value, bool) or not isinstance(value, int):
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         else:
-            raise ParameterError(f"{name} = {value!r} must be an integer {allowed}")
+            raise ParameterError(f"{name} = {value!r} must be an integer{allowed}")
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        raise ParameterError(f"{name} = {value} is out of range: must be an integer {allowed}")
+        raise ParameterError(f"{name} = {value} is out of range: must be an integer{allowed}")
     return int(value)
 
 

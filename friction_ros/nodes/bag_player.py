@@ -18,32 +18,67 @@ import sys
 import time
 
 import rclpy
-from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from friction_ros.core.bag import BagError, bag_info, iter_messages
+from friction_ros.core.config import Field, Schema
 from friction_ros.nodes.bag_common import (
-    Spec,
-    declare_params,
     fail,
     message_class,
     qos_from_dicts,
 )
+from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.runtime import start_process
 
-SPECS = [
-    Spec("bag", "", "bag directory or .mcap file to replay (required)"),
-    Spec("rate", 1.0, "replay speed factor (2.0 = twice as fast)", 1e-3, 1e3),
-    Spec("loop", False, "start again at the end until stopped"),
-    Spec("topics", [], "topics to replay (empty = all)"),
-    Spec("remap", [], "topic remappings 'from:=to' applied to replayed topics"),
-    Spec("publish_clock", False, "publish /clock with the bag time"),
-    Spec("clock_frequency", 100.0, "/clock rate of wall time, 0 = before every message", 0.0, 10000.0, "Hz"),
-    Spec("qos_depth", 1000, "keep-last depth of the replay publishers", lo=1, hi=100000),
-    Spec("start_delay", 0.0, "wait before the first message (discovery)", 0.0, 3600.0, "s"),
-    Spec("wait_for_subscribers", 0, "wait until every replay topic has this many subscribers", lo=0, hi=1000),
-    Spec("wait_timeout", 10.0, "longest wait for subscribers; then play anyway", 0.0, 3600.0, "s"),
-]
+SCHEMA = Schema(
+    "bag_player",
+    [
+        Field("bag", "", "bag directory or .mcap file to replay (required)", read_only=True),
+        Field("rate", 1.0, "replay speed factor (2.0 = twice as fast)", lo=1e-3, hi=1e3, read_only=True),
+        Field("loop", False, "start again at the end until stopped", read_only=True),
+        Field("topics", [], "topics to replay (empty = all)", kind=str, read_only=True),
+        Field(
+            "remap", [], "topic remappings 'from:=to' applied to replayed topics", kind=str, read_only=True
+        ),
+        Field("publish_clock", False, "publish /clock with the bag time", read_only=True),
+        Field(
+            "clock_frequency",
+            100.0,
+            "/clock rate of wall time, 0 = before every message",
+            lo=0.0,
+            hi=10000.0,
+            unit="Hz",
+            read_only=True,
+        ),
+        Field("qos_depth", 1000, "keep-last depth of the replay publishers", lo=1, hi=100000, read_only=True),
+        Field(
+            "start_delay",
+            0.0,
+            "wait before the first message (discovery)",
+            lo=0.0,
+            hi=3600.0,
+            unit="s",
+            read_only=True,
+        ),
+        Field(
+            "wait_for_subscribers",
+            0,
+            "wait until every replay topic has this many subscribers",
+            lo=0,
+            hi=1000,
+            read_only=True,
+        ),
+        Field(
+            "wait_timeout",
+            10.0,
+            "longest wait for subscribers; then play anyway",
+            lo=0.0,
+            hi=3600.0,
+            unit="s",
+            read_only=True,
+        ),
+    ],
+)
 
 
 def parse_remaps(items: list[str]) -> dict[str, str]:
@@ -59,12 +94,12 @@ def parse_remaps(items: list[str]) -> dict[str, str]:
     return out
 
 
-class BagPlayer(Node):
+class BagPlayer(ParameterNode):
     """Replays a bag; call :meth:`play` (blocking) after construction."""
 
     def __init__(self, overrides: dict | None = None, **kwargs):
         super().__init__("bag_player", **kwargs)
-        p = self.p = declare_params(self, SPECS, overrides)
+        p = self.p = declare_config(self, SCHEMA, overrides=overrides)
         if not p["bag"]:
             raise ValueError("parameter bag is empty: give the bag directory or .mcap file to replay")
         remap = parse_remaps(p["remap"])

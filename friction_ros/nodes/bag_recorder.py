@@ -40,67 +40,114 @@ import time
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from friction_ros.core.bag import BagWriter, run_metadata
 from friction_ros.core.bag.writer import COMPRESSIONS
+from friction_ros.core.config import Field, Schema
 from friction_ros.nodes.bag_common import (
-    Spec,
-    declare_params,
     fail,
     message_class,
     qos_to_dict,
 )
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.runtime import start_process
 
-SPECS = [
-    Spec("topics", [], "topics to record (absolute names); empty with all_topics=false records nothing"),
-    Spec("all_topics", False, "record every topic that appears (except /rosout and /parameter_events)"),
-    Spec("output", "", "bag directory to create; default run_<YYYYmmdd_HHMMSS> in the working directory"),
-    Spec("overwrite", False, "allow an existing non-empty output directory (its bag files are replaced)"),
-    Spec("compression", "zstd", "MCAP chunk compression", choices=tuple(COMPRESSIONS)),
-    Spec(
-        "chunk_size",
-        1048576,
-        "uncompressed bytes per chunk before it is written",
-        lo=1024,
-        hi=1 << 30,
-        unit="B",
-    ),
-    Spec(
-        "flush_interval",
-        1.0,
-        "longest time a message waits in the open chunk (SIGKILL loss bound)",
-        0.0,
-        3600.0,
-        "s",
-    ),
-    Spec(
-        "qos_depth",
-        0,
-        "depth of the recording subscriptions: 0 keeps all (a burst waits in the publisher, never "
-        "dropped here); > 0 keep-last of that depth",
-        lo=0,
-        hi=1000000,
-    ),
-    Spec(
-        "discovery_period", 0.2, "period of the search for publishers of the wanted topics", 0.01, 60.0, "s"
-    ),
-    Spec("max_duration", 0.0, "stop after this time, 0 = until SIGINT/SIGTERM", 0.0, 1e9, "s"),
-    Spec(
-        "diagnostics_period",
-        1.0,
-        "period of the diagnostics status (messages and drops per topic) and of drop log lines",
-        0.05,
-        3600.0,
-        "s",
-    ),
-    Spec("preset", "", "run metadata: plant/joint preset name"),
-    Spec("program", "", "run metadata: excitation program"),
-    Spec("parameter_files", [], "run metadata: parameter files embedded by content"),
-]
+SCHEMA = Schema(
+    "bag_recorder",
+    [
+        Field(
+            "topics",
+            [],
+            "topics to record (absolute names); empty with all_topics=false records nothing",
+            kind=str,
+            read_only=True,
+        ),
+        Field(
+            "all_topics",
+            False,
+            "record every topic that appears (except /rosout and /parameter_events)",
+            read_only=True,
+        ),
+        Field(
+            "output",
+            "",
+            "bag directory to create; default run_<YYYYmmdd_HHMMSS> in the working directory",
+            read_only=True,
+        ),
+        Field(
+            "overwrite",
+            False,
+            "allow an existing non-empty output directory (its bag files are replaced)",
+            read_only=True,
+        ),
+        Field("compression", "zstd", "MCAP chunk compression", choices=tuple(COMPRESSIONS), read_only=True),
+        Field(
+            "chunk_size",
+            1048576,
+            "uncompressed bytes per chunk before it is written",
+            lo=1024,
+            hi=1 << 30,
+            unit="B",
+            read_only=True,
+        ),
+        Field(
+            "flush_interval",
+            1.0,
+            "longest time a message waits in the open chunk (SIGKILL loss bound)",
+            lo=0.0,
+            hi=3600.0,
+            unit="s",
+            read_only=True,
+        ),
+        Field(
+            "qos_depth",
+            0,
+            "depth of the recording subscriptions: 0 keeps all (a burst waits in the publisher, never "
+            "dropped here); > 0 keep-last of that depth",
+            lo=0,
+            hi=1000000,
+            read_only=True,
+        ),
+        Field(
+            "discovery_period",
+            0.2,
+            "period of the search for publishers of the wanted topics",
+            lo=0.01,
+            hi=60.0,
+            unit="s",
+            read_only=True,
+        ),
+        Field(
+            "max_duration",
+            0.0,
+            "stop after this time, 0 = until SIGINT/SIGTERM",
+            lo=0.0,
+            hi=1e9,
+            unit="s",
+            read_only=True,
+        ),
+        Field(
+            "diagnostics_period",
+            1.0,
+            "period of the diagnostics status (messages and drops per topic) and of drop log lines",
+            lo=0.05,
+            hi=3600.0,
+            unit="s",
+            read_only=True,
+        ),
+        Field("preset", "", "run metadata: plant/joint preset name", read_only=True),
+        Field("program", "", "run metadata: excitation program", read_only=True),
+        Field(
+            "parameter_files",
+            [],
+            "run metadata: parameter files embedded by content",
+            kind=str,
+            read_only=True,
+        ),
+    ],
+)
 _IGNORED = ("/rosout", "/parameter_events")
 RECORDING_METADATA_NAME = "friction_ros_recording"
 _SEQ_UNSUPPORTED = 1 << 63  # rmw reports RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED (UINT64_MAX)
@@ -124,12 +171,12 @@ class TopicStats:
         return max(self.lost, self.gaps)
 
 
-class BagRecorder(Node):
+class BagRecorder(ParameterNode):
     """Records topics into a :class:`~friction_ros.core.bag.BagWriter` bag."""
 
     def __init__(self, overrides: dict | None = None, **kwargs):
         super().__init__("bag_recorder", **kwargs)
-        p = self.p = declare_params(self, SPECS, overrides)
+        p = self.p = declare_config(self, SCHEMA, overrides=overrides)
         if not p["topics"] and not p["all_topics"]:
             raise ValueError("no topics to record: give topics (positional or -p topics:=[...]) or --all")
         out = p["output"] or time.strftime("run_%Y%m%d_%H%M%S")

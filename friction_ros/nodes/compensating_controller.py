@@ -28,10 +28,11 @@ from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
 
 from friction_ros.core.coefficient_exchange import from_fields
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.control.controller import (
-    CONTROLLER_DEFAULTS,
     ControllerTerms,
     controller_from_ros_parameters,
+    controller_parameter_schema,
 )
 from friction_ros.core.input_gate import (
     DUPLICATE,
@@ -45,23 +46,19 @@ from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
-from friction_ros.nodes.node_utils import (
-    SCHEDULING_PARAMS,
-    Param,
+from friction_ros.nodes.parameters import (
+    SCHEDULING,
     ParameterNode,
-    add_runtime_validation,
-    declare,
-    gate_params,
-    override_values,
-    section_specs,
-    unflatten,
+    current_values,
+    declare_config,
+    input_gate_schema,
 )
 from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
-NODE_PARAMS = [
-    Param("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
-    Param(
+NODE_FIELDS = [
+    Field("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
+    Field(
         "control_period",
         0.001,
         "nominal control period (dt of the control law)",
@@ -70,8 +67,8 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
-    Param(
+    Field("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
+    Field(
         "state_timeout",
         0.05,
         "zero torque once no joint state came for this long (wall)",
@@ -79,45 +76,24 @@ NODE_PARAMS = [
         hi=60.0,
         unit="s",
     ),
-    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    *gate_params(),
-    *SCHEDULING_PARAMS,
+    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
-# Core controller keys that are plain values (not sections).
-TOP_KEYS = [k for k, v in CONTROLLER_DEFAULTS.items() if not isinstance(v, dict)]
-DOCS = {
-    "mode": "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
-    "feedforward_gain": "velocity feedforward gain (command += gain * reference velocity)",
-    "inertia": "J_hat for the inertia feedforward J_hat * reference acceleration",
-    "load_feedforward": "constant torque added to the command: holds a known load such as gravity",
-    "limit_cycle_detection": "switch friction compensation off (latched) when it causes a limit cycle",
-    "limit_cycle_min_frequency": "limit cycle: lowest oscillation frequency that counts",
-    "limit_cycle_min_amplitude": "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
-    "limit_cycle_window": "limit cycle: averaging time constant of the detector",
-    "limit_cycle_hold": "limit cycle: how long the oscillation must hold before the fallback",
-    "u_clamp_max": "upper torque limit",
-    "u_clamp_min": "lower torque limit",
-    "rate_limit": "torque rate limit",
-    "velocity_source": "measured (joint_states velocity) or differentiated (filtered position difference)",
-    "velocity_filter_time_constant": "velocity filter time constant",
-    "position_jump_limit": "reject position samples that jump more than this (lost encoder bits)",
-}
-UNITS = {
-    "inertia": "kg*m^2",
-    "load_feedforward": "N*m",
-    "limit_cycle_min_frequency": "Hz",
-    "limit_cycle_min_amplitude": "rad",
-    "limit_cycle_window": "s",
-    "limit_cycle_hold": "s",
-    "u_clamp_max": "N*m",
-    "u_clamp_min": "N*m",
-    "rate_limit": "N*m/s",
-    "velocity_filter_time_constant": "s",
-    "position_jump_limit": "rad",
-    "feedforward_gain": "N*m*s/rad",
-}
-SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
-DEFAULT_REFERENCE = {"type": "constant"}
+
+
+def parameter_schema(given_section=lambda prefix: {}) -> Schema:
+    """The node's parameters; ``given_section(prefix)``: keys given for a section (friction model
+    and reference defaults apply only when none is given)."""
+    return Schema(
+        "compensating_controller",
+        [
+            *NODE_FIELDS,
+            *controller_parameter_schema(
+                friction_model=not given_section("friction"), reference=not given_section("reference")
+            ),
+            input_gate_schema(),
+            *SCHEDULING,
+        ],
+    )
 
 
 # ControllerTerms fields copied into friction_msgs/ControllerState every period (hot path: no asdict)
@@ -139,34 +115,10 @@ class CompensatingControllerNode(ParameterNode):
 
     def __init__(self):
         super().__init__("compensating_controller")
-        specs = list(NODE_PARAMS)
-        for k in TOP_KEYS:
-            v = CONTROLLER_DEFAULTS[k]
-            specs.append(
-                Param(
-                    k,
-                    float(v) if isinstance(v, int) and not isinstance(v, bool) else v,
-                    DOCS.get(k, k),
-                    unit=UNITS.get(k, ""),
-                )
-            )
-        for s in SCHEME_SECTIONS:
-            specs += section_specs(self, s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
-        comp_defaults = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
-        specs += section_specs(self, "compensation", comp_defaults, "friction compensation option")
-        model_given = override_values(self, "friction")
-        specs += section_specs(self, "friction", {} if model_given else {"model": "none"}, "friction model")
-        ref_given = override_values(self, "reference")
-        specs += section_specs(
-            self, "reference", {} if ref_given else DEFAULT_REFERENCE, "reference generator"
-        )
-        self.specs = specs
-        values = declare(self, specs)
-        self.values = unflatten(values)
+        self.values = declare_config(self, parameter_schema(self.given_section), self._apply)
         self.controller, ref_cfg = controller_from_ros_parameters(self.values)  # ParameterError -> refuses
         self.reference = reference_from_config(ref_cfg)
         self.trajectory: TrajectoryReference | None = None
-        add_runtime_validation(self, specs, self._apply)
 
         self.joint = self.values["joint_name"]
         self.dt = self.values["control_period"]
@@ -214,10 +166,7 @@ class CompensatingControllerNode(ParameterNode):
     # -- parameters -------------------------------------------------------------------------------
     def _apply(self, changes: dict) -> None:
         """Validate a run-time change by building the new controller first; commit only if valid."""
-        flat = {**{p.name: self.get_parameter(p.name).value for p in self.specs}, **changes}
-        values = unflatten(
-            {k: (list(v) if hasattr(v, "tolist") or isinstance(v, tuple) else v) for k, v in flat.items()}
-        )
+        values = current_values(self, changes)
         new_ctrl, ref_cfg = controller_from_ros_parameters(values)  # ParameterError -> change rejected
         new_ref = reference_from_config(ref_cfg)
         if self.controller.compensation_fallback:

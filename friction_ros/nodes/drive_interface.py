@@ -53,47 +53,38 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from friction_ros.core.can import mit as mitc
 from friction_ros.core.can.axis import (
+    AXIS_SCHEMA,
     FAULT_BUS,
-    JITTER_MARGIN,
-    PROTOCOLS,
-    STALE_PERIODS,
-    AxisConfig,
     DriveAxis,
+    axis_config,
     frame_router,
 )
 from friction_ros.core.can.axis_health import AxisHealth
 from friction_ros.core.can.drive_set import axis_values, changed_values, check_distinct_ids, check_joint_names
 from friction_ros.core.can.frame import Frame
-from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.drive_commands import CommandIntake
 from friction_ros.nodes.drive_state_publishers import DriveStatePublishers, drive_values
 from friction_ros.nodes.loops import DeadlineLoop, FixedRateLoop
-from friction_ros.nodes.node_utils import (
-    SCHEDULING_PARAMS,
-    Param,
-    ParameterNode,
-    add_runtime_validation,
-    declare,
-)
+from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 INTERFACES = tuple(sorted(can.VALID_INTERFACES))
 
-PARAMS = [
-    Param(
+NODE_FIELDS = [
+    Field(
         "interface",
         "socketcan",
         "python-can interface (socketcan on robots; virtual in tests)",
         choices=INTERFACES,
         read_only=True,
     ),
-    Param("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
-    Param(
+    Field("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
+    Field(
         "bitrate",
         1000000,
         "bitrate for interfaces that set it (socketcan: set with ip link)",
@@ -102,26 +93,8 @@ PARAMS = [
         read_only=True,
         unit="bit/s",
     ),
-    Param("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
-    Param("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
-    Param("mit.master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
-    *[
-        Param(f"mit.{k}", float(getattr(mitc.MitRanges(), k)), f"MIT scaling range {k}", read_only=True)
-        for k in (
-            "p_min",
-            "p_max",
-            "v_min",
-            "v_max",
-            "kp_min",
-            "kp_max",
-            "kd_min",
-            "kd_max",
-            "t_min",
-            "t_max",
-        )
-    ],
-    Param("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
-    Param(
+    Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
+    Field(
         "control_rate_hz",
         1000.0,
         "publication and command rate",
@@ -130,63 +103,10 @@ PARAMS = [
         read_only=True,
         unit="Hz",
     ),
-    Param("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
-    Param("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
-    Param("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
-    Param("zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"),
-    Param(
-        "effort_source",
-        "current",
-        "joint effort from Iq*k_t*gear (current) or the drive's Torque_Estimate",
-        choices=("current", "torque_estimate"),
-        read_only=True,
-    ),
-    Param(
-        "request_telemetry",
-        False,
-        "ODrive: also send RTR requests for encoder + effort every period",
-        read_only=True,
-    ),
-    Param("torque_limit", 1.0, "|joint torque command| limit", lo=0.0, unit="N*m"),
-    Param("current_limit", 10.0, "|motor current| limit (also sent to the drive)", lo=0.0, unit="A"),
-    Param(
-        "velocity_limit",
-        10.0,
-        "|joint velocity| above which no accelerating torque is sent",
-        lo=0.0,
-        unit="rad/s",
-    ),
-    Param(
-        "command_timeout",
-        0.1,
-        "watchdog: zero torque when no command arrived for this long",
-        lo=1e-4,
-        hi=10.0,
-        unit="s",
-    ),
-    Param(
-        "telemetry_rate_hz",
-        0.0,
-        "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
-        "(MIT replies and RTR requests come once per period)",
-        lo=0.0,
-        hi=10000.0,
-        read_only=True,
-        unit="Hz",
-    ),
-    Param(
-        "telemetry_timeout",
-        0.0,
-        f"stale telemetry fault when no encoder/effort frame for this long; 0 = automatic: "
-        f"{STALE_PERIODS} telemetry periods + {JITTER_MARGIN * 1e3:g} ms jitter margin",
-        lo=0.0,
-        hi=10.0,
-        unit="s",
-    ),
-    Param(
+    Field(
         "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
     ),
-    Param(
+    Field(
         "loop_spin",
         0.0,
         "busy-wait before each period for timing accuracy (costs spin/period of a core)",
@@ -195,11 +115,18 @@ PARAMS = [
         read_only=True,
         unit="s",
     ),
-    Param("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
-    Param("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
-    Param("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
-    *SCHEDULING_PARAMS,
+    Field("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
+    Field("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
+    Field("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
 ]
+
+
+def parameter_schema() -> Schema:
+    """The node's parameters: the bus and loop, one drive (:data:`~friction_ros.core.can.axis.AXIS_SCHEMA`;
+    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling."""
+    return Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING])
+
+
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
     "node_id",
@@ -212,31 +139,6 @@ AXIS_KEYS = (
     "current_limit",
     "velocity_limit",
 )
-
-
-def axis_config(v: dict) -> AxisConfig:
-    """Build the core AxisConfig from validated parameter values (ParameterError on bad combos)."""
-    if v["direction"] not in (1, -1):
-        raise ParameterError(f"direction = {v['direction']} is not allowed: must be one of 1, -1")
-    for k in ("torque_limit", "current_limit", "velocity_limit"):
-        if not v[k] > 0:
-            raise ParameterError(f"{k} = {v[k]:g} is out of range: must be > 0")
-    ranges = mitc.MitRanges(**{f.name: v[f"mit.{f.name}"] for f in dataclasses.fields(mitc.MitRanges)})
-    return AxisConfig(
-        protocol=v["protocol"],
-        node_id=v["node_id"],
-        mit_master_id=v["mit.master_id"],
-        mit_ranges=ranges,
-        conversion=JointConversion(v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"]),
-        torque_limit=v["torque_limit"],
-        current_limit=v["current_limit"],
-        velocity_limit=v["velocity_limit"],
-        command_timeout=v["command_timeout"],
-        telemetry_period=1.0 / (v["telemetry_rate_hz"] or v["control_rate_hz"]),
-        telemetry_timeout=v["telemetry_timeout"],
-        effort_source=v["effort_source"],
-        request_telemetry=v["request_telemetry"],
-    )
 
 
 def declare_joints(node: Node) -> list[str]:
@@ -261,15 +163,15 @@ def declare_joints(node: Node) -> list[str]:
             "joints must be a list of joint names, e.g. joints: [shoulder, elbow] (leave it out for one drive)"
         ) from None
     joints = list(joints or [])
-    check_joint_names(joints, {p.name.split(".")[0] for p in PARAMS})
+    check_joint_names(joints, {name.split(".")[0] for name, _ in parameter_schema().fields()})
     return joints
 
 
-def axis_param_specs(joints: list[str], v: dict) -> list[Param]:
+def axis_param_specs(joints: list[str], v: dict) -> list[Field]:
     """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
-    by = {p.name: p for p in PARAMS}
+    by = dict(parameter_schema().fields())
     return [
-        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], description=f"{j}: {by[k].description}")
+        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
         for j in joints
         for k in AXIS_KEYS
     ]
@@ -282,7 +184,7 @@ class AxisPort:
     def __init__(self, values: dict):
         self.values = values
         self.joint = values["joint_name"]
-        self.axis = DriveAxis(axis_config(values))
+        self.axis = DriveAxis(axis_config(values, values["control_rate_hz"]))
         self.health = AxisHealth()
         self.flags = 0
         self.label = f"drive '{self.joint}' (id {values['node_id']})"
@@ -292,9 +194,9 @@ class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
-        self.v = v = declare(self, PARAMS, check_unknown=not joints)
+        self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
         self.axis_specs = axis_param_specs(joints, v)
-        per_joint = declare(self, self.axis_specs) if joints else {}
+        per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
         self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint, AXIS_KEYS)]
         self.axes = [p.axis for p in self.ports]
@@ -320,7 +222,6 @@ class DriveInterface(ParameterNode):
         ids = ",".join(str(a.cfg.node_id) for a in self.axes)
         hw = f"{v['interface']}:{v['channel']}/{v['protocol']}#{ids}"
         self.diag = DiagnosticsPublisher(self, "drive_interface", hardware_id=hw)
-        add_runtime_validation(self, [*PARAMS, *self.axis_specs], self._apply)
         self._diag_next = time.monotonic()
         self._ros_clock = self.get_clock()
         if self.states.fallback_reason:
@@ -350,7 +251,9 @@ class DriveInterface(ParameterNode):
         """Run-time change: rebuild every affected axis config first (all or nothing), then swap."""
         values = [p.values for p in self.ports]
         new_values, shared = changed_values(self.joints, values, changes, AXIS_KEYS, bool(self.joints_param))
-        configs = [axis_config(vals) for vals in new_values]  # raises ParameterError -> rejected
+        configs = [
+            axis_config(vals, vals["control_rate_hz"]) for vals in new_values
+        ]  # raises ParameterError -> rejected
         for port, vals, cfg in zip(self.ports, new_values, configs):
             with port.axis._lock:
                 port.axis.cfg = cfg

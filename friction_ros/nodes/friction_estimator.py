@@ -20,27 +20,24 @@ from friction_msgs.msg import FrictionEstimate
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
-from friction_ros.core.estimation.estimator import ESTIMATOR_DEFAULTS, OnlineFrictionEstimator
+from friction_ros.core.config import Field, Schema
+from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
-from friction_ros.nodes.node_utils import (
-    SCHEDULING_PARAMS,
-    Param,
+from friction_ros.nodes.parameters import (
+    SCHEDULING,
     ParameterNode,
-    add_runtime_validation,
-    declare,
-    gate_params,
-    override_values,
-    section_specs,
-    unflatten,
+    current_values,
+    declare_config,
+    input_gate_schema,
 )
 from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
-NODE_PARAMS = [
-    Param("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
-    Param(
+NODE_FIELDS = [
+    Field("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
+    Field(
         "control_period",
         0.001,
         "nominal sample period (used when stamps do not advance)",
@@ -49,43 +46,20 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "publish_every",
         10,
         "publish one estimate every N samples (every sample is still processed)",
         lo=1,
         hi=100000,
     ),
-    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    *gate_params(),
-    *SCHEDULING_PARAMS,
+    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
-DOCS = {
-    "method": "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
-    "model": "adapted model: viscous, coulomb_viscous, asymmetric_coulomb_viscous, stribeck, "
-    "asymmetric_stribeck, lugre (observer)",
-    "inertia": "J_hat of the joint (joint side)",
-    "filter_time_constant": "acceleration/velocity filter time constant",
-    "observer_bandwidth": "disturbance observer bandwidth",
-    "vs": "Stribeck velocity (fixed shape)",
-    "delta": "Stribeck exponent (fixed shape)",
-    "forgetting_factor": "RLS forgetting factor",
-    "initial_covariance": "RLS initial covariance",
-    "min_velocity": "excitation: adapt only while |v| >= this",
-    "min_samples": "excited samples before convergence can be declared",
-    "convergence_tolerance": "relative one-sigma std below which a coefficient counts as converged",
-    "std_floor": "absolute std floor for convergence",
-    "observer_gain": "LuGre observer correction gain",
-}
-UNITS = {
-    "inertia": "kg*m^2",
-    "filter_time_constant": "s",
-    "observer_bandwidth": "rad/s",
-    "vs": "rad/s",
-    "min_velocity": "rad/s",
-    "observer_gain": "1/s",
-}
-SECTIONS = ("initial", "lugre")
+
+
+def parameter_schema() -> Schema:
+    """The node's parameters: its own, the estimator's (:data:`ESTIMATOR_SCHEMA`), the input gate."""
+    return Schema("friction_estimator", [*NODE_FIELDS, *ESTIMATOR_SCHEMA, input_gate_schema(), *SCHEDULING])
 
 
 class FrictionEstimatorNode(ParameterNode):
@@ -93,22 +67,10 @@ class FrictionEstimatorNode(ParameterNode):
 
     def __init__(self):
         super().__init__("friction_estimator")
-        specs = list(NODE_PARAMS)
-        for k, v in ESTIMATOR_DEFAULTS.items():
-            if k in SECTIONS:
-                continue
-            specs.append(
-                Param(k, float(v) if isinstance(v, float) else v, DOCS.get(k, k), unit=UNITS.get(k, ""))
-            )
-        for s in SECTIONS:
-            if override_values(self, s):
-                specs += section_specs(self, s, {}, f"estimator {s}")
-        self.specs = specs
-        self.values = unflatten(declare(self, specs))
+        self.values = declare_config(self, parameter_schema(), self._apply)
         self.estimator = OnlineFrictionEstimator(
             self._core_config(self.values)
         )  # refuses to start if invalid
-        add_runtime_validation(self, specs, self._apply)
         self.joint = self.values["joint_name"]
         self.pub = self.create_publisher(FrictionEstimate, "friction_estimate", RECORDED_QOS)
         self._decoder = JointStateDecoder()
@@ -134,11 +96,10 @@ class FrictionEstimatorNode(ParameterNode):
 
     @staticmethod
     def _core_config(values: dict) -> dict:
-        return {k: values[k] for k in ESTIMATOR_DEFAULTS if k in values}
+        return {k: values[k] for k in ESTIMATOR_SCHEMA.items if k in values}
 
     def _apply(self, changes: dict) -> None:
-        flat = {**{p.name: self.get_parameter(p.name).value for p in self.specs}, **changes}
-        values = unflatten({k: (list(v) if hasattr(v, "tolist") else v) for k, v in flat.items()})
+        values = current_values(self, changes)
         est = OnlineFrictionEstimator(self._core_config(values))  # raises -> change rejected
         self.estimator, self.values = est, values
         self._publish_every = values["publish_every"]

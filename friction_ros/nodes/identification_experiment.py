@@ -34,12 +34,14 @@ last), so a wrong joint name does not wait silently.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import time
 
 from friction_msgs.msg import ExperimentEvent
 from sensor_msgs.msg import JointState
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.excitation import (
     DEFAULTS,
     EVENT_NAMES,
@@ -53,43 +55,36 @@ from friction_ros.core.excitation import (
 from friction_ros.core.input_gate import select_sample
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
-from friction_ros.nodes.node_utils import (
-    Param,
-    ParameterNode,
-    add_runtime_validation,
-    declare,
-    section_specs,
-    unflatten,
-)
+from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import request_stop, run_node
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
 MATCH_GRACE = 0.5  # s of wall time the recorders must stay matched before the program starts
 
-NODE_PARAMS = [
-    Param("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
-    Param(
+NODE_FIELDS = [
+    Field("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
+    Field(
         "profile",
         "default",
         "program defaults: default (~2 min, ABB M19-S scale) or quick (~30 s, tests/demo)",
         choices=tuple(PROFILES),
         read_only=True,
     ),
-    Param(
+    Field(
         "program",
         "sequence",
         "excitation program: plateaus, breakaway, random, chirp, presliding or sequence",
         choices=("plateaus", "breakaway", "random", "chirp", "presliding", "sequence"),
         read_only=True,
     ),
-    Param(
+    Field(
         "sequence",
         list(DEFAULTS["sequence"]),
         "programs run by 'sequence', in order",
         read_only=True,
     ),
-    Param(
+    Field(
         "gap",
         float(DEFAULTS["gap"]),
         "zero-torque pause between programs",
@@ -98,7 +93,7 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "bias",
         float(DEFAULTS["bias"]),
         "torque added to every command of the program: holds a constant load such as gravity",
@@ -107,7 +102,7 @@ NODE_PARAMS = [
         unit="N*m",
         read_only=True,
     ),
-    Param(
+    Field(
         "control_period",
         0.001,
         "nominal period of the joint states",
@@ -116,7 +111,7 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "wait_for_subscribers",
         0,
         "start only once this many subscribers listen on experiment_events (the recorder)",
@@ -124,8 +119,8 @@ NODE_PARAMS = [
         hi=100,
         read_only=True,
     ),
-    Param("exit_when_done", True, "exit by itself when the program is over", read_only=True),
-    Param(
+    Field("exit_when_done", True, "exit by itself when the program is over", read_only=True),
+    Field(
         "end_tail",
         0.2,
         "joint time answered with zero torque after the program ends; later states are not answered, "
@@ -135,10 +130,10 @@ NODE_PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "exit_delay", 0.5, "wall time between the end of the program and the exit", lo=0.0, hi=60.0, unit="s"
     ),
-    Param(
+    Field(
         "progress_period",
         2.0,
         "log progress every this much wall time (0: never)",
@@ -146,7 +141,7 @@ NODE_PARAMS = [
         hi=3600.0,
         unit="s",
     ),
-    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
 _RESULT = {"code": 0}
 
@@ -156,24 +151,23 @@ def _profile_of(node: ParameterNode) -> str:
     return given.value if given is not None and given.value in PROFILES else "default"
 
 
+def parameter_schema(profile: str = "default") -> Schema:
+    """The node's parameters; program-level defaults follow the chosen ``profile``."""
+    base = profile_defaults(profile)
+    fields = [
+        dataclasses.replace(f, default=copy.deepcopy(base[f.name])) if f.name in ("sequence", "gap") else f
+        for f in NODE_FIELDS
+    ]
+    sections = [Schema.from_defaults(s, base[s], f"{s} parameter", read_only=True) for s in SECTIONS]
+    return Schema("identification_experiment", [*fields, *sections])
+
+
 class IdentificationExperiment(ParameterNode):
     """Thin adapter over :class:`ExcitationProgram`; see the module docstring."""
 
     def __init__(self):
         super().__init__("identification_experiment")
-        base = profile_defaults(_profile_of(self))
-        specs = [
-            Param(
-                p.name, copy.deepcopy(base[p.name]), p.description, p.lo, p.hi, p.choices, p.read_only, p.unit
-            )
-            if p.name in ("sequence", "gap")
-            else p
-            for p in NODE_PARAMS
-        ]  # program-level defaults follow the chosen profile
-        for s in SECTIONS:
-            specs += section_specs(self, s, base[s], f"{s} parameter", read_only=True)
-        values = declare(self, specs)
-        self.values = unflatten(values)
+        self.values = declare_config(self, parameter_schema(_profile_of(self)), self._apply)
         cfg = {s: self.values[s] for s in SECTIONS}
         cfg.update(
             program=self.values["program"],
@@ -184,7 +178,6 @@ class IdentificationExperiment(ParameterNode):
             dt=self.values["control_period"],
         )
         self.program = ExcitationProgram(cfg)  # ParameterError -> refuses to start
-        add_runtime_validation(self, specs, self._apply)
 
         self.joint = self.values["joint_name"]
         self.commands = CommandPublisher(self, self.joint)

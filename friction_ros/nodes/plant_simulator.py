@@ -28,6 +28,7 @@ from builtin_interfaces.msg import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.harness import command_scale
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
 from friction_ros.core.plant import MAX_COMMAND
@@ -35,39 +36,32 @@ from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
-from friction_ros.nodes.node_utils import (
-    SCHEDULING_PARAMS,
-    Param,
-    ParameterNode,
-    add_runtime_validation,
-    declare,
-    declare_section,
-)
+from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
-PARAMS = [
-    Param(
+NODE_FIELDS = [
+    Field(
         "preset",
         "abb_m19s",
         "plant preset: a name in params/ (abb_m19s, seed002_x ...), a YAML path, or '' (the plant.* / friction_*.* parameters are the whole plant)",
         read_only=True,
     ),
-    Param("description", "", "free text describing the preset", read_only=True),
-    Param(
+    Field("description", "", "free text describing the preset", read_only=True),
+    Field(
         "joint_name",
         "joint1",
         "joint name used in joint_states and expected in joint_commands",
         read_only=True,
     ),
-    Param(
+    Field(
         "mode",
         "realtime",
         "realtime: wall-clock loop; lockstep: one period per command + /clock",
         choices=("realtime", "lockstep"),
         read_only=True,
     ),
-    Param(
+    Field(
         "control_period",
         0.001,
         "control period (plant step per state)",
@@ -76,8 +70,8 @@ PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
-    Param(
+    Field("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
+    Field(
         "command_timeout",
         0.1,
         "realtime: zero torque when no command arrived for this long",
@@ -85,14 +79,14 @@ PARAMS = [
         hi=60.0,
         unit="s",
     ),
-    Param(
+    Field(
         "max_effort",
         PLAUSIBLE_EFFORT,
         "plausibility bound: a commanded |effort| above it is rejected like a NaN (zero torque, logged)",
         lo=1e-9,
         unit="N*m",
     ),
-    Param(
+    Field(
         "log_period",
         1.0,
         "at most one log line per command rejection reason per this period",
@@ -100,7 +94,7 @@ PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "resend_period",
         0.2,
         "lockstep: re-publish the pending state after this wall time",
@@ -108,7 +102,7 @@ PARAMS = [
         hi=60.0,
         unit="s",
     ),
-    Param(
+    Field(
         "clock_period",
         0.01,
         "lockstep: publish /clock every this much simulated time (0: every period)",
@@ -117,14 +111,14 @@ PARAMS = [
         unit="s",
         read_only=True,
     ),
-    Param(
+    Field(
         "stats_file",
         "",
         "write loop/latency statistics as JSON here on shutdown (benchmarks)",
         read_only=True,
     ),
-    Param("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    Param(
+    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Field(
         "stats_delay",
         0.0,
         "loop/latency statistics start this long (wall) after the first command (benchmarks skip start-up)",
@@ -133,8 +127,17 @@ PARAMS = [
         unit="s",
         read_only=True,
     ),
-    *SCHEDULING_PARAMS,
 ]
+
+
+PRESET_SECTIONS = ("plant", "friction_motor", "friction_load")
+
+
+def parameter_schema() -> Schema:
+    """The node's parameters; the preset sections take the keys given in the parameter file (on top
+    of the preset; the plant's keys: :data:`friction_ros.core.plant.PLANT_SCHEMA`)."""
+    sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
+    return Schema("plant_simulator", [*NODE_FIELDS, *sections, *SCHEDULING])
 
 
 class PlantSimulator(ParameterNode):
@@ -142,11 +145,8 @@ class PlantSimulator(ParameterNode):
 
     def __init__(self):
         super().__init__("plant_simulator")
-        sections = {
-            s: declare_section(self, s, {}, f"preset {s} parameter", read_only=True)
-            for s in ("plant", "friction_motor", "friction_load")
-        }
-        self.p = declare(self, PARAMS)
+        self.p = declare_config(self, parameter_schema(), self._apply)
+        sections = {s: self.p.get(s, {}) for s in PRESET_SECTIONS}
         self.preset = resolve_preset(self.p["preset"], sections)
         self.plant = self.preset.make_plant()
         self.scale = command_scale(self.plant)
@@ -154,7 +154,6 @@ class PlantSimulator(ParameterNode):
         self.dt_ns = int(round(self.dt * 1e9))
         self.joint = self.p["joint_name"]
         self.lockstep = self.p["mode"] == "lockstep"
-        add_runtime_validation(self, PARAMS, self._apply)
 
         # joint states and commands are (de)serialised by the wire module's JointState codec and sent as
         # bytes: same wire type, no message objects in the 1 kHz path

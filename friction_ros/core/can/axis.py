@@ -30,18 +30,20 @@ it starts and once when it clears (or is reset) through :class:`~friction_ros.co
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import struct
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.faults import FaultEvent, FaultLog
 from friction_ros.core.can.frame import DecodeStats, Frame
 from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
 
 PROTOCOLS = ("odrive_cansimple", "mit")
@@ -148,6 +150,121 @@ class AxisConfig:
             f"timeout {self.stale_after * 1e3:.4g} ms = {STALE_PERIODS} telemetry periods of "
             f"{self.telemetry_period * 1e3:.4g} ms + {JITTER_MARGIN * 1e3:g} ms jitter margin"
         )
+
+
+AXIS_SCHEMA = Schema(
+    "axis",
+    [
+        Field("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
+        Field("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
+        Schema(
+            "mit",
+            [
+                Field("master_id", 0, "MIT: CAN id the motor replies to", lo=0, hi=0x7FF, read_only=True),
+                *[
+                    Field(f.name, float(f.default), f"MIT scaling range {f.name}", read_only=True)
+                    for f in dataclasses.fields(mitc.MitRanges)
+                ],
+            ],
+            doc="MIT protocol",
+        ),
+        Field("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
+        Field("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
+        Field("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
+        Field(
+            "zero_offset", 0.0, "joint position reported when the motor reads 0", read_only=True, unit="rad"
+        ),
+        Field(
+            "effort_source",
+            "current",
+            "joint effort from Iq*k_t*gear (current) or the drive's Torque_Estimate",
+            choices=("current", "torque_estimate"),
+            read_only=True,
+        ),
+        Field(
+            "request_telemetry",
+            False,
+            "ODrive: also send RTR requests for encoder + effort every period",
+            read_only=True,
+        ),
+        Field(
+            "torque_limit",
+            1.0,
+            "|joint torque command| limit",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+        ),
+        Field(
+            "current_limit",
+            10.0,
+            "|motor current| limit (also sent to the drive)",
+            lo=0.0,
+            lo_open=True,
+            unit="A",
+        ),
+        Field(
+            "velocity_limit",
+            10.0,
+            "|joint velocity| above which no accelerating torque is sent",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+        ),
+        Field(
+            "command_timeout",
+            0.1,
+            "watchdog: zero torque when no command arrived for this long",
+            lo=1e-4,
+            hi=10.0,
+            unit="s",
+        ),
+        Field(
+            "telemetry_rate_hz",
+            0.0,
+            "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
+            "(MIT replies and RTR requests come once per period)",
+            lo=0.0,
+            hi=10000.0,
+            read_only=True,
+            unit="Hz",
+        ),
+        Field(
+            "telemetry_timeout",
+            0.0,
+            f"stale telemetry fault when no encoder/effort frame for this long; 0 = automatic: "
+            f"{STALE_PERIODS} telemetry periods + {JITTER_MARGIN * 1e3:g} ms jitter margin",
+            lo=0.0,
+            hi=10.0,
+            unit="s",
+        ),
+    ],
+    doc="one drive on the CAN bus and its joint",
+)
+"""Parameters of one drive axis (``drive_interface``; per joint ``<joint>.<key>`` for several)."""
+
+
+def axis_config(v: Mapping[str, Any], control_rate_hz: float) -> AxisConfig:
+    """Build the AxisConfig from validated :data:`AXIS_SCHEMA` values (flat dotted names, ``mit.p_min``);
+    ParameterError on bad combinations. ``telemetry_rate_hz`` 0 means ``control_rate_hz``."""
+    if v["direction"] not in (1, -1):
+        raise ParameterError(f"direction = {v['direction']} is not allowed: must be one of 1, -1")
+    ranges = mitc.MitRanges(**{f.name: v[f"mit.{f.name}"] for f in dataclasses.fields(mitc.MitRanges)})
+    return AxisConfig(
+        protocol=v["protocol"],
+        node_id=v["node_id"],
+        mit_master_id=v["mit.master_id"],
+        mit_ranges=ranges,
+        conversion=JointConversion(v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"]),
+        torque_limit=v["torque_limit"],
+        current_limit=v["current_limit"],
+        velocity_limit=v["velocity_limit"],
+        command_timeout=v["command_timeout"],
+        telemetry_period=1.0 / (v["telemetry_rate_hz"] or control_rate_hz),
+        telemetry_timeout=v["telemetry_timeout"],
+        effort_source=v["effort_source"],
+        request_telemetry=v["request_telemetry"],
+    )
 
 
 class JointSample(NamedTuple):

@@ -7,8 +7,6 @@ from friction_ros.core.control.controller import (
     CompensatingController,
     ControllerTerms,
     default_config,
-    flatten,
-    unflatten,
 )
 from friction_ros.core.control.pid import ANTIWINDUP_STRATEGIES, PID_DEFAULTS, Pid, PidOutput
 from friction_ros.core.control.schemes import (
@@ -40,8 +38,6 @@ __all__ = [
     "default_config",
     "describing_damping",
     "describing_stiffness",
-    "flatten",
     "maxwell_virgin_curve",
     "seed000_relay",
-    "unflatten",
 ]

@@ -51,6 +51,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
+from friction_ros.core.config import Field, Schema, unflatten
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
 from friction_ros.core.control.pid import PID_DEFAULTS, Pid
@@ -58,7 +59,6 @@ from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, Sch
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 from friction_ros.core.validation import (
     ParameterError,
-    check_choice,
     check_keys,
     check_real,
 )
@@ -66,31 +66,126 @@ from friction_ros.core.validation import (
 CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
 VELOCITY_SOURCES = ("measured", "differentiated")
 
+_INF = math.inf
+#: The plain (not section) controller settings: default, meaning, range, unit.
+CONTROLLER_FIELDS: tuple[Field, ...] = (
+    Field(
+        "mode",
+        "pid",
+        "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
+        choices=CONTROLLER_MODES,
+    ),
+    Field(
+        "feedforward_gain",
+        0.0,
+        "velocity feedforward gain (command += gain * reference velocity)",
+        lo=0.0,
+        unit="N*m*s/rad",
+    ),
+    Field(
+        "inertia",
+        0.0,
+        "J_hat for the inertia feedforward J_hat * reference acceleration",
+        lo=0.0,
+        unit="kg*m^2",
+    ),
+    Field(
+        "load_feedforward",
+        0.0,
+        "constant torque added to the command: holds a known load such as gravity",
+        unit="N*m",
+    ),
+    Field("u_clamp_max", PLAUSIBLE_EFFORT, "upper torque limit", unit="N*m", allow_inf=True),
+    Field("u_clamp_min", -PLAUSIBLE_EFFORT, "lower torque limit (< u_clamp_max)", unit="N*m", allow_inf=True),
+    Field("rate_limit", _INF, "torque rate limit", lo=0.0, lo_open=True, unit="N*m/s", allow_inf=True),
+    Field(
+        "velocity_source",
+        "measured",
+        "measured (joint_states velocity) or differentiated (filtered position difference)",
+        choices=VELOCITY_SOURCES,
+    ),
+    Field("velocity_filter_time_constant", 0.0, "velocity filter time constant", lo=0.0, unit="s"),
+    Field(
+        "position_jump_limit",
+        _INF,
+        "reject position samples that jump more than this (lost encoder bits)",
+        lo=0.0,
+        lo_open=True,
+        unit="rad",
+        allow_inf=True,
+    ),
+    Field(
+        "limit_cycle_detection",
+        True,
+        "switch friction compensation off (latched) when it causes a limit cycle",
+    ),
+    Field(
+        "limit_cycle_min_frequency",
+        LIMIT_CYCLE_DEFAULTS["min_frequency"],
+        "limit cycle: lowest oscillation frequency that counts",
+        lo=1.0,
+        unit="Hz",
+    ),
+    Field(
+        "limit_cycle_min_amplitude",
+        LIMIT_CYCLE_DEFAULTS["min_amplitude"],
+        "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
+        lo=0.0,
+        unit="rad",
+    ),
+    Field(
+        "limit_cycle_window",
+        LIMIT_CYCLE_DEFAULTS["window"],
+        "limit cycle: averaging time constant of the detector (window + hold <= 0.1 s)",
+        lo=0.005,
+        hi=1.0,
+        unit="s",
+    ),
+    Field(
+        "limit_cycle_hold",
+        LIMIT_CYCLE_DEFAULTS["hold"],
+        "limit cycle: how long the oscillation must hold before the fallback (window + hold <= 0.1 s)",
+        lo=0.0,
+        hi=1.0,
+        unit="s",
+    ),
+)
+
 #: Full default configuration (nested). Sections of modes that are not selected are ignored.
 CONTROLLER_DEFAULTS: dict[str, Any] = {
-    "mode": "pid",
-    "feedforward_gain": 0.0,
-    "inertia": 0.0,
-    "load_feedforward": 0.0,
-    "u_clamp_max": PLAUSIBLE_EFFORT,
-    "u_clamp_min": -PLAUSIBLE_EFFORT,
-    "rate_limit": math.inf,
-    "velocity_source": "measured",
-    "velocity_filter_time_constant": 0.0,
-    "position_jump_limit": math.inf,
-    "limit_cycle_detection": True,
-    "limit_cycle_min_frequency": LIMIT_CYCLE_DEFAULTS["min_frequency"],
-    "limit_cycle_min_amplitude": LIMIT_CYCLE_DEFAULTS["min_amplitude"],
-    "limit_cycle_window": LIMIT_CYCLE_DEFAULTS["window"],
-    "limit_cycle_hold": LIMIT_CYCLE_DEFAULTS["hold"],
+    **{f.name: f.default for f in CONTROLLER_FIELDS},
     "pid": dict(PID_DEFAULTS),
     "friction": dict(COMPENSATION_DEFAULTS),
     "dnpf": dict(DNPF.DEFAULTS),
-    "gain_scheduling": {k: v for k, v in GainScheduling.DEFAULTS.items()},
+    "gain_scheduling": dict(GainScheduling.DEFAULTS),
     "cascade": dict(Cascade.DEFAULTS),
     "sliding_mode": dict(SlidingMode.DEFAULTS),
 }
 _SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+
+
+def controller_parameter_schema(friction_model: bool = True, reference: bool = True) -> list[Field | Schema]:
+    """The compensating_controller's ROS layout of the controller (see :func:`config_from_ros_parameters`).
+
+    Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
+    ``friction`` (the library model config: ``model`` + its coefficients) and ``reference`` (the
+    built-in reference generator). ``friction_model`` / ``reference``: give ``friction.model``
+    (``none``) and ``reference.type`` (``constant``) defaults (a parameter file that sets any key of
+    the section brings its own).
+    """
+    items: list[Field | Schema] = list(CONTROLLER_FIELDS)
+    for s in SCHEME_SECTIONS:
+        items.append(Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter"))
+    comp = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
+    items.append(Schema.from_defaults("compensation", comp, "friction compensation option"))
+    items.append(
+        Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
+    )
+    items.append(
+        Schema.from_defaults("reference", {"type": "constant"} if reference else {}, "reference generator")
+    )
+    return items
 
 
 @dataclass
@@ -121,33 +216,6 @@ class ControllerTerms:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def unflatten(params: Mapping[str, Any]) -> dict[str, Any]:
-    """Turn ROS-style dotted keys (``pid.p``, ``friction.model.fc``) into a nested dict."""
-    out: dict[str, Any] = {}
-    for key, value in params.items():
-        parts = str(key).split(".")
-        d = out
-        for p in parts[:-1]:
-            nxt = d.setdefault(p, {})
-            if not isinstance(nxt, dict):
-                raise ParameterError(f"{key}: {p!r} is both a value and a section")
-            d = nxt
-        d[parts[-1]] = value
-    return out
-
-
-def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    """Inverse of :func:`unflatten` (None values are dropped: ROS parameters cannot be None)."""
-    out: dict[str, Any] = {}
-    for k, v in config.items():
-        key = f"{prefix}{k}"
-        if isinstance(v, Mapping):
-            out.update(flatten(v, key + "."))
-        elif v is not None:
-            out[key] = v
-    return out
 
 
 def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -284,40 +352,17 @@ class CompensatingController:
         return out
 
     def _build(self, cfg: dict[str, Any]) -> None:
-        mode = check_choice("controller.mode", cfg["mode"], CONTROLLER_MODES)
-        ffg = check_real("controller.feedforward_gain", cfg["feedforward_gain"], 0.0, unit="N*m*s/rad")
-        self.load_feedforward = check_real("controller.load_feedforward", cfg["load_feedforward"], unit="N*m")
-        inertia = check_real("controller.inertia", cfg["inertia"], 0.0, unit="kg*m^2")
-        umax = check_real("controller.u_clamp_max", cfg["u_clamp_max"], allow_inf=True, unit="N*m")
-        umin = check_real("controller.u_clamp_min", cfg["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
+        top = {f.name: f.check(cfg[f.name], f"controller.{f.name}") for f in CONTROLLER_FIELDS}
+        mode, ffg, inertia = top["mode"], top["feedforward_gain"], top["inertia"]
+        self.load_feedforward = top["load_feedforward"]
+        umax = top["u_clamp_max"]
+        umin = check_real("controller.u_clamp_min", top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
         if umin >= umax:
             raise ParameterError(f"controller.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
-        rate = check_real(
-            "controller.rate_limit", cfg["rate_limit"], 0.0, lo_open=True, allow_inf=True, unit="N*m/s"
-        )
-        vsrc = check_choice("controller.velocity_source", cfg["velocity_source"], VELOCITY_SOURCES)
-        vtf = check_real(
-            "controller.velocity_filter_time_constant", cfg["velocity_filter_time_constant"], 0.0, unit="s"
-        )
-        jump = check_real(
-            "controller.position_jump_limit",
-            cfg["position_jump_limit"],
-            0.0,
-            lo_open=True,
-            allow_inf=True,
-            unit="rad",
-        )
-        lc_on = cfg["limit_cycle_detection"]
-        if not isinstance(lc_on, bool):
-            raise ParameterError(f"controller.limit_cycle_detection = {lc_on!r} must be true or false")
-        lc_f = check_real(
-            "controller.limit_cycle_min_frequency", cfg["limit_cycle_min_frequency"], 1.0, unit="Hz"
-        )
-        lc_a = check_real(
-            "controller.limit_cycle_min_amplitude", cfg["limit_cycle_min_amplitude"], 0.0, unit="rad"
-        )
-        lc_w = check_real("controller.limit_cycle_window", cfg["limit_cycle_window"], 0.005, 1.0, unit="s")
-        lc_h = check_real("controller.limit_cycle_hold", cfg["limit_cycle_hold"], 0.0, 1.0, unit="s")
+        rate, vsrc, vtf = top["rate_limit"], top["velocity_source"], top["velocity_filter_time_constant"]
+        jump, lc_on = top["position_jump_limit"], top["limit_cycle_detection"]
+        lc_f, lc_a = top["limit_cycle_min_frequency"], top["limit_cycle_min_amplitude"]
+        lc_w, lc_h = top["limit_cycle_window"], top["limit_cycle_hold"]
         if lc_w + lc_h > 0.1:
             raise ParameterError(
                 f"controller.limit_cycle_window + limit_cycle_hold = {lc_w + lc_h:g} is out of range: "
@@ -393,13 +438,6 @@ class CompensatingController:
         self._cfg["friction"]["model"] = (
             None if self.friction.model is None else self.friction.model.to_config()
         )
-
-    def set_pid_gains(self, **gains: Any) -> None:
-        """Change PID parameters at run time (control_toolbox names), validated."""
-        self.pid.set_gains(**gains)
-        if self.scheme is None:  # the feedback-path bound follows the loop gains
-            self.loop_stiffness, self.loop_damping = loop_gains(self.mode, self.pid, None)
-            self.feedback_bound_note = self.friction.bound_feedback(self.loop_stiffness, self.loop_damping)
 
     def reset(self) -> None:
         """Clear integrators, filters, observer and dynamic-model states."""

@@ -1,8 +1,8 @@
 """Online friction estimation (pure core): torque balance, disturbance observer, RLS, LuGre observer."""
 
 from friction_ros.core.estimation.estimator import (
-    ESTIMATOR_DEFAULTS,
     ESTIMATOR_MODELS,
+    ESTIMATOR_SCHEMA,
     METHODS,
     FrictionEstimateData,
     OnlineFrictionEstimator,
@@ -12,7 +12,7 @@ from friction_ros.core.estimation.measurement import DisturbanceObserver, Torque
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
 
 __all__ = [
-    "ESTIMATOR_DEFAULTS",
+    "ESTIMATOR_SCHEMA",
     "ESTIMATOR_MODELS",
     "METHODS",
     "DisturbanceObserver",

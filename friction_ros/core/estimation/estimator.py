@@ -46,12 +46,11 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.estimation.measurement import DisturbanceObserver, TorqueBalanceEstimator
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
 from friction_ros.core.validation import (
     ParameterError,
-    check_choice,
-    check_int,
     check_keys,
     check_real,
 )
@@ -80,24 +79,58 @@ _COEF_NAMES = {
     ],
 }
 
-ESTIMATOR_DEFAULTS: dict[str, Any] = {
-    "method": "torque_balance",
-    "model": "coulomb_viscous",
-    "inertia": 0.0,  # required > 0 for the disturbance observer
-    "filter_time_constant": 0.005,
-    "observer_bandwidth": 200.0,
-    "initial": None,  # {coefficient: value} in the library config's layout; missing -> 0
-    "vs": 0.05,
-    "delta": 2.0,
-    "forgetting_factor": 0.999,
-    "initial_covariance": 10.0,
-    "min_velocity": 0.01,
-    "min_samples": 200,
-    "convergence_tolerance": 0.02,
-    "std_floor": 1e-3,
-    "lugre": None,  # LuGre model config for model = lugre
-    "observer_gain": 50.0,
-}
+ESTIMATOR_SCHEMA = Schema(
+    "estimator",
+    [
+        Field(
+            "method",
+            "torque_balance",
+            "friction measurement: torque_balance (filtered acceleration) or disturbance_observer",
+            choices=METHODS,
+        ),
+        Field("model", "coulomb_viscous", "adapted model (lugre: observer)", choices=ESTIMATOR_MODELS),
+        Field(
+            "inertia",
+            0.0,
+            "J_hat of the joint (joint side); > 0 for the disturbance observer",
+            lo=0.0,
+            unit="kg*m^2",
+        ),
+        Field(
+            "filter_time_constant",
+            0.005,
+            "acceleration/velocity filter time constant (torque_balance)",
+            unit="s",
+        ),
+        Field(
+            "observer_bandwidth", 200.0, "disturbance observer bandwidth (disturbance_observer)", unit="rad/s"
+        ),
+        Schema(
+            "initial",
+            doc="initial coefficient values in the library layout, e.g. positive.fc (missing: 0)",
+            open=True,
+        ),
+        Field("vs", 0.05, "Stribeck velocity (fixed shape)", lo=0.0, lo_open=True, unit="rad/s"),
+        Field("delta", 2.0, "Stribeck exponent (fixed shape)", lo=0.0, lo_open=True),
+        Field("forgetting_factor", 0.999, "RLS forgetting factor (0.5, 1]"),
+        Field("initial_covariance", 10.0, "RLS initial covariance (> 0)"),
+        Field("min_velocity", 0.01, "excitation: adapt only while |v| >= this", lo=0.0, unit="rad/s"),
+        Field("min_samples", 200, "excited samples before convergence can be declared", lo=1),
+        Field(
+            "convergence_tolerance",
+            0.02,
+            "relative one-sigma std below which a coefficient counts as converged",
+            lo=0.0,
+            hi=1.0,
+            lo_open=True,
+        ),
+        Field("std_floor", 1e-3, "absolute std floor for convergence", lo=0.0),
+        Schema("lugre", doc="LuGre model config for model = lugre (model: lugre + coefficients)", open=True),
+        Field("observer_gain", 50.0, "LuGre observer correction gain", lo=0.0, unit="1/s"),
+    ],
+    doc="online friction estimator",
+)
+"""Configuration of :class:`OnlineFrictionEstimator` (the friction_estimator node's parameters)."""
 
 
 @dataclass
@@ -158,40 +191,33 @@ def _regressor(model: str, v: float, vs: float, delta: float) -> tuple[float, ..
 
 
 class OnlineFrictionEstimator:
-    """Online friction estimator façade; see the module docstring and :data:`ESTIMATOR_DEFAULTS`."""
+    """Online friction estimator façade; see the module docstring and :data:`ESTIMATOR_SCHEMA`."""
 
     def __init__(self, config: Mapping[str, Any] | None = None):
-        cfg = dict(ESTIMATOR_DEFAULTS)
-        given = dict(config or {})
-        check_keys("estimator", given, ESTIMATOR_DEFAULTS)
-        cfg.update(given)
+        cfg = ESTIMATOR_SCHEMA.validate(config)
         n = "estimator"
-        self.method = check_choice(f"{n}.method", cfg["method"], METHODS)
-        self.model_name = check_choice(f"{n}.model", cfg["model"], ESTIMATOR_MODELS)
-        lo_open = self.method == "disturbance_observer"
-        self.inertia = check_real(f"{n}.inertia", cfg["inertia"], 0.0, lo_open=lo_open, unit="kg*m^2")
+        self.method = cfg["method"]
+        self.model_name = cfg["model"]
+        self.inertia = cfg["inertia"]
         if self.method == "torque_balance":
             self.front = TorqueBalanceEstimator(self.inertia, cfg["filter_time_constant"])
-        else:
+        else:  # checks inertia > 0
             self.front = DisturbanceObserver(self.inertia, cfg["observer_bandwidth"])
-        self.filter_time_constant = float(cfg["filter_time_constant"])
-        self.observer_bandwidth = float(cfg["observer_bandwidth"])
-        self.vs = check_real(f"{n}.vs", cfg["vs"], 0.0, lo_open=True, unit="rad/s")
-        self.delta = check_real(f"{n}.delta", cfg["delta"], 0.0, lo_open=True)
-        self.min_velocity = check_real(f"{n}.min_velocity", cfg["min_velocity"], 0.0, unit="rad/s")
-        self.min_samples = check_int(f"{n}.min_samples", cfg["min_samples"], 1)
-        self.convergence_tolerance = check_real(
-            f"{n}.convergence_tolerance", cfg["convergence_tolerance"], 0.0, 1.0, lo_open=True
-        )
-        self.std_floor = check_real(f"{n}.std_floor", cfg["std_floor"], 0.0)
-        self.observer_gain = check_real(f"{n}.observer_gain", cfg["observer_gain"], 0.0, unit="1/s")
+        self.filter_time_constant = cfg["filter_time_constant"]
+        self.observer_bandwidth = cfg["observer_bandwidth"]
+        self.vs, self.delta = cfg["vs"], cfg["delta"]
+        self.min_velocity = cfg["min_velocity"]
+        self.min_samples = cfg["min_samples"]
+        self.convergence_tolerance = cfg["convergence_tolerance"]
+        self.std_floor = cfg["std_floor"]
+        self.observer_gain = cfg["observer_gain"]
         self._cfg = cfg
         self.rls = None
         self.lugre = None
         if self.model_name == "lugre":
             from friction_ros.core.control.compensation import LuGreObserver, build_model
 
-            if cfg["lugre"] is None:
+            if not cfg["lugre"]:
                 raise ParameterError(f"{n}.lugre is missing: model = lugre needs a LuGre model config")
             m = build_model(cfg["lugre"], f"{n}.lugre")
             if m is None or m.name != "lugre":

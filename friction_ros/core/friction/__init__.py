@@ -7,7 +7,7 @@ motion: ``steady_state(v) * v >= 0``; the plant applies ``-friction``.
 """
 
 from .asymmetric import Asymmetric
-from .base import Coef, DynamicModel, FrictionModel, StaticModel
+from .base import DynamicModel, FrictionModel, StaticModel
 from .dahl import Dahl
 from .gms import GMS
 from .lugre import LuGre
@@ -41,7 +41,6 @@ from .stiction import GKF, Karnopp
 
 __all__ = [
     "Asymmetric",
-    "Coef",
     "Coulomb",
     "CoulombViscous",
     "Dahl",

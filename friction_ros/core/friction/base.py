@@ -1,4 +1,4 @@
-"""Common machinery of the friction model library: coefficient specs, validation, config round-trip.
+"""Common machinery of the friction model library: coefficient validation, config round-trip.
 
 Sign convention (docs/architecture.md): a model returns the friction torque that *opposes* motion, so
 in steady sliding ``steady_state(v) * v >= 0`` and the plant applies ``-friction``.
@@ -9,40 +9,26 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Sequence
-from dataclasses import dataclass
 from typing import Any, ClassVar
 
 import numpy as np
 
+from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 
 from . import _kernels as K
 
 
-@dataclass(frozen=True)
-class Coef:
-    """Specification of one model coefficient (name, default, allowed range, unit, meaning)."""
-
-    name: str
-    default: float | None = None  # None: required
-    lo: float | None = 0.0
-    hi: float | None = None
-    lo_open: bool = False
-    unit: str = ""
-    doc: str = ""
-    is_list: bool = False
-
-
 class FrictionModel:
     """Base class of every friction model.
 
-    Subclasses declare ``name``, ``COEFS`` (tuple of :class:`Coef`), ``KIND`` (kernel id) and
+    Subclasses declare ``name``, ``COEFS`` (tuple of :class:`~friction_ros.core.config.Field`), ``KIND`` (kernel id) and
     ``is_dynamic``; they implement ``_steady(v)`` (vectorised numpy) and may add cross-checks in
     ``_validate``.
     """
 
     name: ClassVar[str] = "base"
-    COEFS: ClassVar[tuple[Coef, ...]] = ()
+    COEFS: ClassVar[tuple[Field, ...]] = ()
     KIND: ClassVar[int] = K.K_NONE
     is_dynamic: ClassVar[bool] = False
     #: True when the model's torque depends on the transmitted (load) torque (gearbox term)
@@ -52,37 +38,13 @@ class FrictionModel:
         check_keys(self.name, coefficients, [c.name for c in self.COEFS])
         vals: OrderedDict[str, Any] = OrderedDict()
         for c in self.COEFS:
-            key = f"{self.name}.{c.name}"
-            raw = coefficients.get(c.name, c.default)
-            if raw is None:
-                raise ParameterError(f"{key} is missing: required {self._range_text(c)}")
-            if c.is_list:
-                if isinstance(raw, (str, bytes)) or not isinstance(raw, (Sequence, np.ndarray)):
-                    raise ParameterError(f"{key} = {raw!r} must be a list of numbers (flat float list)")
-                vals[c.name] = [
-                    check_real(f"{key}[{i}]", x, c.lo, c.hi, lo_open=c.lo_open, unit=c.unit)
-                    for i, x in enumerate(list(raw))
-                ]
-                if not vals[c.name]:
-                    raise ParameterError(f"{key} is empty: must hold at least one element")
-            else:
-                vals[c.name] = check_real(key, raw, c.lo, c.hi, lo_open=c.lo_open, unit=c.unit)
+            vals[c.name] = c.check(coefficients.get(c.name, c.default), f"{self.name}.{c.name}")
         self._c = vals
         self._validate()
         self._p = np.ascontiguousarray(self._kernel_params(), dtype=np.float64)
         self._state = self.initial_state()
 
     # ---- helpers -----------------------------------------------------------------------------------
-    @staticmethod
-    def _range_text(c: Coef) -> str:
-        parts = []
-        if c.lo is not None:
-            parts.append(f"{'>' if c.lo_open else '>='} {c.lo:g}")
-        if c.hi is not None:
-            parts.append(f"<= {c.hi:g}")
-        unit = f" [{c.unit}]" if c.unit else ""
-        return (" and ".join(parts) or "finite") + unit
-
     def _validate(self) -> None:
         """Cross-coefficient checks (override)."""
 
@@ -254,11 +216,11 @@ class DynamicModel(FrictionModel):
             if c.lo is not None:
                 bad |= col <= c.lo if c.lo_open else col < c.lo
             if c.hi is not None:
-                bad |= col > c.hi
+                bad |= col >= c.hi if c.hi_open else col > c.hi
             if bad.any():
                 r = int(np.argmax(bad))
                 raise ParameterError(
-                    f"{self.name}.{nm} = {col[r]:g} (row {r}) is out of range: must be {self._range_text(c)}"
+                    f"{self.name}.{nm} = {col[r]:g} (row {r}) is out of range: must be {c.range_text()}{f' [{c.unit}]' if c.unit else ''}"
                 )
         if "fs" in names and "fc" in names:
             fs, fc = pm[:, names.index("fs")], pm[:, names.index("fc")]

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
+
 from . import _kernels as K
-from .base import Coef, DynamicModel
+from .base import DynamicModel
 
 
 class Dahl(DynamicModel):
@@ -20,15 +22,15 @@ class Dahl(DynamicModel):
     KIND = K.K_DAHL
     STATE_NAMES = ("F",)
     COEFS = (
-        Coef(
+        Field(
             "sigma",
             lo=0.0,
             lo_open=True,
             unit="N*m/rad",
             doc="rest stiffness: dF/dx = sigma at F = 0 (seed 004 eq. (9))",
         ),
-        Coef("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level: F -> Fc sgn(v) (seed 004 eq. (9))"),
-        Coef(
+        Field("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level: F -> Fc sgn(v) (seed 004 eq. (9))"),
+        Field(
             "alpha",
             1.0,
             lo=0.0,

@@ -6,10 +6,11 @@ import math
 
 import numpy as np
 
+from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
 from . import _kernels as K
-from .base import Coef, DynamicModel, stribeck_np
+from .base import DynamicModel, stribeck_np
 
 ALPHA_SUM_TOL = 1e-6
 
@@ -37,33 +38,33 @@ class GMS(DynamicModel):
     name = "gms"
     KIND = K.K_GMS
     COEFS = (
-        Coef(
+        Field(
             "fc",
             lo=0.0,
             lo_open=True,
             unit="N*m",
             doc="Coulomb level of s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 003 eq. (3), A.2.4)",
         ),
-        Coef(
+        Field(
             "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v), s(0) = Fs (seed 003 eq. (3))"
         ),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of s(v) (seed 003 eq. (3))"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (seed 003 eq. (3))"),
-        Coef(
+        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of s(v) (seed 003 eq. (3))"),
+        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (seed 003 eq. (3))"),
+        Field(
             "attraction",
             lo=0.0,
             lo_open=True,
             unit="N*m/s",
             doc="attraction parameter C: slip dF_i/dt = C (alpha_i sgn(v) - F_i / |s(v)|) (seed 003 eq. (3))",
         ),
-        Coef(
+        Field(
             "fv",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
             doc="viscous coefficient: F = sum_i F_i + fv v (seed 003 eq. (2))",
         ),
-        Coef(
+        Field(
             "k",
             lo=0.0,
             lo_open=True,
@@ -71,7 +72,7 @@ class GMS(DynamicModel):
             is_list=True,
             doc="element stiffnesses k_i: stick dF_i/dt = k_i v (seed 003 eq. (2))",
         ),
-        Coef(
+        Field(
             "alpha",
             lo=0.0,
             lo_open=True,
@@ -80,7 +81,7 @@ class GMS(DynamicModel):
             doc="element weights alpha_i [-] (sum 1): element i slips at |F_i| = alpha_i s(v) (seed 003 eq. (3))",
         ),
         # appended last so positional users of param_names / param_vector() keep their indices
-        Coef(
+        Field(
             "sigma1",
             0.0,
             lo=0.0,

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
+
 from . import _kernels as K
-from .base import Coef, DynamicModel, stribeck_np
+from .base import DynamicModel, stribeck_np
 
 
 class LuGre(DynamicModel):
@@ -25,40 +27,40 @@ class LuGre(DynamicModel):
     KIND = K.K_LUGRE
     STATE_NAMES = ("z",)
     COEFS = (
-        Coef(
+        Field(
             "sigma0",
             lo=0.0,
             lo_open=True,
             unit="N*m/rad",
             doc="bristle stiffness: sigma0 z in F and sigma0 |v| z / g(v) in dz/dt (seed 004 eqs. (10)-(11))",
         ),
-        Coef(
+        Field(
             "sigma1",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
             doc="bristle micro-damping: sigma1 dz/dt in F (seed 004 eq. (11))",
         ),
-        Coef(
+        Field(
             "fv",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
             doc="viscous coefficient (the papers' sigma2): fv v in F (seed 004 eq. (11))",
         ),
-        Coef(
+        Field(
             "fc",
             lo=0.0,
             lo_open=True,
             unit="N*m",
             doc="Coulomb level of g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (10))",
         ),
-        Coef(
+        Field(
             "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of g(v), g(0) = Fs (seed 004 eq. (10))"
         ),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of g(v) (seed 004 eq. (10))"),
-        Coef("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of g(v) [-] (seed 004 eq. (10))"),
-        Coef(
+        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of g(v) (seed 004 eq. (10))"),
+        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of g(v) [-] (seed 004 eq. (10))"),
+        Field(
             "vd",
             0.0,
             lo=0.0,

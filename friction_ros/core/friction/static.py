@@ -8,40 +8,41 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
 from . import _kernels as K
-from .base import Coef, StaticModel, stribeck_np
+from .base import StaticModel, stribeck_np
 
 # The coefficients the static maps share; each model's docstring gives the equation it uses them in.
-_FC = Coef(
+_FC = Field(
     "fc",
     lo=0.0,
     unit="N*m",
     doc="Coulomb (kinetic) friction level Fc: F = Fc sgn(v) (seed 004 eq. (1)), the high-speed "
     "level of the Stribeck curve s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (5))",
 )
-_FS = Coef(
+_FS = Field(
     "fs",
     lo=0.0,
     unit="N*m",
     doc="static friction (stiction) level Fs: s(0) = Fs in the Stribeck curve (seed 004 eq. (5))",
 )
-_VS = Coef(
+_VS = Field(
     "vs",
     lo=0.0,
     lo_open=True,
     unit="rad/s",
     doc="Stribeck velocity vs: exp(-|v/vs|^delta) in the Stribeck curve (seed 004 eq. (5))",
 )
-_DELTA = Coef(
+_DELTA = Field(
     "delta",
     2.0,
     lo=0.0,
     lo_open=True,
     doc="Stribeck shape exponent delta [-]: exp(-|v/vs|^delta) (seed 004 eq. (5); 1 Tustin, 2 Gaussian)",
 )
-_FV = Coef(
+_FV = Field(
     "fv",
     0.0,
     lo=0.0,
@@ -76,7 +77,9 @@ class Viscous(StaticModel):
 
     name = "viscous"
     KIND = K.K_VISCOUS
-    COEFS = (Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient Fv: F = Fv v (seed 004 eq. (2))"),)
+    COEFS = (
+        Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient Fv: F = Fv v (seed 004 eq. (2))"),
+    )
 
     def _steady(self, v):
         return self._c["fv"] * v
@@ -89,7 +92,7 @@ class CoulombViscous(StaticModel):
     KIND = K.K_COULOMB_VISCOUS
     COEFS = (
         _FC,
-        Coef(
+        Field(
             "fv",
             lo=0.0,
             unit="N*m*s/rad",
@@ -180,7 +183,7 @@ class StribeckEps(StaticModel):
         _VS,
         _DELTA,
         _FV,
-        Coef(
+        Field(
             "eps",
             lo=0.0,
             lo_open=True,
@@ -208,22 +211,22 @@ class GAExponential(StaticModel):
     name = "ga_exponential"
     KIND = K.K_GA_EXPONENTIAL
     COEFS = (
-        Coef("fs", lo=0.0, unit="N*m", doc="static level F_ST (seed 001 eq. (21), Table 5.2)"),
-        Coef(
+        Field("fs", lo=0.0, unit="N*m", doc="static level F_ST (seed 001 eq. (21), Table 5.2)"),
+        Field(
             "gamma",
             lo=0.0,
             lo_open=True,
             unit="s/rad",
             doc="inverse Stribeck velocity: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
         ),
-        Coef(
+        Field(
             "delta",
             lo=0.0,
             lo_open=True,
             doc="shape exponent [-]: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
         ),
-        Coef("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin (seed 001 eq. (21), Table 5.2)"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (21))"),
+        Field("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin (seed 001 eq. (21), Table 5.2)"),
+        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (21))"),
     )
 
     def _steady(self, v):
@@ -240,17 +243,17 @@ class GATustin(StaticModel):
     name = "ga_tustin"
     KIND = K.K_GA_TUSTIN
     COEFS = (
-        Coef("ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (seed 001 eq. (22))"),
-        Coef("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction Ffc (seed 001 eq. (22))"),
-        Coef(
+        Field("ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (seed 001 eq. (22))"),
+        Field("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction Ffc (seed 001 eq. (22))"),
+        Field(
             "vc",
             lo=0.0,
             lo_open=True,
             unit="rad/s",
             doc="threshold velocity Vc: 1 - exp(-(|v|/Vc)^x) (seed 001 eq. (22))",
         ),
-        Coef("x", lo=0.0, lo_open=True, doc="Armstrong exponent [-]: (|v|/Vc)^x (seed 001 eq. (22))"),
-        Coef("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (22))"),
+        Field("x", lo=0.0, lo_open=True, doc="Armstrong exponent [-]: (|v|/Vc)^x (seed 001 eq. (22))"),
+        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (22))"),
     )
 
     def _steady(self, v):
@@ -270,13 +273,13 @@ class GANonLinear(StaticModel):
     name = "ga_nonlinear"
     KIND = K.K_GA_NONLINEAR
     COEFS = (
-        Coef("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (seed 001 eq. (23))"),
-        Coef("alpha1", lo=0.0, unit="N*m", doc="decaying level: alpha1 exp(-beta1 |v|) (seed 001 eq. (23))"),
-        Coef(
+        Field("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (seed 001 eq. (23))"),
+        Field("alpha1", lo=0.0, unit="N*m", doc="decaying level: alpha1 exp(-beta1 |v|) (seed 001 eq. (23))"),
+        Field(
             "alpha2", lo=0.0, unit="N*m", doc="rising level: alpha2 (1 - exp(-beta2 |v|)) (seed 001 eq. (23))"
         ),
-        Coef("beta1", lo=0.0, unit="s/rad", doc="decay rate of the alpha1 term (seed 001 eq. (23))"),
-        Coef("beta2", lo=0.0, unit="s/rad", doc="rise rate of the alpha2 term (seed 001 eq. (23))"),
+        Field("beta1", lo=0.0, unit="s/rad", doc="decay rate of the alpha1 term (seed 001 eq. (23))"),
+        Field("beta2", lo=0.0, unit="s/rad", doc="rise rate of the alpha2 term (seed 001 eq. (23))"),
     )
 
     def _steady(self, v):
@@ -295,11 +298,11 @@ class GADupont(StaticModel):
     name = "ga_dupont"
     KIND = K.K_GA_DUPONT
     COEFS = (
-        Coef("c0", lo=0.0, unit="N*m", doc="constant level c0 (seed 001 eq. (24))"),
-        Coef("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (seed 001 eq. (24))"),
-        Coef("c2", lo=0.0, unit="N*m", doc="Stribeck level: c2 exp(-(|v|/c3)^c4) (seed 001 eq. (24))"),
-        Coef("c3", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity c3 (seed 001 eq. (24))"),
-        Coef("c4", lo=0.0, lo_open=True, doc="Stribeck exponent c4 [-] (seed 001 eq. (24))"),
+        Field("c0", lo=0.0, unit="N*m", doc="constant level c0 (seed 001 eq. (24))"),
+        Field("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (seed 001 eq. (24))"),
+        Field("c2", lo=0.0, unit="N*m", doc="Stribeck level: c2 exp(-(|v|/c3)^c4) (seed 001 eq. (24))"),
+        Field("c3", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity c3 (seed 001 eq. (24))"),
+        Field("c4", lo=0.0, lo_open=True, doc="Stribeck exponent c4 [-] (seed 001 eq. (24))"),
     )
 
     def _steady(self, v):
@@ -318,15 +321,17 @@ class GASevenParameter(StaticModel):
     name = "ga_seven_parameter"
     KIND = K.K_GA_SEVEN
     COEFS = (
-        Coef("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (seed 001 eq. (25))"),
-        Coef("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: Fv |v| (seed 001 eq. (25))"),
-        Coef(
+        Field("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (seed 001 eq. (25))"),
+        Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: Fv |v| (seed 001 eq. (25))"),
+        Field(
             "fs",
             lo=0.0,
             unit="N*m",
             doc="Stribeck magnitude F_s,inf, added to fc at rest: Fs / (1 + (v/vs)^2) (seed 001 eq. (25))",
         ),
-        Coef("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity: (v/vs)^2 (seed 001 eq. (25))"),
+        Field(
+            "vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity: (v/vs)^2 (seed 001 eq. (25))"
+        ),
     )
 
     def _steady(self, v):
@@ -344,14 +349,14 @@ class Polynomial(StaticModel):
     name = "polynomial"
     KIND = K.K_POLYNOMIAL
     COEFS = (
-        Coef(
+        Field(
             "pos",
             lo=None,
             unit="N*m",
             is_list=True,
             doc="coefficients c0..cn of F = sum_j c_j v^j for v > 0 (c_j in N*m*(s/rad)^j; seed 004 eq. (8))",
         ),
-        Coef(
+        Field(
             "neg",
             lo=None,
             unit="N*m",
@@ -389,14 +394,14 @@ class LoadDependent(StaticModel):
     load_dependent = True
     COEFS = (
         _FC,
-        Coef(
+        Field(
             "fl",
             0.0,
             lo=0.0,
             doc="friction per unit transmitted torque [-]: (fc + fl |tau_load|) (anchors 3.1, BAM M3-M6)",
         ),
         _FV,
-        Coef(
+        Field(
             "veps",
             0.0,
             lo=0.0,

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from friction_ros.core.config import Field
+
 from . import _kernels as K
-from .base import Coef
 from .static import _DELTA, _FC, _FS, _FV, _VS, Stribeck
 
 
@@ -59,7 +60,7 @@ class Karnopp(GKF):
         _VS,
         _DELTA,
         _FV,
-        Coef(
+        Field(
             "dv",
             lo=0.0,
             lo_open=True,
