@@ -626,4 +626,6 @@ def test_drive_emulator_duration_is_the_run_time(channel):
     rc = p.wait(30)
     elapsed = time.monotonic() - t0
     assert rc == 0 and first.startswith("drive_emulator:"), first
-    assert 0.9 < elapsed < 2.0, f"ran {elapsed:.2f} s after starting, --duration 1.0"
+    # the status period is 30 s: an emulator that waited for it would run >= 30 s; the upper bound
+    # leaves room for a loaded machine
+    assert 0.9 < elapsed < 10.0, f"ran {elapsed:.2f} s after starting, --duration 1.0"

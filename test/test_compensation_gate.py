@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import time
-
 import pytest
 
 from friction_ros.core.control.compensation import FrictionCompensator
@@ -64,14 +62,11 @@ def _summary(v):
 
 def test_the_known_bad_case_is_refused_with_a_reason(abb, unbounded):
     _, scale = abb
-    t0 = time.perf_counter()
     v = _gate(BAD_LUGRE, SEED003_PD, scale, reference=REF)
-    seconds = time.perf_counter() - t0
     assert not v["feedback"].enabled, _summary(v)
     assert v["feedback"].reason.startswith("refused: unstable: the error grows without bound")
     assert v["feedback"].reason.endswith("(+4 more cases)")  # every perturbed plant fails too
     assert v["feedforward"].enabled and v["feedforward"].worst_ratio < 0.8, _summary(v)
-    assert seconds < 5.0  # measured 1.6 s for 3 modes x 5 cases (+ 5 uncompensated) on the dev VM
 
 
 def test_with_the_bound_the_bad_case_is_stable_and_better_than_none(abb):
@@ -125,12 +120,9 @@ def test_a_static_fit_in_feedback_is_refused(abb):
     """The same Coulomb level as a static model (no presliding term to bound) switched on the
     measured velocity: refused, feed-forward of it enabled only if it is not worse in any case."""
     _, scale = abb
-    t0 = time.perf_counter()
     v = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
-    seconds = time.perf_counter() - t0
     assert not v["feedback"].enabled and v["feedback"].reason.startswith("refused: unstable"), _summary(v)
     assert len(v["feedback"].cases) == 3  # static: nominal + forces +-20 %
-    assert seconds < 5.0
 
 
 def test_a_good_model_is_enabled_and_the_file_carries_the_verdicts(abb):
