@@ -25,3 +25,11 @@ def test_parameter_reference_has_one_table_per_node_with_units():
     for node in ("plant_simulator", "compensating_controller", "friction_estimator", "drive_interface"):
         assert f"## {node}" in text
     assert "| `control_period` | float | `0.001` | in [1e-05, 0.1] | s |" in text
+
+
+def test_readme_key_parameters_equal_the_generator_output():
+    gen = _generator()
+    text = (ROOT / "README.md").read_text()
+    assert gen.render_readme(text) == text, "run scripts/parameter-tables.py"
+    assert "| `compensating_controller` | `mode` | `pid` |" in text
+    assert "| | `pid.p` | `0` | N*m/rad | proportional gain" in text.replace("|  |", "| |")

@@ -54,7 +54,7 @@ from typing import Any
 from friction_ros.core.config import Field, Schema, unflatten
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
-from friction_ros.core.control.pid import PID_DEFAULTS, Pid
+from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA, Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 from friction_ros.core.validation import (
@@ -176,7 +176,9 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
     """
     items: list[Field | Schema] = list(CONTROLLER_FIELDS)
     for s in SCHEME_SECTIONS:
-        items.append(Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter"))
+        items.append(
+            PID_SCHEMA if s == "pid" else Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
+        )
     comp = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
     items.append(Schema.from_defaults("compensation", comp, "friction compensation option"))
     items.append(

@@ -33,24 +33,49 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
 
 ANTIWINDUP_STRATEGIES = ("none", "back_calculation", "conditional_integration")
 
-#: Default PID parameters (control_toolbox names); ranges are checked by :class:`Pid`.
-PID_DEFAULTS: dict[str, Any] = {
-    "p": 0.0,
-    "i": 0.0,
-    "d": 0.0,
-    "i_clamp_max": math.inf,
-    "i_clamp_min": -math.inf,
-    "antiwindup_strategy": "conditional_integration",
-    "tracking_time_constant": 0.0,
-    "u_clamp_max": math.inf,
-    "u_clamp_min": -math.inf,
-    "error_deadband": 0.0,
-    "derivative_filter_time_constant": 0.0,
-}
+#: The PID's settings (control_toolbox names): the compensating_controller's ``pid.*`` parameters.
+#: Open section without ROS ranges: :class:`Pid` checks the values and their cross-rules itself.
+PID_SCHEMA = Schema(
+    "pid",
+    [
+        Field("p", 0.0, "proportional gain: p_term = p * e", unit="N*m/rad", allow_inf=True),
+        Field("i", 0.0, "integral gain: I += i * e * dt", unit="N*m/(rad*s)", allow_inf=True),
+        Field("d", 0.0, "derivative gain on the (filtered) error rate", unit="N*m*s/rad", allow_inf=True),
+        Field("i_clamp_max", math.inf, "upper bound of the integral term I", unit="N*m", allow_inf=True),
+        Field("i_clamp_min", -math.inf, "lower bound of the integral term I", unit="N*m", allow_inf=True),
+        Field(
+            "antiwindup_strategy",
+            "conditional_integration",
+            "none, back_calculation or conditional_integration (control_toolbox AntiWindupStrategy)",
+            choices=ANTIWINDUP_STRATEGIES,
+        ),
+        Field(
+            "tracking_time_constant",
+            0.0,
+            "back_calculation: T_t (0: sqrt(d / i) if d != 0 else p / i)",
+            unit="s",
+            allow_inf=True,
+        ),
+        Field("u_clamp_max", math.inf, "upper bound of the PID output", unit="N*m", allow_inf=True),
+        Field("u_clamp_min", -math.inf, "lower bound of the PID output", unit="N*m", allow_inf=True),
+        Field("error_deadband", 0.0, "|e| below this counts as 0", unit="rad", allow_inf=True),
+        Field(
+            "derivative_filter_time_constant",
+            0.0,
+            "first-order filter of the error rate (0: unfiltered)",
+            unit="s",
+            allow_inf=True,
+        ),
+    ],
+    doc="PID gains and limits",
+    open=True,
+)
+PID_DEFAULTS: dict[str, Any] = PID_SCHEMA.defaults()
 
 
 @dataclass
