@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.append(str(Path(__file__).resolve().parent))  # bench/can.py must not shadow python-can
 from _common import print_table, write_results  # noqa: E402
 
 from friction_ros.core.bag import BagWriter, encode, load_installed, read_bag  # noqa: E402

@@ -12,7 +12,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.append(str(Path(__file__).resolve().parent))  # bench/can.py must not shadow python-can
 from _common import print_table, write_results  # noqa: E402
 
 from friction_ros.cli import demo  # noqa: E402

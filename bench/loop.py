@@ -53,7 +53,7 @@ from pathlib import Path
 
 import yaml
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.append(str(Path(__file__).resolve().parent))  # bench/can.py must not shadow python-can
 from _common import print_table, write_results  # noqa: E402
 
 from friction_ros.cli.bringup import Bringup, NodeSpec  # noqa: E402

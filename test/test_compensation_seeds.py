@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+sys.path.append(
+    str(Path(__file__).resolve().parents[1] / "bench")
+)  # after site-packages: bench/can.py must not shadow python-can
 
 import compensation as bench  # noqa: E402
 

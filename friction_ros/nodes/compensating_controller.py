@@ -169,6 +169,15 @@ class CompensatingControllerNode(ParameterNode):
         values = current_values(self, changes)
         new_ctrl, ref_cfg = controller_from_ros_parameters(values)  # ParameterError -> change rejected
         new_ref = reference_from_config(ref_cfg)
+        if all(k.startswith("pid.") for k in changes) and not self.controller.compensation_fallback:
+            # gains only: change them in the running controller (its integrator and states stay)
+            note = self.controller.feedback_bound_note
+            self.controller.set_pid_gains(**{k[4:]: v for k, v in changes.items()})
+            self.values = values
+            self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))} (states kept)")
+            if self.controller.feedback_bound_note != note and self.controller.feedback_bound_note:
+                self.get_logger().warning(self.controller.feedback_bound_note)
+            return
         if self.controller.compensation_fallback:
             self.get_logger().info(
                 "compensation fallback cleared by a parameter change: compensation active again"

@@ -37,27 +37,47 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
 
 SOURCES = ("none", "feedforward", "feedback", "blended", "observer")
 SMOOTHING = ("none", "tanh", "linear")
 
+#: How the model is applied: the compensating_controller's ``compensation.*`` parameters. Open
+#: section (the safety gate also writes ``refused`` / ``refused_reasons`` lists there); no ROS
+#: ranges: :class:`FrictionCompensator` checks the values itself.
+COMPENSATION_SCHEMA = Schema(
+    "compensation",
+    [
+        Field("source", "feedforward", "none, feedforward, feedback, blended or observer", choices=SOURCES),
+        Field("gain", 1.0, "compensation gain g_c in [0, 2] (seed 001 used 0.95)", allow_inf=True),
+        Field("blend", 0.5, "blended: feedforward weight w in [0, 1] (feedback gets 1 - w)", allow_inf=True),
+        Field("smoothing", "none", "static models near v = 0: none, tanh or linear", choices=SMOOTHING),
+        Field("smoothing_velocity", 1e-3, "v_eps of the smoothing", unit="rad/s", allow_inf=True),
+        Field("observer_gain", 0.0, "observer: LuGre observer gain L >= 0", unit="1/s", allow_inf=True),
+        Field(
+            "feedback_bound",
+            0.5,
+            "feedback path: share f in (0, 1] of the loop's Kp / Kd that fed-back presliding "
+            "stiffness / damping may remove",
+            allow_inf=True,
+        ),
+        Field(
+            "allow_refused",
+            False,
+            "run a source the safety gate refused (written by friction-fit in ``refused``) anyway",
+        ),
+    ],
+    doc="how the friction model is applied",
+    open=True,
+)
+#: model config dict {"model": name, coef: value ...} or None (no compensation); refused sources
+#: and their reasons as written by the fitter's safety gate (compensation_gate)
 COMPENSATION_DEFAULTS: dict[str, Any] = {
-    "model": None,  # model config dict {"model": name, coef: value ...} or None (no compensation)
-    "source": "feedforward",
-    "gain": 1.0,
-    "blend": 0.5,
-    "smoothing": "none",
-    "smoothing_velocity": 1e-3,
-    "observer_gain": 0.0,
-    # stability bound of the feedback path (FrictionCompensator.bound_feedback): the presliding
-    # damping / stiffness fed back may remove at most this share of the loop's Kd / Kp
-    "feedback_bound": 0.5,
-    # written by the fitter's safety gate (compensation_gate): sources it refused, why, and the
-    # explicit override; asking for a refused source refuses to start unless allow_refused is true
+    "model": None,
+    **COMPENSATION_SCHEMA.defaults(),
     "refused": None,
     "refused_reasons": None,
-    "allow_refused": False,
 }
 
 

@@ -52,7 +52,11 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 from friction_ros.core.config import Field, Schema, unflatten
-from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, FrictionCompensator
+from friction_ros.core.control.compensation import (
+    COMPENSATION_DEFAULTS,
+    COMPENSATION_SCHEMA,
+    FrictionCompensator,
+)
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS, LimitCycleDetector
 from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA, Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
@@ -179,8 +183,7 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
         items.append(
             PID_SCHEMA if s == "pid" else Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
         )
-    comp = {k: v for k, v in CONTROLLER_DEFAULTS["friction"].items() if k != "model"}
-    items.append(Schema.from_defaults("compensation", comp, "friction compensation option"))
+    items.append(COMPENSATION_SCHEMA)
     items.append(
         Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
     )
@@ -418,6 +421,14 @@ class CompensatingController:
         cfg["pid"] = self.pid.config()
         cfg["friction"] = self.friction.config()
         return cfg
+
+    def set_pid_gains(self, **gains: Any) -> None:
+        """Change PID parameters at run time (control_toolbox names), validated; the integrator,
+        filters and model states are kept (bumpless for gain changes)."""
+        self.pid.set_gains(**gains)
+        if self.scheme is None:  # the feedback-path bound follows the loop gains
+            self.loop_stiffness, self.loop_damping = loop_gains(self.mode, self.pid, None)
+            self.feedback_bound_note = self.friction.bound_feedback(self.loop_stiffness, self.loop_damping)
 
     def reconfigure(self, changes: Mapping[str, Any]) -> None:
         """Apply parameter changes (nested or dotted keys); all-or-nothing, resets the states."""
