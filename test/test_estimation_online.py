@@ -10,7 +10,7 @@ from friction_ros.core.estimation import (
     TorqueBalanceEstimator,
 )
 from friction_ros.core.harness import run_closed_loop
-from friction_ros.core.plant import GearheadServoPlant
+from friction_ros.core.plant.params import GearheadServoPlant
 from friction_ros.core.validation import ParameterError
 
 J = 0.0012

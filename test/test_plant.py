@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from friction_ros.core.plant import (
+from friction_ros.core.plant.params import (
     GearheadServoPlant,
     PlantParams,
     current_from_sensor_voltage,
@@ -227,7 +227,7 @@ def test_parameter_validation_is_clear():
 _FALLBACK = r"""
 import json, numpy as np
 from friction_ros.core.friction import make_model
-from friction_ros.core.plant import GearheadServoPlant, PlantParams
+from friction_ros.core.plant.params import GearheadServoPlant, PlantParams
 v = np.sin(np.linspace(0, 20, 400)) * 0.3
 g = make_model("gms", fc=0.8, fs=0.95, vs=0.05, attraction=50.0, k=[1e5, 1e3], alpha=[0.4, 0.6])
 l = make_model("lugre", sigma0=1e5, sigma1=20.0, fc=0.8, fs=0.95, vs=0.05)

@@ -69,7 +69,7 @@ def make_plant(spec: Any, **plant_overrides: Any):
     ``plant_overrides``: plant keys (``encoder_cpr=0`` ...) and/or ``friction_motor`` /
     ``friction_load`` model configs replacing the preset's.
     """
-    from friction_ros.core.plant import GearheadServoPlant
+    from friction_ros.core.plant.params import GearheadServoPlant
 
     if isinstance(spec, GearheadServoPlant):
         if plant_overrides:

@@ -26,7 +26,7 @@ import numpy as np
 import yaml
 
 from friction_ros.core.friction import FrictionModel
-from friction_ros.core.plant import GearheadServoPlant, PlantParams
+from friction_ros.core.plant.params import GearheadServoPlant, PlantParams
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 from friction_ros.core.yaml_files import load_yaml
 

@@ -31,7 +31,7 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.harness import command_scale
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
-from friction_ros.core.plant import MAX_COMMAND
+from friction_ros.core.plant.params import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher

@@ -360,7 +360,7 @@ def plant_from_preset(preset: str = "abb_m19s"):
     :class:`JointConversion` matches the preset's gear ratio and torque constant, i.e. what the
     drive_interface node must be configured with to get the plant's joint values back.
     """
-    from friction_ros.core.plant import GearheadServoPlant
+    from friction_ros.core.plant.params import GearheadServoPlant
     from friction_ros.core.presets import load_preset
 
     p = load_preset(preset).params

@@ -58,7 +58,7 @@ def seed003_velocity(duration: float, dt: float, high: float, low: float, seed: 
 
 def _make_plant(preset: str, friction=None, overrides: dict | None = None):
     from friction_ros.core.friction import model_from_config
-    from friction_ros.core.plant import GearheadServoPlant
+    from friction_ros.core.plant.params import GearheadServoPlant
     from friction_ros.core.presets import load_preset
 
     pre = load_preset(preset)

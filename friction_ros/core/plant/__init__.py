@@ -1,0 +1,1 @@
+"""The simulated gearhead DC servo plant (pure core)."""
