@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.plant.params import GearheadServoPlant
+from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.presets import PRESET_NAMES, load_preset, params_dir, save_preset
 from friction_ros.core.validation import ParameterError
 

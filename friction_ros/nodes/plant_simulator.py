@@ -28,9 +28,8 @@ from builtin_interfaces.msg import Time
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from friction_ros.core.harness import command_scale
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
-from friction_ros.core.plant.params import MAX_COMMAND
+from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.node_utils import (
@@ -155,10 +154,13 @@ class PlantSimulator(ParameterNode):
             for s in ("plant", "friction_motor", "friction_load")
         }
         self.p = declare(self, PARAMS)
-        self.preset = resolve_preset(self.p["preset"], sections)
+        # the node's control_period is the preset's (it owns the period the plant is stepped at)
+        self.preset = resolve_preset(
+            self.p["preset"], {**sections, "control_period": self.p["control_period"]}
+        )
         self.plant = self.preset.make_plant()
-        self.scale = command_scale(self.plant)
-        self.dt = self.p["control_period"]
+        self.scale = self.plant.command_scale
+        self.dt = self.preset.control_period
         self.dt_ns = int(round(self.dt * 1e9))
         self.joint = self.p["joint_name"]
         self.lockstep = self.p["mode"] == "lockstep"
