@@ -66,8 +66,8 @@ sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must n
 
 from _common import print_table, write_results  # noqa: E402
 
-from friction_ros.core.harness import load_plant_config, make_plant, run_closed_loop  # noqa: E402
-from friction_ros.core.presets import load_preset  # noqa: E402
+from friction_ros.core.harness import run_closed_loop  # noqa: E402
+from friction_ros.core.presets import load_preset, make_plant  # noqa: E402
 
 # the ABB M19-S preset's GMS-4 truth (params/abb_m19s.yaml), read from the preset so the two cannot drift
 GMS = load_preset("abb_m19s").friction.to_config()
@@ -271,7 +271,7 @@ def _seed001_self_motion(plant) -> dict:
             d[k] *= s
         return d
 
-    F = load_plant_config("seed001_harmonic_drive")["friction_motor"]
+    F = load_preset("seed001_harmonic_drive").friction_motor.to_config()
     motion = {}
     for name, model, gain in (
         ("accurate, k_c = 0.95", F, 0.95),
@@ -294,7 +294,7 @@ def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: boo
     Loop (extract 6.1): c = sat((u - theta) + k_c F_hat(omega_hat)), omega_hat = backward
     difference of the held encoder position at 0.01 s, k_c = 0.95; uncompensated: k_c F_hat = 0.
     """
-    F = load_plant_config("seed001_harmonic_drive")["friction_motor"]
+    F = load_preset("seed001_harmonic_drive").friction_motor.to_config()
     dur = 40.0 if quick else 141.0
     out: dict = {"item7": {}, "item8": {}, "item9": {}}
     for variant in plants:
@@ -410,7 +410,7 @@ def seed002(duration: float = 20.0, cases=None) -> list[dict]:
 
 def seed004(duration: float = 3.0, amplitudes=(0.1, 0.5, 1.0, 10.0)) -> list[dict]:
     """1 Hz sinusoids: RMSE of PD vs PD + model compensation (feed-forward and feedback)."""
-    F = load_plant_config("seed004_dc_motor")["friction_motor"]
+    F = load_preset("seed004_dc_motor").friction_motor.to_config()
     rows = []
     for deg in amplitudes:
         A = np.deg2rad(deg)

@@ -164,7 +164,7 @@ def render_readme(text: str) -> str:
 
 def render() -> str:
     from friction_ros.core.friction.registry import MODEL_CLASSES
-    from friction_ros.core.plant import PLANT_SCHEMA
+    from friction_ros.core.plant.params import PLANT_SCHEMA
 
     out = [
         "# Parameters",

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from friction_ros.core.excitation import END, START, make_program
-from friction_ros.core.harness import command_scale
 from friction_ros.core.identification import data as D
 from friction_ros.core.identification import metrics
 from friction_ros.core.identification.pipeline import _breakaway_levels, _imprecise_breakaways
@@ -66,7 +65,7 @@ def _plateau_run(name: str, speeds: int = 2):
     prog = make_program(c)
     plant = preset.make_plant()
     plant.reset()
-    cs = command_scale(plant)
+    cs = plant.command_scale
     dt, t, m = c["dt"], 0.0, plant.step(0.0, c["dt"])
     rows, events = [], []
     while not prog.done:

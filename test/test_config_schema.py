@@ -3,7 +3,7 @@
 import pytest
 
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.plant import PLANT_SCHEMA
+from friction_ros.core.plant.params import PLANT_SCHEMA
 from friction_ros.core.validation import ParameterError
 
 SCHEMA = Schema(

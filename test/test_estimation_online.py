@@ -10,7 +10,7 @@ from friction_ros.core.estimation import (
     TorqueBalanceEstimator,
 )
 from friction_ros.core.harness import run_closed_loop
-from friction_ros.core.plant.params import GearheadServoPlant
+from friction_ros.core.presets import make_plant
 from friction_ros.core.validation import ParameterError
 
 J = 0.0012
@@ -18,7 +18,7 @@ TRUTH = {"model": "stribeck", "fc": 0.4, "fs": 0.6, "vs": 0.05, "delta": 2.0, "f
 
 
 def plant():
-    return GearheadServoPlant(
+    return make_plant(
         {
             "plant": {"motor_inertia": J, "torque_constant": 0.49, "actuation": "torque"},
             "friction_motor": TRUTH,
@@ -83,7 +83,7 @@ def _continue(est):
 @pytest.mark.parametrize("factor", [0.5, 1.5])
 def test_rls_asymmetric_coulomb_viscous_with_dob(factor):
     truth = {"fc": 0.4, "fv": 0.05}
-    p = GearheadServoPlant(
+    p = make_plant(
         {
             "plant": {"motor_inertia": J, "torque_constant": 0.49, "actuation": "torque"},
             "friction_motor": {"model": "coulomb_viscous", **truth},
@@ -163,7 +163,7 @@ def test_rls_skips_unexcited_samples():
 
 def test_lugre_observer_estimator():
     lu = {"model": "lugre", "sigma0": 1e4, "sigma1": 0.0, "fv": 0.05, "fc": 0.4, "fs": 0.6, "vs": 0.05}
-    p = GearheadServoPlant(
+    p = make_plant(
         {"plant": {"motor_inertia": J, "torque_constant": 0.49, "actuation": "torque"}, "friction_motor": lu}
     )
     est = OnlineFrictionEstimator({"model": "lugre", "lugre": lu, "inertia": J})

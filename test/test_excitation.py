@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from friction_ros.core.excitation import ABORT, END, START, ExcitationProgram, make_program, random_velocity
-from friction_ros.core.harness import command_scale
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 
@@ -19,7 +18,7 @@ def run(config, *, max_time=None, plant=None):
     """Step the preset plant with the program's torque; return arrays and events."""
     preset = load_preset("abb_m19s")
     plant = plant or preset.make_plant()
-    scale = command_scale(plant)
+    scale = plant.command_scale
     prog = make_program(config)
     dt = prog.config["dt"]
     t, pos, vel = 0.0, 0.0, 0.0

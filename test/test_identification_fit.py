@@ -96,7 +96,8 @@ def _round_trip(out):
     """Seed 003 Table 2/3 analogue (PD Kp = 200, Kd = 0.15, 1 kHz, ABB M19-S, GMS-4 truth): RMS
     tracking error of 4 s band-limited random references (small and large stroke) with the true,
     the fitted (from the parameter file) and no friction feed-forward, per reference seed."""
-    from friction_ros.core.harness import make_plant, run_closed_loop
+    from friction_ros.core.harness import run_closed_loop
+    from friction_ros.core.presets import make_plant
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     from friction_ros.core.control.controller import config_from_ros_parameters
@@ -145,7 +146,8 @@ def _round_trip_benchmark_length(
     ``truth``) and the fitted (parameter file) feed-forward, on the plant with friction ``truth``
     (default: the preset's) and a 0.1 ms current loop; ``none``: also without friction feed-forward."""
     from friction_ros.core.control.controller import config_from_ros_parameters
-    from friction_ros.core.harness import make_plant, run_closed_loop
+    from friction_ros.core.harness import run_closed_loop
+    from friction_ros.core.presets import make_plant
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])

@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 
 from friction_ros.core.excitation import make_program
-from friction_ros.core.harness import command_scale
 from friction_ros.core.identification import data as D
 from friction_ros.core.identification import metrics
 from friction_ros.core.identification.pipeline import fit_bag, fit_records
@@ -199,7 +198,7 @@ def _compliant_run(with_events: bool):
     scale = JointScale.from_preset(preset)
     prog = make_program(dict(experiment_config(scale, "quick"), program="breakaway"))
     plant = preset.make_plant()
-    k = command_scale(plant)
+    k = plant.command_scale
     plant.reset()
     pos = vel = t = 0.0
     T, P, V, E, events = [], [], [], [], []

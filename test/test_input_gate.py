@@ -20,7 +20,7 @@ from friction_ros.core.input_gate import (
     select_command,
     select_sample,
 )
-from friction_ros.core.plant.params import MAX_COMMAND
+from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.core.validation import ParameterError
 

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from friction_ros.core.excitation import ABORT, END, START, make_program
-from friction_ros.core.harness import command_scale, make_plant, run_closed_loop
+from friction_ros.core.harness import run_closed_loop
 from friction_ros.core.joint_sizing import (
     ENCODER_TORQUE_SHARE,
     JointScale,
@@ -20,7 +20,7 @@ from friction_ros.core.joint_sizing import (
     tracking_gains,
     tracking_reference,
 )
-from friction_ros.core.presets import load_preset, params_dir, preset_from_config
+from friction_ros.core.presets import load_preset, make_plant, params_dir, preset_from_config
 from friction_ros.core.validation import ParameterError
 
 
@@ -44,7 +44,7 @@ def run_program(preset, profile="quick"):
     cfg = experiment_config(scale, profile)
     prog = make_program(cfg)
     plant = preset.make_plant()
-    k = command_scale(plant)
+    k = plant.command_scale
     plant.reset()
     pos = vel = t = 0.0
     events, v_meas = [], []

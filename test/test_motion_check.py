@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from friction_ros.core.excitation import ABORT, END, make_program
-from friction_ros.core.harness import command_scale
 from friction_ros.core.presets import load_preset
 
 
@@ -31,7 +30,7 @@ def run_stuck(config, position=lambda t: 0.0, limit=200.0):
 def run_plant(config, preset="abb_m19s"):
     p = load_preset(preset)
     plant = p.make_plant()
-    scale = command_scale(plant)
+    scale = plant.command_scale
     prog = make_program(config)
     dt = prog.config["dt"]
     t, pos, vel, events = 0.0, 0.0, 0.0, []

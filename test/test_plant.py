@@ -12,13 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from friction_ros.core.plant.params import (
-    GearheadServoPlant,
-    PlantParams,
-    current_from_sensor_voltage,
-    sensor_voltage_from_current,
-    voltage_params_from_transfer_function,
-)
+from friction_ros.core.plant.params import PlantParams, voltage_params_from_transfer_function
+from friction_ros.core.plant.sensing import current_from_sensor_voltage, sensor_voltage_from_current
+from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -227,7 +223,8 @@ def test_parameter_validation_is_clear():
 _FALLBACK = r"""
 import json, numpy as np
 from friction_ros.core.friction import make_model
-from friction_ros.core.plant.params import GearheadServoPlant, PlantParams
+from friction_ros.core.plant.params import PlantParams
+from friction_ros.core.plant.servo import GearheadServoPlant
 v = np.sin(np.linspace(0, 20, 400)) * 0.3
 g = make_model("gms", fc=0.8, fs=0.95, vs=0.05, attraction=50.0, k=[1e5, 1e3], alpha=[0.4, 0.6])
 l = make_model("lugre", sigma0=1e5, sigma1=20.0, fc=0.8, fs=0.95, vs=0.05)

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.plant.params import GearheadServoPlant
+from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.presets import PRESET_NAMES, load_preset, params_dir, save_preset
 from friction_ros.core.validation import ParameterError
 
@@ -148,3 +148,65 @@ def test_seed000_gearhead_preset_runs_with_backlash():
     pl = pr.make_plant()
     out = pl.simulate(np.full(2000, 6.0), 1e-3)
     assert out["true_velocity"][-1] > 0 and np.all(np.isfinite(out["true_position"]))
+
+
+def test_one_preset_to_plant_path():
+    """resolve_preset / make_plant: a preset, a parameter file's sections and keywords build the plant
+    one way; the preset owns the control period."""
+    from friction_ros.core.presets import (
+        CONTROL_PERIOD_RANGE,
+        DEFAULT_CONTROL_PERIOD,
+        make_plant,
+        resolve_preset,
+    )
+
+    base = load_preset("abb_m19s")
+    same = resolve_preset("abb_m19s")
+    assert same.to_config() == base.to_config()
+    # plant keys merge, a friction section without a model merges its coefficients, keywords win
+    fc = base.friction_motor.coefficients["fc"]
+    pr = resolve_preset(
+        "abb_m19s",
+        {"plant": {"encoder_cpr": 0, "seed": 3}, "friction_motor": {"fc": fc / 2}, "control_period": 0.002},
+        seed=4,
+    )
+    assert pr.params.encoder_cpr == 0 and pr.params.seed == 4
+    assert pr.params.motor_inertia == base.params.motor_inertia
+    assert pr.friction_motor.name == base.friction_motor.name
+    assert pr.friction_motor.coefficients["fc"] == fc / 2
+    assert pr.control_period == 0.002 and base.control_period == DEFAULT_CONTROL_PERIOD
+    assert base.params.encoder_cpr > 0  # the base preset is unchanged
+    # a friction section naming a model replaces the model; a Preset object is a base too
+    assert (
+        resolve_preset(base, {"friction_motor": {"model": "coulomb", "fc": 0.1}}).friction_motor.name
+        == "coulomb"
+    )
+    # no base preset: the sections are the whole plant
+    cfg = {
+        "plant": {"motor_inertia": 0.01, "torque_constant": 0.5},
+        "friction_motor": {"model": "coulomb", "fc": 0.2},
+    }
+    pl = make_plant(cfg, actuation="torque")
+    assert pl.params.actuation == "torque" and pl.params.friction_motor.name == "coulomb"
+    assert resolve_preset(cfg).name == "custom"
+    with pytest.raises(ParameterError, match="plant.motor_inertia is missing"):
+        make_plant({"plant": {"torque_constant": 0.5}})
+    with pytest.raises(ParameterError, match="preset overrides"):
+        resolve_preset("abb_m19s", {"plants": {"seed": 1}})
+    with pytest.raises(ParameterError, match="control_period"):
+        resolve_preset("abb_m19s", {"control_period": 2 * CONTROL_PERIOD_RANGE[1]})
+    with pytest.raises(ParameterError, match="must be PlantParams"):
+        GearheadServoPlant(cfg)
+
+
+def test_command_scale_is_the_plants():
+    """Joint torque -> command: 1/(gain Kt r eta) (current), 1 (torque), R/(Kt r eta) (voltage)."""
+    from friction_ros.core.presets import make_plant
+
+    for name in PRESET_NAMES:
+        pl = load_preset(name).make_plant()
+        p = pl.params
+        gain = p.torque_constant * p.ratio * p.gear_efficiency
+        expect = {"current": 1.0 / (p.amplifier_gain * gain), "torque": 1.0, "voltage": p.resistance / gain}
+        assert pl.command_scale == pytest.approx(expect[p.actuation])
+    assert make_plant("abb_m19s", actuation="torque").command_scale == 1.0

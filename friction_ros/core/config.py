@@ -8,7 +8,7 @@ validates a nested config dict once (:meth:`Schema.validate`), with one-line
 and what is allowed.
 
 The friction models list their coefficients as fields (``FrictionModel.COEFS``); the plant
-(:data:`friction_ros.core.plant.PLANT_SCHEMA`), the controller
+(:data:`friction_ros.core.plant.params.PLANT_SCHEMA`), the controller
 (:data:`friction_ros.core.control.controller.CONTROLLER_FIELDS`), the online estimator
 (:data:`friction_ros.core.estimation.estimator.ESTIMATOR_SCHEMA`) and a CAN drive axis
 (:data:`friction_ros.core.can.axis.AXIS_SCHEMA`) have schemas next to the code they configure. The

@@ -9,9 +9,8 @@ Per period k (t_k = k dt)::
     estimator.update(t_{k+1}, pos, vel, effort, dt)     (optional; coefficients can be adopted
                                                           by the controller every ``adopt_period``)
 
-``command_scale`` converts the controller's joint torque to the plant's command: current mode
-1 / (amplifier_gain Kt r eta), torque mode 1, voltage mode R / (Kt r eta) (quasi-static, the
-back-EMF is part of the plant's linear dynamics, seed 004 eq. (12)).
+``command_scale`` is the plant's (:attr:`GearheadServoPlant.command_scale`): it converts the
+controller's joint torque to the plant's command unit.
 
 Everything is seeded and stepped in one thread, so the same inputs give bit-identical outputs
 (tests, benchmarks and the ROS lockstep comparison rely on it).
@@ -28,71 +27,17 @@ and amplitude above ``resolution``).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
-from friction_ros.core.control.controller import CompensatingController
+from friction_ros.core.control.controller import CompensatingController, ControllerTerms
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
+from friction_ros.core.plant.servo import GearheadServoPlant
+from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD, Preset, make_plant
 from friction_ros.core.references import Reference, reference_from_config
-from friction_ros.core.validation import ParameterError, check_real
-
-PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"
-
-
-def load_plant_config(name: str) -> dict[str, Any]:
-    """Plant config ``{"plant": ..., "friction_motor": ..., "friction_load": ...}`` of a preset.
-
-    Reads ``params/<name>.yaml`` (``plant_simulator.ros__parameters``) and returns its sections as
-    written (a missing friction section is ``{"model": "none"}``).
-    """
-    import yaml
-
-    path = PARAMS_DIR / f"{name}.yaml"
-    if not path.is_file():
-        avail = ", ".join(sorted(p.stem for p in PARAMS_DIR.glob("*.yaml")))
-        raise ParameterError(f"plant preset = {name!r} is not allowed: must be one of {avail}")
-    doc = yaml.safe_load(path.read_text())
-    params = next(iter(doc.values()))["ros__parameters"]
-    return {
-        "plant": dict(params["plant"]),
-        "friction_motor": params.get("friction_motor", {"model": "none"}),
-        "friction_load": params.get("friction_load", {"model": "none"}),
-    }
-
-
-def make_plant(spec: Any, **plant_overrides: Any):
-    """Build a GearheadServoPlant from a preset name, a plant config dict or a plant instance.
-
-    ``plant_overrides``: plant keys (``encoder_cpr=0`` ...) and/or ``friction_motor`` /
-    ``friction_load`` model configs replacing the preset's.
-    """
-    from friction_ros.core.plant.params import GearheadServoPlant
-
-    if isinstance(spec, GearheadServoPlant):
-        if plant_overrides:
-            return GearheadServoPlant(spec.params.replace(**plant_overrides))
-        return spec
-    cfg = load_plant_config(spec) if isinstance(spec, str) else dict(spec)
-    cfg = {k: (dict(v) if isinstance(v, Mapping) else v) for k, v in cfg.items()}
-    plant = dict(cfg.get("plant", {}))
-    fm = plant_overrides.pop("friction_motor", cfg.get("friction_motor"))
-    fl = plant_overrides.pop("friction_load", cfg.get("friction_load"))
-    plant.update(plant_overrides)
-    return GearheadServoPlant({"plant": plant, "friction_motor": fm, "friction_load": fl})
-
-
-def command_scale(plant) -> float:
-    """Joint torque -> plant command factor (see the module docstring)."""
-    p = plant.params
-    gain = p.torque_constant * p.ratio * p.gear_efficiency
-    if p.actuation == "current":
-        return 1.0 / (p.amplifier_gain * gain)
-    if p.actuation == "voltage":
-        return p.resistance / gain
-    return 1.0
+from friction_ros.core.validation import check_real
 
 
 @dataclass
@@ -118,14 +63,9 @@ class LoopResult:
         return self.reference[:, 0] - self.true_position
 
 
-_TERM_KEYS = (
-    "p_term",
-    "i_term",
-    "d_term",
-    "velocity_feedforward",
-    "inertia_feedforward",
-    "friction_feedforward",
-    "friction_feedback",
+#: The control law's terms (ControllerTerms fields): p/i/d terms, feed-forwards and friction feedback.
+_TERM_KEYS = tuple(
+    f.name for f in fields(ControllerTerms) if f.name.endswith(("_term", "_feedforward", "_feedback"))
 )
 
 
@@ -174,11 +114,11 @@ def tracking_metrics(
 
 
 def run_closed_loop(
-    plant: Any,
+    plant: str | Preset | Mapping[str, Any] | GearheadServoPlant,
     controller: CompensatingController | Mapping[str, Any],
     reference: Reference | Mapping[str, Any],
     duration: float,
-    dt: float = 1e-3,
+    dt: float = DEFAULT_CONTROL_PERIOD,
     *,
     estimator: OnlineFrictionEstimator | Mapping[str, Any] | None = None,
     adopt_period: float = 0.0,
@@ -190,15 +130,17 @@ def run_closed_loop(
 ) -> LoopResult:
     """Run the lockstep loop for ``duration`` seconds at period ``dt``; see the module docstring.
 
-    ``plant``: preset name, plant config or GearheadServoPlant (reset here to the reference's
-    initial position unless ``initial_position`` is given). ``adopt_period > 0`` with an estimator:
+    ``plant``: preset (name or object), plant config (:func:`~friction_ros.core.presets.make_plant`)
+    or GearheadServoPlant (reset here to the reference's initial position unless
+    ``initial_position`` is given). ``adopt_period > 0`` with an estimator:
     every ``adopt_period`` seconds the controller adopts ``estimator.model_config()`` once the
     estimator has converged. ``metrics``: keyword arguments of :func:`tracking_metrics`.
     """
     duration = check_real("harness.duration", duration, 0.0, lo_open=True, unit="s")
     dt = check_real("harness.dt", dt, 0.0, 1.0, lo_open=True, unit="s")
     adopt_period = check_real("harness.adopt_period", adopt_period, 0.0, unit="s")
-    plant = make_plant(plant)
+    if not isinstance(plant, GearheadServoPlant):
+        plant = make_plant(plant)
     ctrl = (
         controller if isinstance(controller, CompensatingController) else CompensatingController(controller)
     )
@@ -210,7 +152,7 @@ def run_closed_loop(
             if isinstance(estimator, OnlineFrictionEstimator)
             else OnlineFrictionEstimator(estimator)
         )
-    k_scale = command_scale(plant) if scale is None else float(scale)
+    k_scale = plant.command_scale if scale is None else float(scale)
     n = int(round(duration / dt))
     t = np.arange(n) * dt
     R = np.column_stack(ref.arrays(t))

@@ -12,13 +12,26 @@ File format (one file per preset)::
         friction_load: {model: none}
 
 ``load_preset(name_or_path)`` accepts a preset name (see ``PRESET_NAMES``) or a path to such a file.
+
+One way from a preset to a plant: :func:`resolve_preset` (a preset by name, path or object, its
+sections overridden by a parameter file's and/or by keywords) gives a :class:`Preset`, and
+:meth:`Preset.make_plant` the :class:`~friction_ros.core.plant.servo.GearheadServoPlant`
+(:func:`make_plant` does both). The harness, the synthetic identification records, the CAN drive
+emulator, the plant_simulator node and the CLIs all go this way.
+
+The control period is owned by the plant's preset: ``Preset.control_period`` (the ``control_period``
+of the YAML file, validated by :func:`check_control_period`), by default
+:data:`DEFAULT_CONTROL_PERIOD`. The nodes' ``control_period`` parameters (``control_rate_hz`` =
+1 / period in drive_interface) take their default and range from :data:`DEFAULT_CONTROL_PERIOD` and
+:data:`CONTROL_PERIOD_RANGE`; plant_simulator hands its ``control_period`` to the preset it builds
+and steps the plant at ``Preset.control_period``.
 """
 
 from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,7 +39,8 @@ import numpy as np
 import yaml
 
 from friction_ros.core.friction import FrictionModel
-from friction_ros.core.plant.params import GearheadServoPlant, PlantParams
+from friction_ros.core.plant.params import PlantParams
+from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 from friction_ros.core.yaml_files import load_yaml
 
@@ -41,6 +55,19 @@ PRESET_NAMES: tuple[str, ...] = (
     "seed000_gearhead",
 )
 _SECTION_KEYS = ("preset", "description", "control_period", "plant", "friction_motor", "friction_load")
+_OVERRIDE_KEYS = ("control_period", "plant", "friction_motor", "friction_load")
+_FRICTION_SIDES = ("friction_motor", "friction_load")
+
+#: The control period [s] of a plant whose preset does not give one, and the default of every node's
+#: ``control_period`` parameter (drive_interface: ``control_rate_hz`` = 1 / it).
+DEFAULT_CONTROL_PERIOD = 1e-3
+#: The range [s] a control period must lie in (the plant's preset and the nodes' parameters).
+CONTROL_PERIOD_RANGE = (1e-5, 0.1)
+
+
+def check_control_period(name: str, value: Any) -> float:
+    """``value`` as a control period [s] within :data:`CONTROL_PERIOD_RANGE`, else ParameterError."""
+    return check_real(name, value, *CONTROL_PERIOD_RANGE, unit="s")
 
 
 def params_dir() -> Path:
@@ -133,7 +160,34 @@ class Preset:
         return self.params.friction_load
 
     def make_plant(self) -> GearheadServoPlant:
+        """A new plant with this preset's parameters (the one way from a preset to a plant)."""
         return GearheadServoPlant(self.params)
+
+    def override(self, sections: Mapping[str, Any] | None = None, /, **changes: Any) -> Preset:
+        """This preset with ROS parameter ``sections`` and keyword ``changes`` applied.
+
+        ``sections``: ``plant`` (merged key by key), ``friction_motor`` / ``friction_load`` (a section
+        that names a ``model`` replaces the preset's model as a whole, one without merges its
+        coefficients into the preset's model), ``control_period``; an empty section changes nothing.
+        ``changes``: plant keys and/or whole ``friction_motor`` / ``friction_load`` models (configs or
+        model objects), applied after ``sections``.
+        """
+        given = {k: v for k, v in dict(sections or {}).items() if v}
+        check_keys("preset overrides", given, _OVERRIDE_KEYS)
+        plant = {**given.get("plant", {}), **{k: v for k, v in changes.items() if k not in _FRICTION_SIDES}}
+        friction = {}
+        for side in _FRICTION_SIDES:
+            if side in changes:
+                friction[side] = changes[side]
+            elif side in given:
+                sec = dict(given[side])
+                own = getattr(self.params, side)
+                friction[side] = sec if "model" in sec else {**own.to_config(), **sec}
+        params = self.params.replace(**plant, **friction) if plant or friction else self.params
+        period = self.control_period
+        if "control_period" in given:
+            period = check_control_period("preset.control_period", given["control_period"])
+        return replace(self, params=params, control_period=period)
 
     def to_config(self) -> dict:
         """The ROS parameter YAML document (``{plant_simulator: {ros__parameters: {...}}}``)."""
@@ -167,8 +221,8 @@ def preset_from_config(doc: Mapping[str, Any], source: str = "") -> Preset:
     return Preset(
         name=str(sec.get("preset", Path(source).stem if source else "custom")),
         description=str(sec.get("description", "")),
-        control_period=check_real(
-            "preset.control_period", sec.get("control_period", 0.001), 0.0, lo_open=True, unit="s"
+        control_period=check_control_period(
+            "preset.control_period", sec.get("control_period", DEFAULT_CONTROL_PERIOD)
         ),
         params=params,
         source=source,
@@ -197,24 +251,46 @@ def save_preset(preset: Preset, path: str | os.PathLike) -> Path:
     return path
 
 
-def resolve_preset(name_or_path: str, overrides: Mapping[str, Any] | None = None) -> Preset:
-    """A preset by name/path with its ``plant`` / ``friction_motor`` / ``friction_load`` sections
-    overridden (how plant_simulator combines ``preset`` with sections from parameter files).
+def resolve_preset(
+    preset: str | os.PathLike | Preset | Mapping[str, Any] = "",
+    overrides: Mapping[str, Any] | None = None,
+    /,
+    **changes: Any,
+) -> Preset:
+    """A preset by name, path or object with its sections overridden (the one way from a preset or a
+    parameter file to a plant: ``resolve_preset(...).make_plant()``).
 
-    A friction section that names a ``model`` replaces the preset's model as a whole; ``plant`` keys
-    are merged key by key. ``name_or_path`` = "" means no base preset: the sections are the whole
-    plant (as in a ``friction-fit`` parameter file), missing plant keys take their defaults.
+    ``overrides``: the ``plant`` / ``friction_motor`` / ``friction_load`` / ``control_period``
+    sections of a parameter file, ``changes``: plant keys and whole friction models as keywords
+    (see :meth:`Preset.override`). ``preset`` = "" means no base preset: the sections are the whole
+    plant (as in a ``friction-fit`` parameter file), missing plant keys take their defaults; a
+    mapping ``preset`` is such a whole plant (``{"plant": ..., "friction_motor": ...}``).
     """
-    overrides = dict(overrides or {})
-    if name_or_path:
-        doc = load_preset(name_or_path).to_config()[NODE_NAME]["ros__parameters"]
-    else:
-        doc = {"preset": "custom", "plant": {}}
-    for sec, given in overrides.items():
-        if not given:
-            continue
-        if sec.startswith("friction") and "model" in given:
-            doc[sec] = dict(given)
-        else:
-            doc[sec] = {**(doc.get(sec) or {}), **dict(given)}
-    return preset_from_config(doc, source=str(name_or_path) or "parameter file")
+    if isinstance(preset, Mapping):
+        preset, overrides = "", {**preset, **dict(overrides or {})}
+    if isinstance(preset, Preset):
+        base = preset
+    elif preset:
+        base = load_preset(preset)
+    else:  # the sections (and keywords) are the whole plant
+        given = {k: v for k, v in dict(overrides or {}).items() if v}
+        check_keys("preset overrides", given, _OVERRIDE_KEYS)
+        doc = {**given, "preset": "custom"}
+        doc["plant"] = {
+            **given.get("plant", {}),
+            **{k: v for k, v in changes.items() if k not in _FRICTION_SIDES},
+        }
+        doc.update({side: changes[side] for side in _FRICTION_SIDES if side in changes})
+        return preset_from_config(doc, source="parameter file")
+    return base.override(overrides, **changes)
+
+
+def make_plant(
+    preset: str | os.PathLike | Preset | Mapping[str, Any] = "",
+    overrides: Mapping[str, Any] | None = None,
+    /,
+    **changes: Any,
+) -> GearheadServoPlant:
+    """``resolve_preset(preset, overrides, **changes).make_plant()``: e.g.
+    ``make_plant("abb_m19s", encoder_cpr=0)`` or ``make_plant({"plant": {...}, "friction_motor": {...}})``."""
+    return resolve_preset(preset, overrides, **changes).make_plant()

@@ -29,9 +29,8 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.harness import command_scale
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
-from friction_ros.core.plant.params import MAX_COMMAND
+from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
@@ -135,7 +134,7 @@ PRESET_SECTIONS = ("plant", "friction_motor", "friction_load")
 
 def parameter_schema() -> Schema:
     """The node's parameters; the preset sections take the keys given in the parameter file (on top
-    of the preset; the plant's keys: :data:`friction_ros.core.plant.PLANT_SCHEMA`)."""
+    of the preset; the plant's keys: :data:`friction_ros.core.plant.params.PLANT_SCHEMA`)."""
     sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
     return Schema("plant_simulator", [*NODE_FIELDS, *sections, *SCHEDULING])
 
@@ -147,10 +146,13 @@ class PlantSimulator(ParameterNode):
         super().__init__("plant_simulator")
         self.p = declare_config(self, parameter_schema(), self._apply)
         sections = {s: self.p.get(s, {}) for s in PRESET_SECTIONS}
-        self.preset = resolve_preset(self.p["preset"], sections)
+        # the node's control_period is the preset's (it owns the period the plant is stepped at)
+        self.preset = resolve_preset(
+            self.p["preset"], {**sections, "control_period": self.p["control_period"]}
+        )
         self.plant = self.preset.make_plant()
-        self.scale = command_scale(self.plant)
-        self.dt = self.p["control_period"]
+        self.scale = self.plant.command_scale
+        self.dt = self.preset.control_period
         self.dt_ns = int(round(self.dt * 1e9))
         self.joint = self.p["joint_name"]
         self.lockstep = self.p["mode"] == "lockstep"

@@ -1,7 +1,7 @@
 """Frame-level servo-drive emulator (ODrive CANSimple or MIT) on a python-can bus.
 
 A plant object (``step(command_torque, dt) -> measurement`` with joint ``position``, ``velocity``,
-``effort`` attributes, e.g. ``friction_ros.core.plant.GearheadServoPlant`` in torque mode) sits behind
+``effort`` attributes, e.g. ``friction_ros.core.plant.servo.GearheadServoPlant`` in torque mode) sits behind
 a drive that answers the same frames a real one does:
 
 * ODrive: Set_Axis_State (IDLE / CLOSED_LOOP_CONTROL), Set_Controller_Mode, Set_Input_Torque,
@@ -353,16 +353,15 @@ class DriveEmulator:
 
 
 def plant_from_preset(preset: str = "abb_m19s"):
-    """A project plant (:class:`friction_ros.core.plant.GearheadServoPlant`) for the emulator.
+    """A project plant (:class:`friction_ros.core.plant.servo.GearheadServoPlant`) for the emulator.
 
     The preset's plant is switched to torque actuation (the emulated drive closes the current loop,
     so the plant's command is the joint torque). Returns ``(plant, conversion)`` where the
     :class:`JointConversion` matches the preset's gear ratio and torque constant, i.e. what the
     drive_interface node must be configured with to get the plant's joint values back.
     """
-    from friction_ros.core.plant.params import GearheadServoPlant
-    from friction_ros.core.presets import load_preset
+    from friction_ros.core.presets import make_plant
 
-    p = load_preset(preset).params
-    plant = GearheadServoPlant(p.replace(actuation="torque"))
+    plant = make_plant(preset, actuation="torque")
+    p = plant.params
     return plant, JointConversion(gear_ratio=p.ratio, torque_constant=p.torque_constant)

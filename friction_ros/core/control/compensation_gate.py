@@ -108,7 +108,8 @@ def identified_plant(
 ):
     """A plant with the identified J and friction (torque in N*m = current in A: unit gains);
     ``damping`` [N*m*s/rad]: viscous damping that is not friction (a voltage drive's back-EMF)."""
-    from friction_ros.core.plant.params import GearheadServoPlant, PlantParams
+    from friction_ros.core.plant.params import PlantParams
+    from friction_ros.core.plant.servo import GearheadServoPlant
 
     cpr = int(round(2.0 * math.pi / resolution)) if resolution > 0 else 0
     return GearheadServoPlant(

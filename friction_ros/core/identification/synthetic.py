@@ -57,18 +57,14 @@ def seed003_velocity(duration: float, dt: float, high: float, low: float, seed: 
 
 
 def _make_plant(preset: str, friction=None, overrides: dict | None = None):
-    from friction_ros.core.friction import model_from_config
-    from friction_ros.core.plant.params import GearheadServoPlant
-    from friction_ros.core.presets import load_preset
+    """The preset's plant with plant-key ``overrides`` and ``friction`` as its motor-side model."""
+    from friction_ros.core.presets import make_plant
 
-    pre = load_preset(preset)
-    params = pre.params
     changes = dict(overrides or {})
     if friction is not None:
-        changes["friction_motor"] = model_from_config(friction)
-    if changes:
-        params = params.replace(**changes)
-    return GearheadServoPlant(params), params
+        changes["friction_motor"] = friction
+    plant = make_plant(preset, **changes)
+    return plant, plant.params
 
 
 def run_velocity_loop(
