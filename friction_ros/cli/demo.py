@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -41,7 +42,7 @@ SCHEMES = ("feedforward", "feedback", "blended")
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
 # the ROS graph's control period (plant_simulator / compensating_controller / experiment default)
-GRAPH_PERIOD = 1e-3
+GRAPH_PERIOD = DEFAULT_CONTROL_PERIOD
 # s of wall time between seeing the controller's writer and starting the plant (its writer matches
 # this reader a moment later; the experiment node waits alike)
 MATCH_GRACE = 0.5

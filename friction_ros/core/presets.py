@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from friction_ros.core.config import Field
 from friction_ros.core.friction import FrictionModel
 from friction_ros.core.plant.params import PlantParams
 from friction_ros.core.plant.servo import GearheadServoPlant
@@ -63,6 +64,19 @@ _FRICTION_SIDES = ("friction_motor", "friction_load")
 DEFAULT_CONTROL_PERIOD = 1e-3
 #: The range [s] a control period must lie in (the plant's preset and the nodes' parameters).
 CONTROL_PERIOD_RANGE = (1e-5, 0.1)
+
+
+def control_period_field(doc: str, hi: float = CONTROL_PERIOD_RANGE[1]) -> Field:
+    """A node's read-only ``control_period`` parameter [s]: default and range from this module."""
+    return Field(
+        "control_period",
+        DEFAULT_CONTROL_PERIOD,
+        doc,
+        lo=CONTROL_PERIOD_RANGE[0],
+        hi=hi,
+        unit="s",
+        read_only=True,
+    )
 
 
 def check_control_period(name: str, value: Any) -> float:

@@ -40,6 +40,7 @@ from friction_ros.core.input_gate import (
     RESYNC,
     JointInputGate,
 )
+from friction_ros.core.presets import control_period_field
 from friction_ros.core.references import reference_from_config
 from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
@@ -58,15 +59,7 @@ from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
-    Field(
-        "control_period",
-        0.001,
-        "nominal control period (dt of the control law)",
-        lo=1e-5,
-        hi=0.1,
-        unit="s",
-        read_only=True,
-    ),
+    control_period_field("nominal control period (dt of the control law)"),
     Field("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
     Field(
         "state_timeout",

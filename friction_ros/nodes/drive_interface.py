@@ -64,6 +64,7 @@ from friction_ros.core.can.axis_health import AxisHealth
 from friction_ros.core.can.drive_set import axis_values, changed_values, check_distinct_ids, check_joint_names
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
+from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
@@ -96,7 +97,7 @@ NODE_FIELDS = [
     Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
     Field(
         "control_rate_hz",
-        1000.0,
+        1.0 / DEFAULT_CONTROL_PERIOD,
         "publication and command rate",
         lo=1.0,
         hi=5000.0,

@@ -23,6 +23,7 @@ from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
+from friction_ros.core.presets import control_period_field
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.parameters import (
@@ -37,15 +38,7 @@ from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to estimate (name in joint_states)", read_only=True),
-    Field(
-        "control_period",
-        0.001,
-        "nominal sample period (used when stamps do not advance)",
-        lo=1e-5,
-        hi=1.0,
-        unit="s",
-        read_only=True,
-    ),
+    control_period_field("nominal sample period (used when stamps do not advance)", hi=1.0),
     Field(
         "publish_every",
         10,

@@ -53,6 +53,7 @@ from friction_ros.core.excitation import (
     profile_defaults,
 )
 from friction_ros.core.input_gate import select_sample
+from friction_ros.core.presets import control_period_field
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.parameters import ParameterNode, declare_config
@@ -102,15 +103,7 @@ NODE_FIELDS = [
         unit="N*m",
         read_only=True,
     ),
-    Field(
-        "control_period",
-        0.001,
-        "nominal period of the joint states",
-        lo=1e-5,
-        hi=0.1,
-        unit="s",
-        read_only=True,
-    ),
+    control_period_field("nominal period of the joint states"),
     Field(
         "wait_for_subscribers",
         0,

@@ -31,7 +31,7 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
 from friction_ros.core.plant.servo import MAX_COMMAND
-from friction_ros.core.presets import resolve_preset
+from friction_ros.core.presets import control_period_field, resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
@@ -60,15 +60,7 @@ NODE_FIELDS = [
         choices=("realtime", "lockstep"),
         read_only=True,
     ),
-    Field(
-        "control_period",
-        0.001,
-        "control period (plant step per state)",
-        lo=1e-5,
-        hi=0.1,
-        unit="s",
-        read_only=True,
-    ),
+    control_period_field("control period (plant step per state)"),
     Field("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
     Field(
         "command_timeout",
