@@ -7,8 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import make_program, random_velocity, resolve_config
-from friction_ros.core.joint_sizing import LIMIT_SHARE, fit_to_limits, plateau_travel
+from friction_ros.core.experiment.excitation import make_program
+from friction_ros.core.experiment.excitation_config import resolve_config
+from friction_ros.core.experiment.experiment_sizing import LIMIT_SHARE, fit_to_limits, plateau_travel
+from friction_ros.core.experiment.velocity_programs import random_velocity
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 

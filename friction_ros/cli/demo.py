@@ -501,8 +501,9 @@ def _resolution(preset_obj) -> float:
 
 def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     """Steps 1-4 for one preset; raises RuntimeError/ParameterError naming what failed."""
+    from friction_ros.core.experiment.joint_scale import JointScale
+    from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
     from friction_ros.core.identification.export import dump_yaml
-    from friction_ros.core.joint_sizing import JointScale, tracking_gains, tracking_reference
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early

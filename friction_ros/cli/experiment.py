@@ -15,7 +15,7 @@ Sizing: with a simulated joint (``--preset``) the program is sized to the joint 
 (``--sizing joint``): plateau speeds from below the Stribeck velocity down to what the encoder
 resolves up to a fraction of the speed limit, ramp torques and amplitudes from the breakaway
 torque, travel and loop gains from the inertia, current lag and delays
-(``friction_ros.core.joint_sizing``). On a real joint (``--no-sim``) give what a short probe
+(``friction_ros.core.experiment.experiment_sizing``). On a real joint (``--no-sim``) give what a short probe
 measured (``--breakaway``, ``--inertia``, ``--torque-limit``, ``--speed-limit``, ``--travel``,
 ``--resolution``) to size it the same way; without them the ``--profile`` values are used as they
 are (``--sizing profile``, scaled for the ABB M19-S). ``--set`` overrides any key afterwards.
@@ -50,15 +50,9 @@ from pathlib import Path
 import yaml
 
 from friction_ros.cli.bringup import Bringup, NodeSpec
-from friction_ros.core.excitation import (
-    EXIT_ABORTED,
-    EXIT_NOT_EXCITED,
-    PROFILES,
-    PROGRAM_NAMES,
-    ExcitationProgram,
-    resolve_config,
-)
-from friction_ros.core.joint_sizing import fit_to_limits
+from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
+from friction_ros.core.experiment.excitation_config import PROFILES, PROGRAM_NAMES, resolve_config
+from friction_ros.core.experiment.experiment_sizing import fit_to_limits
 from friction_ros.core.validation import ParameterError
 
 
@@ -158,7 +152,7 @@ def _stop_proc(proc: subprocess.Popen, grace: float = 5.0) -> None:
 def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, states_topic: str) -> str:
     """The text printed after a run: segments, aborts, breakaways, plateau map."""
     from friction_ros.core.identification.pipeline import load_bag
-    from friction_ros.core.plateaus import plateau_map
+    from friction_ros.core.identification.plateau_map import plateau_map
 
     data = load_bag(bag, topic=states_topic, joint=joint, events_topic=events_topic)
     ev = data.events
@@ -223,7 +217,8 @@ def sized_config(args, preset, sets: dict | None = None) -> dict:
     derived within them."""
     from dataclasses import replace
 
-    from friction_ros.core.joint_sizing import JointScale, experiment_config
+    from friction_ros.core.experiment.experiment_sizing import experiment_config
+    from friction_ros.core.experiment.joint_scale import JointScale
 
     given = {k: getattr(args, k) for k in PROBE if getattr(args, k) is not None}
     sizing = args.sizing or ("joint" if (preset is not None or given) else "profile")
@@ -269,7 +264,7 @@ def _flat(d: dict, prefix: str = "") -> dict:
 
 def _node_values(config: dict, profile: str, sized_flat: dict) -> dict:
     """The experiment node's parameters: the sized values and whatever the limits fit changed."""
-    from friction_ros.core.excitation import SECTIONS, profile_defaults
+    from friction_ros.core.experiment.excitation_config import SECTIONS, profile_defaults
 
     base = _flat({s: profile_defaults(profile)[s] for s in SECTIONS})
     fitted = _flat({s: config[s] for s in SECTIONS})
@@ -283,7 +278,7 @@ def _node_values(config: dict, profile: str, sized_flat: dict) -> dict:
 def _typed_like_defaults(flat: dict, profile: str) -> dict:
     """Plain Python values typed like the declared defaults (ROS parameters are typed: an int where
     a double is declared is refused)."""
-    from friction_ros.core.excitation import profile_defaults
+    from friction_ros.core.experiment.excitation_config import profile_defaults
 
     base = _flat(profile_defaults(profile))
     out = {}

@@ -36,7 +36,7 @@ import numpy as np
 
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
-from friction_ros.core.references import Reference, reference_from_config
+from friction_ros.core.experiment.references import Reference, reference_from_config
 from friction_ros.core.validation import ParameterError, check_real
 
 PARAMS_DIR = Path(__file__).resolve().parents[2] / "params"

@@ -33,14 +33,14 @@ from friction_ros.core.control.controller import (
     ControllerTerms,
     controller_from_ros_parameters,
 )
+from friction_ros.core.experiment.references import reference_from_config
+from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import (
     DUPLICATE,
     REJECTED,
     RESYNC,
     JointInputGate,
 )
-from friction_ros.core.references import reference_from_config
-from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
 from friction_ros.nodes.node_utils import (

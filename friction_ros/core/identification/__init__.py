@@ -10,7 +10,6 @@ nu-SVR per direction), ``identifiability`` (collinearity flags, confidence inter
 Entry points: :func:`fit_bag` and :func:`fit_records` (see ``pipeline``).
 """
 
-from friction_ros.core.identification.data import ExcitationError, JointData, prepare
 from friction_ros.core.identification.pipeline import (
     DEFAULT_MODELS,
     FitResult,
@@ -19,6 +18,7 @@ from friction_ros.core.identification.pipeline import (
     fit_records,
     load_bag,
 )
+from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 __all__ = [
     "DEFAULT_MODELS",

@@ -5,7 +5,7 @@ Public entry points (stable signatures):
 * :func:`fit_bag` ``(bag_paths, topic, joint, models, out_dir, **options) -> FitResult``
   reads one or more bags and writes the report, JSON summary, plots and parameter YAML;
 * :func:`fit_records` ``(records, models, **options) -> FitResult`` on prepared
-  :class:`~friction_ros.core.identification.data.JointData` (no files);
+  :class:`~friction_ros.core.identification.records.JointData` (no files);
 * :func:`load_bag` ``(path, topic, joint, ...) -> JointData``.
 """
 
@@ -20,9 +20,16 @@ from pathlib import Path
 
 import numpy as np
 
-from friction_ros.core.identification import data as D
+from friction_ros.core.experiment.events import Event
 from friction_ros.core.identification import export, identifiability, learned, metrics
+from friction_ros.core.identification.breakaway_detection import Breakaway, find_breakaways
 from friction_ros.core.identification.dynamic_fit import DynamicFit, fit_time_domain
+from friction_ros.core.identification.excitation_checks import (
+    Excitation,
+    check_excitation,
+    check_motion,
+    excitation,
+)
 from friction_ros.core.identification.models import (
     DEFAULT_EPS,
     LEARNED,
@@ -30,7 +37,21 @@ from friction_ros.core.identification.models import (
     sat_sign,
     spec_for,
 )
+from friction_ros.core.identification.plateau_detection import (
+    Plateau,
+    chattering_plateaus,
+    find_plateaus,
+    load_offset,
+)
+from friction_ros.core.identification.records import ExcitationError, JointData, concat_records, prepare
 from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus, stribeck_map
+from friction_ros.core.identification.training_split import split, training_segments, training_window
+from friction_ros.core.identification.velocity_regimes import (
+    high_velocity_mask,
+    mask_runs,
+    moving_mask,
+    standstill_mask,
+)
 from friction_ros.core.validation import ParameterError, check_choice
 
 DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
@@ -49,7 +70,7 @@ class ModelResult:
     identifiability: dict
     seconds: float
     steady_state: Callable[[np.ndarray], np.ndarray]
-    predict: Callable[[D.JointData], np.ndarray]
+    predict: Callable[[JointData], np.ndarray]
     notes: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
 
@@ -60,11 +81,11 @@ class FitResult:
 
     models: dict[str, ModelResult]
     recommended: str | None
-    train: list[D.JointData]
-    validation: list[D.JointData]
-    plateaus: list[D.Plateau]
-    breakaways: list[D.Breakaway]
-    excitation: D.Excitation
+    train: list[JointData]
+    validation: list[JointData]
+    plateaus: list[Plateau]
+    breakaways: list[Breakaway]
+    excitation: Excitation
     high_threshold: float
     options: dict
     files: dict[str, str] = field(default_factory=dict)
@@ -105,23 +126,23 @@ def load_bag(
     velocity_window: float = 0.021,
     acceleration_window: float = 0.041,
     torque_delay: float = 0.0,
-) -> D.JointData:
+) -> JointData:
     """Read a joint of a JointState topic (and event markers) from a bag into JointData."""
     from friction_ros.core.bag import BagError, read_bag
 
     path = Path(path)
     if not path.exists():
-        raise D.ExcitationError(f"bag {path}: no such file or directory")
+        raise ExcitationError(f"bag {path}: no such file or directory")
     try:
         bag = read_bag(path, topics=None)
     except BagError as exc:
-        raise D.ExcitationError(f"bag {path}: {exc}") from None
+        raise ExcitationError(f"bag {path}: {exc}") from None
     bag_warnings = [str(w) for w in getattr(bag, "warnings", [])]
     if getattr(bag, "truncated", False) and not bag_warnings:
         bag_warnings.append(f"bag {path} is truncated: the messages after the cut are lost")
     if topic not in bag:
         have = ", ".join(sorted(bag.topics)) if hasattr(bag, "topics") else "?"
-        raise D.ExcitationError(
+        raise ExcitationError(
             f"bag {path} has no topic {topic} (topics: {have}): record the joint states "
             "(sensor_msgs/JointState) with the identification experiment, or pass --topic"
         )
@@ -129,14 +150,14 @@ def load_bag(
     names = js.joint_names
     if joint is None:
         if len(names) != 1:
-            raise D.ExcitationError(
+            raise ExcitationError(
                 f"bag {path}: topic {topic} has joints {', '.join(names)}: choose one with --joint"
             )
         joint = names[0]
     try:
         series = js.joint(joint)
     except BagError as exc:
-        raise D.ExcitationError(str(exc)) from None
+        raise ExcitationError(str(exc)) from None
     try:
         stamps = series.stamp
     except BagError:
@@ -152,7 +173,7 @@ def load_bag(
             et = ev.time
         for i in range(len(ev)):
             events.append(
-                D.Event(
+                Event(
                     float(et[i]),
                     str(ev["program"][i]),
                     str(ev["segment"][i]),
@@ -173,11 +194,11 @@ def load_bag(
         current_t = ct.time
         effort = None
     elif not np.any(np.isfinite(effort)):
-        raise D.ExcitationError(
+        raise ExcitationError(
             f"bag {path}: joint {joint!r} on {topic} has no effort: pass the motor current with "
             "--current-topic/--current-field plus --torque-constant and --gear-ratio"
         )
-    data = D.prepare(
+    data = prepare(
         stamps,
         series.position,
         series.velocity,
@@ -197,7 +218,7 @@ def load_bag(
 
 
 # ------------------------------------------------------------------------------------ fitting
-def _grid(records: list[D.JointData]) -> np.ndarray:
+def _grid(records: list[JointData]) -> np.ndarray:
     v = np.concatenate([np.abs(r.velocity) for r in records])
     vmax = float(np.max(v))
     moving = v[v > 1e-6]
@@ -207,7 +228,7 @@ def _grid(records: list[D.JointData]) -> np.ndarray:
 
 
 def fit_records(
-    records: D.JointData | list[D.JointData],
+    records: JointData | list[JointData],
     models=DEFAULT_MODELS,
     *,
     train_seconds: float = 10.0,
@@ -226,20 +247,20 @@ def fit_records(
     """Fit ``models`` to prepared records (see module and package docstrings).
 
     ``train_window``: ``"content"`` (default) trains on chunks stratified by content
-    (:func:`~friction_ros.core.identification.data.training_segments`, about ``train_seconds``
+    (:func:`~friction_ros.core.identification.training_split.training_segments`, about ``train_seconds``
     in all) and validates on the rest; ``"window"`` on the single most exciting ``train_seconds``
-    window (:func:`~friction_ros.core.identification.data.training_window`); ``"first"`` on the
+    window (:func:`~friction_ros.core.identification.training_split.training_window`); ``"first"`` on the
     first ``train_seconds`` (seed 003 A.3).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
     t_start = time.perf_counter()
-    records = [records] if isinstance(records, D.JointData) else list(records)
+    records = [records] if isinstance(records, JointData) else list(records)
     names = check_model_names(models)
     if not records:
         raise ParameterError("records = []: need at least one record")
     for r in records:
-        D.check_motion(r, r.meta.get("source", label))
-    load, load_note = D.load_offset([p for r in records for p in D.find_plateaus(r)])
+        check_motion(r, r.meta.get("source", label))
+    load, load_note = load_offset([p for r in records for p in find_plateaus(r)])
     if load:
         records = [dataclasses.replace(r, torque=r.torque - load) for r in records]
     train, val, val_from = [], [], []
@@ -247,17 +268,17 @@ def fit_records(
     for r in records:
         if r.duration > train_seconds + 1.0:
             if train_window == "first":
-                segs = [(0, D.split(r, train_seconds)[0].n)]
+                segs = [(0, split(r, train_seconds)[0].n)]
             elif train_window == "window":
-                segs = [D.training_window(r, train_seconds)]
+                segs = [training_window(r, train_seconds)]
             else:
-                segs = D.training_segments(r, train_seconds)
+                segs = training_segments(r, train_seconds)
             keep = np.ones(r.n, bool)
             for i0, i1 in segs:
                 keep[i0:i1] = False
                 train.append(r.slice(i0, i1))
                 windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
-            val.append(D.concat_records([r.slice(a, b) for a, b in D._runs(keep)]))
+            val.append(concat_records([r.slice(a, b) for a, b in mask_runs(keep)]))
             val_from.append((r, keep))
     if not val:  # records too short to split: validate on the training data (reported)
         train = list(records)
@@ -277,8 +298,8 @@ def fit_records(
         # dynamic states run through the whole record (one simulation); validation = outside the window
         return np.concatenate([model.predict(full)[keep] for full, keep in val_from])
 
-    plateaus = [p for r in records for p in D.find_plateaus(r)]
-    chatter = D.chattering_plateaus(plateaus)
+    plateaus = [p for r in records for p in find_plateaus(r)]
+    chatter = chattering_plateaus(plateaus)
     if chatter:
         worst = max(p.torque_std / max(abs(p.torque), 1e-300) for p in chatter)
         res_note = f" ({records[0].resolution:.3g} per count)" if records[0].resolution > 0 else ""
@@ -287,15 +308,15 @@ def fit_records(
             f"{worst:.1f} times the mean): their mean torque is not the friction at that speed, so every map "
             f"fitted to them is suspect; a coarse encoder{res_note} or loop gains too high for it"
         )
-    breakaways = [b for r in records for b in D.find_breakaways(r)]
+    breakaways = [b for r in records for b in find_breakaways(r)]
     if note := _imprecise_breakaways(breakaways):
         warnings_pre.append(note)
-    ex = D.excitation(records[0] if len(records) == 1 else D.concat_records(records), plateaus)
+    ex = excitation(records[0] if len(records) == 1 else concat_records(records), plateaus)
     dynamic_wanted = any(spec_for(n).dynamic for n in names if n not in LEARNED)
     static_from_plateaus = len(plateaus) >= 3
-    D.check_excitation(ex, dynamic=dynamic_wanted, static_from_plateaus=False, label=label)
+    check_excitation(ex, dynamic=dynamic_wanted, static_from_plateaus=False, label=label)
     if dynamic_wanted:
-        ex_train = D.excitation(D.concat_records(train), [])
+        ex_train = excitation(concat_records(train), [])
         if ex_train.reversals < 4:
             why = (
                 f"too little excitation in the {train_seconds:g} s training window: "
@@ -304,17 +325,17 @@ def fit_records(
             )
             dynamic = [n for n in names if n not in LEARNED and spec_for(n).dynamic]
             if not static_from_plateaus or len(dynamic) == len(names):
-                raise D.ExcitationError(f"{label}: {why}")
+                raise ExcitationError(f"{label}: {why}")
             # the plateaus still determine the static models: fit those, name what was skipped
             names = [n for n in names if n not in dynamic]
             warnings_pre.append(f"dynamic models skipped ({', '.join(dynamic)}): {why}")
-    vall = D.concat_records(val)
-    mv = D.moving_mask(vall.velocity, vall.resolution, vall.dt)
-    hm, thr = D.high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
+    vall = concat_records(val)
+    mv = moving_mask(vall.velocity, vall.resolution, vall.dt)
+    hm, thr = high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
     lm = mv & ~hm
     # long standstills are not scored: at rest the friction is whatever torque holds the joint
     scored = ~np.concatenate(
-        [D.standstill_mask(full.velocity, full.resolution, full.dt)[keep] for full, keep in val_from]
+        [standstill_mask(full.velocity, full.resolution, full.dt)[keep] for full, keep in val_from]
     )
     results: dict[str, ModelResult] = {}
     warnings: list[str] = list(warnings_pre)
@@ -466,7 +487,7 @@ def _learning_data(plateaus, train, J, eps):
             np.array([p.torque for p in plateaus]),
             "plateau means",
         )
-    r = D.concat_records(train)
+    r = concat_records(train)
     m = np.abs(r.velocity) > max(20 * eps, 0.02)
     return (
         r.velocity[m],
@@ -532,7 +553,7 @@ def _fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResu
         return stribeck_map(v, c)
 
     # inertia by NNLS on the training records with the map fixed (acceleration is ~0 on plateaus)
-    r = D.concat_records(train)
+    r = concat_records(train)
     resid = r.torque - ss(r.velocity)
     a = r.acceleration
     J = max(float(a @ resid / max(a @ a, 1e-300)), 0.0)
