@@ -17,7 +17,7 @@ from friction_ros.core.experiment.tracking_design import tracking_gains
 from friction_ros.core.harness import command_scale
 from friction_ros.core.identification import metrics
 from friction_ros.core.identification.breakaway_detection import Breakaway
-from friction_ros.core.identification.pipeline import _breakaway_levels, _imprecise_breakaways
+from friction_ros.core.identification.model_fits import breakaway_levels, imprecise_breakaways
 from friction_ros.core.identification.plateau_detection import Plateau
 from friction_ros.core.presets import PRESET_NAMES, load_preset
 
@@ -110,10 +110,10 @@ def test_an_imprecise_breakaway_reading_is_left_out_and_named():
     fine = Breakaway(1.0, 0.95, 1, "events", lag=0.009)
     coarse = Breakaway(2.0, -0.098, -1, "events", lag=0.0915)
     unknown = Breakaway(3.0, -0.9, -1, "events")  # a log without a stated lag: used
-    assert _breakaway_levels([fine, coarse, unknown]) == {1: 0.95, -1: 0.9}
-    note = _imprecise_breakaways([fine, coarse, unknown])
+    assert breakaway_levels([fine, coarse, unknown]) == {1: 0.95, -1: 0.9}
+    note = imprecise_breakaways([fine, coarse, unknown])
     assert note.startswith("1 breakaway reading(s) left out") and "93 %" in note, note
-    assert _imprecise_breakaways([fine, unknown]) == ""
+    assert imprecise_breakaways([fine, unknown]) == ""
 
 
 def test_without_signal_in_the_validation_torque_the_plateaus_decide():

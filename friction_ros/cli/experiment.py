@@ -151,7 +151,7 @@ def _stop_proc(proc: subprocess.Popen, grace: float = 5.0) -> None:
 
 def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, states_topic: str) -> str:
     """The text printed after a run: segments, aborts, breakaways, plateau map."""
-    from friction_ros.core.identification.pipeline import load_bag
+    from friction_ros.core.identification.bag_loading import load_bag
     from friction_ros.core.identification.plateau_map import plateau_map
 
     data = load_bag(bag, topic=states_topic, joint=joint, events_topic=events_topic)

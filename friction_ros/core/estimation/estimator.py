@@ -38,6 +38,7 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.estimation.lugre_observer import LuGreObserver
 from friction_ros.core.estimation.measurement import DisturbanceObserver, TorqueBalanceEstimator
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
 from friction_ros.core.validation import (
@@ -162,7 +163,7 @@ class OnlineFrictionEstimator:
         self.rls = None
         self.lugre = None
         if self.model_name == "lugre":
-            from friction_ros.core.control.compensation import LuGreObserver, build_model
+            from friction_ros.core.control.compensation import build_model
 
             if cfg["lugre"] is None:
                 raise ParameterError(f"{n}.lugre is missing: model = lugre needs a LuGre model config")

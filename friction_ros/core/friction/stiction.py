@@ -53,14 +53,7 @@ class Karnopp(GKF):
 
     name = "karnopp"
     KIND = K.K_KARNOPP
-    COEFS = (
-        _FC,
-        _FS,
-        _VS,
-        _DELTA,
-        _FV,
-        Coef("dv", lo=0.0, lo_open=True, unit="rad/s", doc="zero-velocity band"),
-    )
+    COEFS = (*Stribeck.COEFS, Coef("dv", lo=0.0, lo_open=True, unit="rad/s", doc="zero-velocity band"))
 
     @property
     def band(self) -> float:  # type: ignore[override]

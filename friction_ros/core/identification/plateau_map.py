@@ -6,7 +6,7 @@ one row per constant-velocity plateau: mean velocity and torque with their sprea
 deviation over the plateau, first ``settle`` seconds discarded), plus :meth:`PlateauMap.aggregate`,
 the seed 004 "mean over the repeats per set-point" with the spread across repeats.
 
-It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.pipeline.load_bag`:
+It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.bag_loading.load_bag`:
 uniform grid, Savitzky-Golay velocity from position, torque from ``effort``) and its event-based
 plateau extraction (:func:`friction_ros.core.identification.plateau_detection.find_plateaus`), so the map printed
 after an experiment is exactly what ``friction-fit`` fits. ``settle`` defaults to what each
@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from friction_ros.core.experiment.events import ABORT, END, START, Event, completed_segments, start_settle
-from friction_ros.core.identification.pipeline import load_bag
+from friction_ros.core.identification.bag_loading import load_bag
 from friction_ros.core.identification.plateau_detection import find_plateaus
 from friction_ros.core.identification.records import ExcitationError
 
