@@ -64,7 +64,8 @@ def test_a_user_value_that_cannot_fit_is_refused_naming_it():
 
 
 def test_set_limits_bound_the_joint_the_program_is_sized_to():
-    from friction_ros.cli.experiment import build_parser, sized_config
+    from friction_ros.cli.experiment import build_parser
+    from friction_ros.cli.experiment_config import sized_config
 
     args = build_parser().parse_args(["--profile", "quick"])
     preset = load_preset("abb_m19s")
