@@ -6,7 +6,7 @@ A program drives a joint directly with a joint torque [N*m], one call per contro
     torque, events = prog.update(t, position, velocity)      # t [s], position [rad], velocity [rad/s]
     prog.done, prog.progress, prog.total_duration, prog.aborted
 
-Programs (``PROGRAM_NAMES``), each a list of segments planned upfront (``total_duration`` is known
+Programs (``excitation_config.PROGRAM_NAMES``), each a list of segments planned upfront (``total_duration`` is known
 before the run; a breakaway ramp counts with its longest possible duration):
 
 ``plateaus``   seed 004 B.3 exp. 2: constant-velocity plateaus at ``count`` log-spaced speeds in
@@ -39,7 +39,7 @@ before the run; a breakaway ramp counts with its longest possible duration):
                the breakaway torque: presliding hysteresis (virgin curve, Masing loops).
 ``sequence``   the programs named in ``sequence``, separated by ``gap`` s of zero torque.
 
-Events: :class:`Event` (time, program, segment label, index within the program, START/END/ABORT,
+Events: :class:`~friction_ros.core.experiment.events.Event` (time, program, segment label, index within the program, START/END/ABORT,
 target, note), the fields of ``friction_msgs/ExperimentEvent``. A plateau START note carries
 ``settle=<s>`` so readers discard the same transient.
 
@@ -66,7 +66,7 @@ joint ``travel_counts`` counts (of ``breakaway.resolution``) and reversed ``reve
 reversal: ``travel_counts`` counts back from the last extreme); a program with checked segments
 none of which moved the joint is not excited either. ``not_excited`` then holds the reason (None when excited).
 
-Profiles (``PROFILES``): ``default`` (~115 s simulated, scaled for the ABB M19-S preset: static
+Profiles (``excitation_config.PROFILES``): ``default`` (~115 s simulated, scaled for the ABB M19-S preset: static
 friction 0.95 N*m, J = 0.0012 kg m^2) and ``quick`` (~27 s, tests/demo). Config keys given next to
 ``profile`` override the profile's values section by section.
 """
