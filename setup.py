@@ -44,6 +44,6 @@ setup(
     entry_points={
         "console_scripts": ENTRY_POINTS,
         # python-can interface "friction_local": a CAN bus between processes without SocketCAN
-        "can.interface": ["friction_local = friction_ros.core.can.local_bus:LocalBus"],
+        "can.interface": ["friction_local = friction_ros.can_bus.local_bus:LocalBus"],
     },
 )

@@ -108,7 +108,7 @@ def child(
 
     ``bus = "virtual"``: the emulator runs on a thread of this process (python-can's virtual bus
     does not cross processes). ``bus = "friction_local"``: the emulator is the ``drive_emulator``
-    program in a process of its own, on the Unix-socket bus (friction_ros.core.can.local_bus), as a
+    program in a process of its own, on the Unix-socket bus (friction_ros.can_bus.local_bus), as a
     drive is on a robot; nothing but the node runs in this process. ``pin``: the node on CPU 1
     (its ``cpu_affinity`` parameter), the emulator process (and the parent controller) on CPU 0.
     """

@@ -31,9 +31,9 @@ from compensation import J003, PD003, SENSING, TRUTH003  # noqa: E402
 
 from friction_ros.core.harness import run_closed_loop  # noqa: E402
 from friction_ros.core.identification import fit_records, prepare, synthetic  # noqa: E402
-from friction_ros.core.identification.data import find_plateaus  # noqa: E402
 from friction_ros.core.identification.dynamic_fit import fit_time_domain  # noqa: E402
 from friction_ros.core.identification.models import spec_for  # noqa: E402
+from friction_ros.core.identification.plateau_detection import find_plateaus  # noqa: E402
 from friction_ros.core.identification.static_fit import fit_plateaus  # noqa: E402
 from friction_ros.core.presets import make_plant  # noqa: E402
 

@@ -30,17 +30,17 @@ from pathlib import Path
 sys.path.append(str(Path(__file__).resolve().parent))  # bench/can.py must not shadow python-can
 from _common import print_table, write_results  # noqa: E402
 
-from friction_ros.cli import demo  # noqa: E402
+from friction_ros.cli import demo, demo_results  # noqa: E402
 from friction_ros.core.presets import PRESET_NAMES  # noqa: E402
 
 MODES = ("feedforward", "feedback", "blended")
 
 
 def encoder_cap(run, preset: str) -> float:
-    """The demo's encoder cap of this run (``friction_ros.cli.demo.encoder_cap``)."""
+    """The demo's encoder cap of this run (``friction_ros.cli.demo_results.encoder_cap``)."""
     from friction_ros.core.presets import load_preset
 
-    return demo.encoder_cap(run, demo._resolution(load_preset(preset)))
+    return demo_results.encoder_cap(run, demo._resolution(load_preset(preset)))
 
 
 def main() -> int:

@@ -23,8 +23,8 @@ from pathlib import Path
 import can
 import pytest
 
+from friction_ros.can_bus.local_bus import LocalBus, pack_frame, unpack_frame
 from friction_ros.core.can import odrive as od
-from friction_ros.core.can.local_bus import LocalBus, pack_frame, unpack_frame
 
 HERE = Path(__file__).resolve().parent
 

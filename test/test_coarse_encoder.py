@@ -9,16 +9,15 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import END, START, make_program
-from friction_ros.core.identification import data as D
+from friction_ros.core.experiment.events import END, START, start_settle
+from friction_ros.core.experiment.excitation import make_program
+from friction_ros.core.experiment.experiment_sizing import experiment_config, plateau_loop_softening
+from friction_ros.core.experiment.joint_scale import JointScale
+from friction_ros.core.experiment.tracking_design import tracking_gains
 from friction_ros.core.identification import metrics
-from friction_ros.core.identification.pipeline import _breakaway_levels, _imprecise_breakaways
-from friction_ros.core.joint_sizing import (
-    JointScale,
-    experiment_config,
-    plateau_loop_softening,
-    tracking_gains,
-)
+from friction_ros.core.identification.breakaway_detection import Breakaway
+from friction_ros.core.identification.model_fits import breakaway_levels, imprecise_breakaways
+from friction_ros.core.identification.plateau_detection import Plateau
 from friction_ros.core.presets import PRESET_NAMES, load_preset
 
 
@@ -79,7 +78,7 @@ def _plateau_run(name: str, speeds: int = 2):
     starts = [e for e in events if e.event == START]
     ends = [e for e in events if e.event == END]
     for s, e in zip(starts, ends):
-        i0, i1 = np.searchsorted(rec[:, 0], [s.time + D.start_settle(s, 0.2), e.time])
+        i0, i1 = np.searchsorted(rec[:, 0], [s.time + start_settle(s, 0.2), e.time])
         seg = rec[i0:i1]
         out.append(
             (
@@ -107,18 +106,18 @@ def test_coarse_encoder_plateaus_measure_the_friction():
 
 
 def test_an_imprecise_breakaway_reading_is_left_out_and_named():
-    fine = D.Breakaway(1.0, 0.95, 1, "events", lag=0.009)
-    coarse = D.Breakaway(2.0, -0.098, -1, "events", lag=0.0915)
-    unknown = D.Breakaway(3.0, -0.9, -1, "events")  # a log without a stated lag: used
-    assert _breakaway_levels([fine, coarse, unknown]) == {1: 0.95, -1: 0.9}
-    note = _imprecise_breakaways([fine, coarse, unknown])
+    fine = Breakaway(1.0, 0.95, 1, "events", lag=0.009)
+    coarse = Breakaway(2.0, -0.098, -1, "events", lag=0.0915)
+    unknown = Breakaway(3.0, -0.9, -1, "events")  # a log without a stated lag: used
+    assert breakaway_levels([fine, coarse, unknown]) == {1: 0.95, -1: 0.9}
+    note = imprecise_breakaways([fine, coarse, unknown])
     assert note.startswith("1 breakaway reading(s) left out") and "93 %" in note, note
-    assert _imprecise_breakaways([fine, unknown]) == ""
+    assert imprecise_breakaways([fine, unknown]) == ""
 
 
 def test_without_signal_in_the_validation_torque_the_plateaus_decide():
-    plateaus = [D.Plateau(0, 1, v, 0.037 + 0.0018 * v, 0.001, 0.0, 500) for v in (0.13, 0.3, 0.7, 1.6, 3.8)]
-    plateaus += [D.Plateau(0, 1, -p.velocity, -p.torque, 0.001, 0.0, 500) for p in list(plateaus)]
+    plateaus = [Plateau(0, 1, v, 0.037 + 0.0018 * v, 0.001, 0.0, 500) for v in (0.13, 0.3, 0.7, 1.6, 3.8)]
+    plateaus += [Plateau(0, 1, -p.velocity, -p.torque, 0.001, 0.0, 500) for p in list(plateaus)]
     models = {
         "coulomb": (lambda v: 0.039 * np.sign(v), 2),
         "coulomb_viscous": (lambda v: 0.037 * np.sign(v) + 0.0018 * np.asarray(v), 3),

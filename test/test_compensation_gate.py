@@ -7,9 +7,10 @@ import pytest
 from friction_ros.core.control.compensation import FrictionCompensator
 from friction_ros.core.control.compensation_gate import gate_modes, perturbations
 from friction_ros.core.control.controller import CompensatingController
+from friction_ros.core.experiment.joint_scale import JointScale
+from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
 from friction_ros.core.harness import run_closed_loop
 from friction_ros.core.identification.export import compensation_section, parameter_document
-from friction_ros.core.joint_sizing import JointScale, tracking_gains, tracking_reference
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 

@@ -5,7 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.references import REFERENCE_TYPES, SEED001_PARABOLA_TABLE, reference_from_config
+from friction_ros.core.experiment.references import (
+    REFERENCE_TYPES,
+    SEED001_PARABOLA_TABLE,
+    reference_from_config,
+)
 from friction_ros.core.validation import ParameterError
 
 

@@ -7,7 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import ABORT, END, START, ExcitationProgram, make_program, random_velocity
+from friction_ros.core.experiment.events import ABORT, END, START
+from friction_ros.core.experiment.excitation import ExcitationProgram, make_program
+from friction_ros.core.experiment.velocity_programs import random_velocity
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ast
 import os
 import re
 import subprocess
@@ -16,7 +17,82 @@ ROOT = Path(__file__).resolve().parents[1]
 MSG_TYPES = ["DriveState", "FrictionEstimate", "ControllerState", "ExperimentEvent"]
 
 
+#: top-level packages the pure core must not import: rclpy and the ROS message/IDL packages
+ROS_PACKAGES = (
+    "rclpy",
+    "rosidl",
+    "rmw",
+    "rcl_interfaces",
+    "builtin_interfaces",
+    "std_msgs",
+    "sensor_msgs",
+    "trajectory_msgs",
+    "diagnostic_msgs",
+    "friction_msgs",
+    "launch",
+    "launch_ros",
+)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> list[tuple[int, str, str | None]]:
+    """Every import statement of a module, also inside functions and classes:
+    ``(line, module, imported name or None)``, relative imports resolved to absolute names."""
+    tree = ast.parse(path.read_text(), str(path))
+    name = _module_name(path)
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, None) for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(
+                    package[: len(package) - node.level + 1] + ([node.module] if node.module else [])
+                )
+            out += [(node.lineno, base, a.name) for a in node.names]
+    return out
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Static import graph of friction_ros: module -> the friction_ros modules it imports (a
+    ``from package import name`` counts as importing ``package.name`` when that is a module)."""
+    paths = {_module_name(p): p for p in (ROOT / "friction_ros").rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for mod, path in paths.items():
+        targets = set()
+        for _, module, name in _imports(path):
+            target = f"{module}.{name}" if name and f"{module}.{name}" in paths else module
+            if target in paths and target != mod:
+                targets.add(target)
+        graph[mod] = targets
+    return graph
+
+
 def test_pure_core_imports_without_rclpy():
+    """No module under friction_ros/core imports rclpy or a ROS message package, checked statically
+    on every import statement (module level and inside functions)."""
+    files = sorted((ROOT / "friction_ros" / "core").rglob("*.py"))
+    assert len(files) >= 1
+    bad = []
+    for path in files:
+        for line, module, _ in _imports(path):
+            top = module.split(".")[0]
+            if (
+                top in ROS_PACKAGES
+                or top.startswith("rosidl")
+                or module.endswith((".msg", ".srv", ".action"))
+            ):
+                bad.append(f"{path.relative_to(ROOT)}:{line}: import {module}")
+    assert not bad, "the pure core imports ROS packages:\n" + "\n".join(bad)
+
+
+def test_every_core_module_imports_without_rclpy():
     """Every module under friction_ros.core imports with rclpy made unimportable."""
     code = textwrap.dedent(
         """
@@ -37,6 +113,36 @@ def test_pure_core_imports_without_rclpy():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert out.returncode == 0, out.stderr
     assert int(out.stdout.strip().splitlines()[-1]) >= 1
+
+
+def test_import_graph_has_no_circles():
+    """The static import graph of friction_ros (module-level and function-level imports) is acyclic."""
+    graph = _import_graph()
+    assert len(graph) > 50
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    circles = []
+
+    def visit(node: str, path: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph[node]):
+            if state.get(nxt) == 1:
+                circles.append(
+                    " -> ".join(path[path.index(nxt) :] + [node, nxt]) if nxt in path else f"{node} -> {nxt}"
+                )
+            elif nxt not in state:
+                visit(nxt, path + [node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+    assert not circles, "import circles:\n" + "\n".join(circles)
+
+
+def test_import_graph_sees_function_level_imports():
+    """The graph the circle test walks includes imports inside functions (a lazy import is an edge)."""
+    graph = _import_graph()
+    assert "friction_ros.core.control.compensation" in graph["friction_ros.core.estimation.estimator"]
 
 
 @pytest.mark.ros

@@ -11,9 +11,13 @@ import numpy as np
 import pytest
 
 from friction_ros.cli.fit import main
-from friction_ros.core.identification import data as D
+from friction_ros.core.experiment.events import END, START, Event
 from friction_ros.core.identification import learned, metrics, synthetic
+from friction_ros.core.identification.breakaway_detection import find_breakaways
+from friction_ros.core.identification.plateau_detection import find_plateaus
+from friction_ros.core.identification.records import ExcitationError, prepare
 from friction_ros.core.identification.synthetic import Record
+from friction_ros.core.identification.training_split import split
 
 
 def _record(t, pos, eff, events=None):
@@ -117,7 +121,7 @@ def test_prepare_time_alignment_current_and_derivatives():
     pos = np.floor(pos_true / q) * q
     cur = 0.5 * np.cos(2 * np.pi * t)
     perm = rng.permutation(n)
-    d = D.prepare(
+    d = prepare(
         t[perm],
         pos[perm],
         None,
@@ -147,23 +151,23 @@ def test_split_and_breakaway_detection():
     pos = np.where(tau > 0.35, (t - 4.5) * 0.01, 0.0)
     pos = np.floor(pos / q) * q
     ev = [
-        D.Event(1.0, "breakaway", "ramp+", 0, D.START, math.nan),
-        D.Event(13.0, "breakaway", "ramp+", 0, D.END),
+        Event(1.0, "breakaway", "ramp+", 0, START, math.nan),
+        Event(13.0, "breakaway", "ramp+", 0, END),
     ]
-    d = D.prepare(t, pos, None, tau, events=ev)
-    br = D.find_breakaways(d)
+    d = prepare(t, pos, None, tau, events=ev)
+    br = find_breakaways(d)
     assert len(br) == 1 and br[0].source == "events" and br[0].direction == 1
     assert abs(br[0].torque - 0.35) < 0.01
-    tr, va = D.split(d, 10.0)
+    tr, va = split(d, 10.0)
     assert tr.n == 10000 and va.n == 4000
-    with pytest.raises(D.ExcitationError, match="no validation"):
-        D.split(d, 14.0)
+    with pytest.raises(ExcitationError, match="no validation"):
+        split(d, 14.0)
 
 
 def test_automatic_plateaus_without_events():
     rec = synthetic.plateau_experiment([0.05, 0.5], hold=1.5)
-    d = D.prepare(rec.t, rec.position, rec.velocity, rec.effort)  # no events
-    pl = D.find_plateaus(d)
+    d = prepare(rec.t, rec.position, rec.velocity, rec.effort)  # no events
+    pl = find_plateaus(d)
     got = sorted(round(p.velocity, 2) for p in pl)
     assert got == [-0.5, -0.05, 0.05, 0.5], got
     assert all(p.source == "auto" for p in pl)

@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 from friction_ros.core.identification import fit_bag, fit_records, prepare, synthetic
-from friction_ros.core.identification.data import find_plateaus
+from friction_ros.core.identification.plateau_detection import find_plateaus
 
 NOISY = {"current_noise_std": 0.005}  # 2.5 mN*m torque noise on top of the 1.05e-4 rad encoder
 

@@ -8,11 +8,17 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import make_program
-from friction_ros.core.identification import data as D
+from friction_ros.core.experiment.events import END, START, Event
+from friction_ros.core.experiment.excitation import make_program
+from friction_ros.core.experiment.experiment_sizing import experiment_config
+from friction_ros.core.experiment.joint_scale import JointScale
 from friction_ros.core.identification import metrics
+from friction_ros.core.identification.breakaway_detection import find_breakaways
 from friction_ros.core.identification.pipeline import fit_bag, fit_records
-from friction_ros.core.joint_sizing import JointScale, experiment_config
+from friction_ros.core.identification.plateau_detection import Plateau, chattering_plateaus, find_plateaus
+from friction_ros.core.identification.records import prepare, quantization_velocity_noise
+from friction_ros.core.identification.training_split import training_segments
+from friction_ros.core.identification.velocity_regimes import moving_mask, standstill_mask
 from friction_ros.core.presets import load_preset
 
 # ---------------------------------------------------------------------------------- an independent joint
@@ -153,7 +159,7 @@ def test_an_asymmetric_joint_gets_direction_levels_in_every_model(tmp_path):
 
 def _record(tail: float):
     t, pos, vel, tau = simulate_lugre_joint(tail=tail)
-    return D.prepare(t, pos, None, tau)
+    return prepare(t, pos, None, tau)
 
 
 def test_a_standstill_tail_changes_neither_the_recommendation_nor_the_metrics():
@@ -212,8 +218,8 @@ def _compliant_run(with_events: bool):
         P.append(pos)
         V.append(vel)
         E.append(m.effort)
-    evs = [D.Event(e.time, e.program, e.segment, e.index, e.event, e.target, e.note) for e in events]
-    rec = D.prepare(np.array(T), np.array(P), None, np.array(E), events=evs if with_events else [])
+    evs = [Event(e.time, e.program, e.segment, e.index, e.event, e.target, e.note) for e in events]
+    rec = prepare(np.array(T), np.array(P), None, np.array(E), events=evs if with_events else [])
     return preset, rec
 
 
@@ -221,7 +227,7 @@ def _compliant_run(with_events: bool):
 def test_breakaway_on_a_compliant_joint_is_within_5_percent(with_events):
     preset, rec = _compliant_run(with_events)
     fs = float(np.max(np.abs(preset.joint_friction(np.array([1e-7, -1e-7])))))
-    brk = D.find_breakaways(rec)
+    brk = find_breakaways(rec)
     assert {b.direction for b in brk} == {1, -1}
     for b in brk:
         assert abs(abs(b.torque) - fs) / fs < 0.05, (with_events, b, fs)
@@ -231,8 +237,8 @@ def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
     from friction_ros.core.identification import synthetic
 
     rec = synthetic.seed003_experiment(40.0)
-    d = D.prepare(rec.t, rec.position, None, rec.effort)
-    segs = D.training_segments(d, 10.0)
+    d = prepare(rec.t, rec.position, None, rec.effort)
+    segs = training_segments(d, 10.0)
     train = np.zeros(d.n, bool)
     for a, b in segs:
         train[a:b] = True
@@ -240,9 +246,9 @@ def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
     speed = np.abs(d.velocity)
     for part in (train, ~train):  # each set holds the slowest and the fastest tenth of the record
         assert np.any(part & (speed > np.percentile(speed, 95)))
-        mv = D.moving_mask(d.velocity, d.resolution, d.dt) & part
+        mv = moving_mask(d.velocity, d.resolution, d.dt) & part
         assert np.percentile(speed[mv], 10) < 1.5 * np.percentile(
-            speed[D.moving_mask(d.velocity, d.resolution, d.dt)], 10
+            speed[moving_mask(d.velocity, d.resolution, d.dt)], 10
         )
         s = np.sign(d.velocity[mv])
         assert np.sum(s[1:] != s[:-1]) >= 4  # reversals
@@ -252,7 +258,7 @@ def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
 
 def test_a_standstill_is_not_scored():
     v = np.concatenate([np.sin(np.linspace(0, 20, 3000)), np.zeros(2000), np.sin(np.linspace(0, 5, 500))])
-    st = D.standstill_mask(v, 1e-4, 1e-3)
+    st = standstill_mask(v, 1e-4, 1e-3)
     assert st[3200:4900].all() and not st[:2900].any() and not st[-400:].any()
     y = np.concatenate([np.ones(100), np.zeros(100)]) + 0.01
     m = metrics.compare(np.zeros(200) + 0.01, y, np.ones(200, bool), 2, scored=np.arange(200) >= 100)
@@ -270,40 +276,40 @@ def _coarse_plateau_run(resolution: float, settle_note: float):
     tau = 0.3 * np.sign(v) + 0.01 * v + np.where((t % 4.0) < 1.0, 1.0 * np.sign(v), 0.0)
     evs = []
     for k, (t0, vt) in enumerate(((0.0, 1.0), (4.0, -1.0))):
-        evs.append(D.Event(t0, "plateaus", f"plateau{vt:+g}", k, D.START, vt, f"settle={settle_note:g}"))
-        evs.append(D.Event(t0 + 3.999, "plateaus", f"plateau{vt:+g}", k, D.END, vt, ""))
-    return D.prepare(t, pos_q, None, tau, events=evs)
+        evs.append(Event(t0, "plateaus", f"plateau{vt:+g}", k, START, vt, f"settle={settle_note:g}"))
+        evs.append(Event(t0 + 3.999, "plateaus", f"plateau{vt:+g}", k, END, vt, ""))
+    return prepare(t, pos_q, None, tau, events=evs)
 
 
 def test_plateaus_on_a_coarse_encoder_are_kept_and_each_start_note_sets_its_settle():
     """A 60-count encoder makes the differentiated velocity noise (std >> speed) without stick-slip:
     the plateau is still a plateau. The transient named by the START note is discarded."""
     data = _coarse_plateau_run(2 * math.pi / 60, settle_note=1.2)
-    assert D.quantization_velocity_noise(data) > 1.0  # the noise that used to reject the plateaus
-    ps = D.find_plateaus(data)
+    assert quantization_velocity_noise(data) > 1.0  # the noise that used to reject the plateaus
+    ps = find_plateaus(data)
     assert len(ps) == 2
     for p in ps:
         assert p.velocity == pytest.approx(math.copysign(1.0, p.velocity), rel=0.05)
         assert p.torque == pytest.approx(math.copysign(0.31, p.velocity), rel=0.02)  # transient left out
     # an explicit settle overrides the notes: the transient is then inside the plateau
-    short = D.find_plateaus(data, settle=0.2)
+    short = find_plateaus(data, settle=0.2)
     assert abs(short[0].torque) > 0.4
     # a fine encoder keeps its strict stick-slip test
-    assert D.quantization_velocity_noise(_coarse_plateau_run(1e-4, 1.2)) < 0.05
+    assert quantization_velocity_noise(_coarse_plateau_run(1e-4, 1.2)) < 0.05
 
 
 def test_a_chattering_plateau_loop_is_named_in_the_fit_warnings():
     """Torque that scatters by more than its mean on a plateau (a velocity loop flipping across the
     count edge of a coarse encoder) makes the plateau means meaningless: the fit says so."""
-    good = D.Plateau(0.0, 1.0, 0.1, 1.05, 0.01, 0.001, 500)
-    bad = D.Plateau(0.0, 1.0, -0.1, -0.02, 0.3, 4.0, 500)
-    assert D.chattering_plateaus([good, bad]) == [bad]
+    good = Plateau(0.0, 1.0, 0.1, 1.05, 0.01, 0.001, 500)
+    bad = Plateau(0.0, 1.0, -0.1, -0.02, 0.3, 4.0, 500)
+    assert chattering_plateaus([good, bad]) == [bad]
     t, pos, vel, tau = simulate_lugre_joint()
-    clean = fit_records(D.prepare(t, pos, None, tau), ["coulomb"], maxiter=5)
+    clean = fit_records(prepare(t, pos, None, tau), ["coulomb"], maxiter=5)
     assert not any("chattered" in w for w in clean.warnings)
     rng = np.random.default_rng(1)
     noisy = tau + 5.0 * np.sign(rng.standard_normal(tau.size))  # +-5 N*m square chatter, fc = 1 N*m
-    res = fit_records(D.prepare(t, pos, None, noisy), ["coulomb"], maxiter=5)
+    res = fit_records(prepare(t, pos, None, noisy), ["coulomb"], maxiter=5)
     assert any("velocity loop chattered on" in w for w in res.warnings), res.warnings
 
 
@@ -312,6 +318,6 @@ def test_a_joint_state_stamped_by_another_clock_is_left_out_and_named():
     a 13 TiB allocation: the largest run of samples on one clock is kept, the rest named."""
     t, pos, vel, tau = simulate_lugre_joint()
     t2 = np.append(t, 1.8e9)
-    rec = D.prepare(t2, np.append(pos, pos[-1]), None, np.append(tau, 0.0))
+    rec = prepare(t2, np.append(pos, pos[-1]), None, np.append(tau, 0.0))
     assert rec.n == t.size and rec.t[-1] == pytest.approx(t[-1])
     assert any("1 joint states stamped up to 1.8e+09 s away" in w for w in rec.meta["warnings"]), rec.meta

@@ -9,17 +9,18 @@ import numpy as np
 import pytest
 import yaml
 
-from friction_ros.core.excitation import ABORT, END, START, make_program
-from friction_ros.core.harness import run_closed_loop
-from friction_ros.core.joint_sizing import (
+from friction_ros.core.experiment.events import ABORT, END, START
+from friction_ros.core.experiment.excitation import make_program
+from friction_ros.core.experiment.experiment_sizing import experiment_config
+from friction_ros.core.experiment.joint_scale import JointScale
+from friction_ros.core.experiment.tracking_design import (
     ENCODER_TORQUE_SHARE,
-    JointScale,
     crossover,
-    experiment_config,
     tracking_crossover,
     tracking_gains,
     tracking_reference,
 )
+from friction_ros.core.harness import run_closed_loop
 from friction_ros.core.presets import load_preset, make_plant, params_dir, preset_from_config
 from friction_ros.core.validation import ParameterError
 

@@ -11,8 +11,9 @@ import pytest
 from friction_ros.core.control.compensation import FrictionCompensator
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.control.limit_cycle import LimitCycleDetector
+from friction_ros.core.experiment.joint_scale import JointScale
+from friction_ros.core.experiment.tracking_design import tracking_gains
 from friction_ros.core.harness import run_closed_loop
-from friction_ros.core.joint_sizing import JointScale, tracking_gains
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 

@@ -7,8 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import make_program, random_velocity, resolve_config
-from friction_ros.core.joint_sizing import LIMIT_SHARE, fit_to_limits, plateau_travel
+from friction_ros.core.experiment.excitation import make_program
+from friction_ros.core.experiment.excitation_config import resolve_config
+from friction_ros.core.experiment.experiment_sizing import LIMIT_SHARE, fit_to_limits, plateau_travel
+from friction_ros.core.experiment.velocity_programs import random_velocity
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 
@@ -62,7 +64,8 @@ def test_a_user_value_that_cannot_fit_is_refused_naming_it():
 
 
 def test_set_limits_bound_the_joint_the_program_is_sized_to():
-    from friction_ros.cli.experiment import build_parser, sized_config
+    from friction_ros.cli.experiment import build_parser
+    from friction_ros.cli.experiment_config import sized_config
 
     args = build_parser().parse_args(["--profile", "quick"])
     preset = load_preset("abb_m19s")

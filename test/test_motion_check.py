@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from friction_ros.core.excitation import ABORT, END, make_program
+from friction_ros.core.experiment.events import ABORT, END
+from friction_ros.core.experiment.excitation import make_program
 from friction_ros.core.presets import load_preset
 
 

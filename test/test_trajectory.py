@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.trajectory import TrajectoryReference
+from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 
 

@@ -29,467 +29,24 @@ import json
 import math
 import sys
 import time
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
-from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD
+from friction_ros.cli.demo_report import json_default, plot_friction_map, plot_tracking, print_table
+from friction_ros.cli.demo_results import (
+    ENCODER_CAP_WARN,
+    GRAPH_PERIOD,
+    DemoResult,
+    encoder_cap,
+    map_error_vs_truth,
+    run_metrics,
+)
+from friction_ros.cli.demo_steps import controller_document, fit, run_experiment, say, track
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMES = ("feedforward", "feedback", "blended")
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
-# the ROS graph's control period (plant_simulator / compensating_controller / experiment default)
-GRAPH_PERIOD = DEFAULT_CONTROL_PERIOD
-# s of wall time between seeing the controller's writer and starting the plant (its writer matches
-# this reader a moment later; the experiment node waits alike)
-MATCH_GRACE = 0.5
-
-
-@dataclass
-class TrackingRun:
-    """One closed-loop tracking run through the ROS graph (every control period, in order)."""
-
-    label: str
-    t: np.ndarray
-    reference: np.ndarray
-    reference_velocity: np.ndarray
-    position: np.ndarray
-    velocity: np.ndarray
-    error: np.ndarray
-    command: np.ndarray
-    friction: np.ndarray
-    wall_seconds: float
-    enabled: bool = True
-    reason: str = ""
-    metrics: dict = field(default_factory=dict)
-
-    @property
-    def rms(self) -> float:
-        return float(np.sqrt(np.mean(self.error**2)))
-
-    @property
-    def max(self) -> float:
-        return float(np.max(np.abs(self.error)))
-
-    @property
-    def samples(self) -> int:
-        return int(self.t.size)
-
-    def fallback_time(self) -> float | None:
-        """Time after which the friction terms stayed exactly zero while they were active before
-        (the controller's run-time limit-cycle fallback), else None."""
-        active = self.friction != 0.0
-        if not active.any() or active[-1]:
-            return None
-        last = int(np.nonzero(active)[0][-1])
-        return float(self.t[last + 1]) if last + 1 < self.t.size else None
-
-
-@dataclass
-class DemoResult:
-    preset: str = ""
-    bag: str = ""
-    bag_digest: str = ""
-    fit_dir: str = ""
-    params_file: str = ""
-    model: str = ""
-    recommendation: dict = field(default_factory=dict)
-    fit_nmse: dict = field(default_factory=dict)
-    gate: dict = field(default_factory=dict)
-    gains: dict = field(default_factory=dict)
-    reference: dict = field(default_factory=dict)
-    runs: dict[str, TrackingRun] = field(default_factory=dict)
-    encoder_cap: float = 100.0  # largest reduction [%] the encoder lets the measured error show
-    warnings: list[str] = field(default_factory=list)
-    files: list[str] = field(default_factory=list)
-    timings: dict[str, float] = field(default_factory=dict)
-    map_error: dict = field(default_factory=dict)
-
-    def reduction(self, label: str) -> float:
-        base = self.runs["none"].rms
-        return 100.0 * (1.0 - self.runs[label].rms / base) if base > 0 else 0.0
-
-    @property
-    def best(self) -> str:
-        """The enabled mode with the lowest RMS error ("none" when no mode is enabled)."""
-        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled]
-        return min(enabled, key=lambda k: self.runs[k].rms) if enabled else "none"
-
-    def summary(self) -> dict:
-        return {
-            "preset": self.preset,
-            "bag": self.bag,
-            "bag_digest": self.bag_digest,
-            "model": self.model,
-            "recommendation": self.recommendation,
-            "fit_nmse_percent": self.fit_nmse,
-            "map_error_vs_truth": self.map_error,
-            "params_file": self.params_file,
-            "control_period": GRAPH_PERIOD,
-            "gains": self.gains,
-            "reference": self.reference,
-            "gate": self.gate,
-            "runs": {
-                k: {
-                    "rms_mrad": r.rms * 1e3,
-                    "max_mrad": r.max * 1e3,
-                    "wall_seconds": r.wall_seconds,
-                    "enabled": r.enabled,
-                    "reason": r.reason,
-                    "samples": r.samples,
-                    "fallback_s": r.fallback_time(),
-                    **{f"{m}": v for m, v in r.metrics.items()},
-                }
-                for k, r in self.runs.items()
-            },
-            "best": self.best,
-            "reduction_percent": {k: self.reduction(k) for k in self.runs},
-            "encoder_cap_percent": self.encoder_cap,
-            "warnings": self.warnings,
-            "timings_s": self.timings,
-        }
-
-
-def _say(msg: str) -> None:
-    print(f"[demo] {msg}", flush=True)
-
-
-# -- step 1 -------------------------------------------------------------------------------------------
-def run_experiment(preset: str, profile: str, bag: Path, joint: str, seed: int | None = None) -> None:
-    """friction-experiment in lockstep, sized to the preset (its default for a simulated joint)."""
-    from friction_ros.cli import experiment
-
-    argv = ["--profile", profile, "--preset", preset, "--mode", "lockstep", "-o", str(bag), "--overwrite"]
-    argv += ["--joint", joint]
-    if seed is not None:
-        argv += ["--set", f"random.seed={int(seed)}"]
-    code = experiment.main(argv)
-    if code == 3:
-        raise RuntimeError("identification experiment stopped by a safety limit (see the ABORT lines above)")
-    if code != 0:
-        raise RuntimeError(f"identification experiment failed (exit code {code})")
-
-
-# -- step 2 -------------------------------------------------------------------------------------------
-def fit(
-    bag: Path,
-    joint: str,
-    models: list[str],
-    out_dir: Path,
-    quick: bool,
-    preset: str,
-    params_file: Path,
-    gate: dict | None = None,
-):
-    from friction_ros.core.identification import fit_bag
-
-    options = {"maxiter": 25} if quick else {}
-    return fit_bag(
-        [str(bag)],
-        "/joint_states",
-        joint,
-        models,
-        out_dir,
-        plant_preset=preset,
-        params_file=str(params_file),
-        gate=gate,
-        **options,
-    )
-
-
-def controller_document(
-    model_config: dict | None,
-    inertia: float,
-    scheme: str,
-    reference: dict,
-    gains: dict,
-    *,
-    load_feedforward: float = 0.0,
-    allow_refused: bool = False,
-) -> dict:
-    """compensating_controller parameters (README layout: ``friction`` = model, ``compensation`` = how)."""
-    params: dict = {"mode": "pid", "pid": dict(gains), "reference": dict(reference)}
-    if load_feedforward:
-        params["load_feedforward"] = float(load_feedforward)
-    if model_config is not None:
-        params["inertia"] = float(inertia)
-        params["friction"] = dict(model_config)
-        params["compensation"] = {"source": scheme, "gain": 1.0, "blend": 0.5}
-        if allow_refused:  # the demo runs a refused mode on the simulated joint only to show why
-            params["compensation"]["allow_refused"] = True
-    return {"compensating_controller": {"ros__parameters": params}}
-
-
-# -- step 3 -------------------------------------------------------------------------------------------
-class MissingStates(RuntimeError):
-    """A tracking run whose controller states did not all arrive."""
-
-
-#: tracking runs repeated when states went missing (the run is deterministic: a repeat is the same run)
-TRACK_ATTEMPTS = 3
-
-
-def track(
-    preset: str,
-    params_file: Path,
-    duration: float,
-    label: str,
-    joint: str = "joint1",
-    period: float = 1e-3,
-) -> TrackingRun:
-    """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
-
-    Every controller_state of the run is read (a reliable subscription as deep as the publisher's
-    history); a run in which one control period is missing is repeated (up to TRACK_ATTEMPTS runs;
-    lockstep makes the repeat identical) and fails after that, so the figures never depend on what
-    a loaded machine happened to deliver. Measured under a load average of 9 on 2 cores: the
-    controller's writer had not yet matched this reader when the plant started (108 of 4001 states
-    missing at the start) although the reader already saw the writer.
-    """
-    for attempt in range(1, TRACK_ATTEMPTS + 1):
-        try:
-            return _track_once(preset, params_file, duration, label, joint, period)
-        except MissingStates as exc:
-            if attempt == TRACK_ATTEMPTS:
-                raise RuntimeError(f"{exc} (in each of {TRACK_ATTEMPTS} runs)") from None
-            _say(f"  {label}: {exc}; running it again")
-    raise AssertionError("unreachable")
-
-
-def _track_once(
-    preset: str, params_file: Path, duration: float, label: str, joint: str, period: float
-) -> TrackingRun:
-    import threading
-
-    import rclpy
-    from friction_msgs.msg import ControllerState
-    from rclpy.executors import SingleThreadedExecutor
-
-    from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
-    from friction_ros.nodes.qos import RECORDED_QOS
-
-    specs = [
-        NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
-        NodeSpec(
-            "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
-        ),
-    ]
-    pin_latency_chain(specs)
-    if not rclpy.ok():
-        rclpy.init()
-    node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
-    states: list = []
-    sub = node.create_subscription(ControllerState, "controller_state", states.append, RECORDED_QOS)
-    ex = SingleThreadedExecutor()
-    ex.add_node(node)
-    stop = threading.Event()
-
-    def spin():
-        while not stop.is_set():
-            ex.spin_once(timeout_sec=0.05)
-
-    th = threading.Thread(target=spin, daemon=True)
-    th.start()
-    # the controller first; the plant (which steps the run) only once this subscription is matched to
-    # the controller's publisher, so that no state of the run is published before we listen (a late
-    # match under load used to shift the evaluated window: figures then depended on machine speed)
-    bring_ctrl = Bringup(specs[1:], quiet=True)
-    bring_plant = Bringup(specs[:1], quiet=True)
-    t0 = time.monotonic()
-    bring_ctrl.start()
-    n_periods = int(round(duration / period))
-    try:
-        while sub.get_publisher_count() < 1:
-            if bring_ctrl.failed():
-                out = "\n".join(sum(bring_ctrl.output.values(), [])[-20:])
-                raise RuntimeError(f"tracking run {label}: the controller failed\n{out}")
-            if time.monotonic() - t0 > 60:
-                raise RuntimeError(f"tracking run {label}: controller_state not matched within 60 s")
-            time.sleep(0.01)
-        time.sleep(MATCH_GRACE)  # the controller's writer matches this reader a moment later
-        bring_plant.start()
-        last_print = 0.0
-        while True:
-            if bring_ctrl.failed() or bring_plant.failed():
-                out = "\n".join(sum([*bring_ctrl.output.values(), *bring_plant.output.values()], [])[-20:])
-                raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
-            t_sim = _stamp(states[-1]) - _stamp(states[0]) if states else 0.0
-            if t_sim >= duration + 2 * period:
-                break
-            if time.monotonic() - t0 > 60 + 20 * duration:
-                raise RuntimeError(f"tracking run {label}: timed out at t = {t_sim:.2f} s")
-            if sys.stdout.isatty() and time.monotonic() - last_print > 1.0:
-                last_print = time.monotonic()
-                print(f"\r[demo]   {label:<12} t = {t_sim:5.1f} / {duration:g} s", end="", flush=True)
-            time.sleep(0.02)
-    finally:
-        wall = time.monotonic() - t0
-        bring_ctrl.stop()  # the torque commander first
-        bring_plant.stop()
-        stop.set()
-        th.join(timeout=2)
-        node.destroy_node()
-    print(
-        f"{chr(13) if sys.stdout.isatty() else ''}[demo]   {label:<12} {duration:g} s simulated in {wall:.1f} s",
-        flush=True,
-    )
-    if not states:
-        raise MissingStates(f"tracking run {label}: no controller state was received")
-    # the lockstep clock starts at 0: index by simulated time, so states missed at the start count
-    t_first = min(_stamp(states[0]), period)
-    by_k: dict[int, object] = {}
-    for m in states:
-        by_k.setdefault(int(round((_stamp(m) - t_first) / period)), m)
-    missing = [k for k in range(n_periods + 1) if k not in by_k]
-    if missing:
-        raise MissingStates(
-            f"tracking run {label}: {len(missing)} of {n_periods + 1} controller states were not received "
-            f"(first missing period {missing[0]}): the figures would not be of the whole run"
-        )
-    msgs = [by_k[k] for k in range(n_periods + 1)]
-    col = lambda name: np.array([getattr(m, name) for m in msgs])  # noqa: E731
-    return TrackingRun(
-        label=label,
-        t=np.arange(n_periods + 1) * period,
-        reference=col("reference_position"),
-        reference_velocity=col("reference_velocity"),
-        position=col("position"),
-        velocity=col("velocity"),
-        error=col("error"),
-        command=col("command"),
-        friction=col("friction_feedforward") + col("friction_feedback"),
-        wall_seconds=wall,
-    )
-
-
-def _stamp(m) -> float:
-    return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9
-
-
-def run_metrics(run: TrackingRun, resolution: float) -> dict:
-    """Stick-slip and hunting of one run from the measured signals (harness.tracking_metrics)."""
-    from friction_ros.core.harness import tracking_metrics
-
-    v_stick = max(2.0 * resolution / 0.01, 1e-4)  # under two counts per 10 ms counts as stuck
-    m = tracking_metrics(
-        run.t,
-        run.reference,
-        run.position,
-        run.velocity,
-        run.reference_velocity,
-        v_stick=v_stick,
-        resolution=2.0 * resolution,
-    )
-    return {
-        "stick_fraction": m["stick_fraction"],
-        "stick_events": m["stick_events"],
-        "hunting_reversals": m["hunting_reversals"],
-        "hunting_amplitude_mrad": m["hunting_amplitude"] * 1e3,
-    }
-
-
-# -- step 4 -------------------------------------------------------------------------------------------
-def plot_tracking(result: DemoResult, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
-    base = result.runs["none"]
-    axes[0].plot(base.t, base.reference, "k", lw=1, label="reference")
-    axes[0].plot(base.t, base.position, lw=0.8, label="no compensation")
-    if result.best != "none":
-        best = result.runs[result.best]
-        axes[0].plot(best.t, best.position, lw=0.8, label=f"{result.best}")
-    axes[0].set_ylabel("position [rad]")
-    axes[0].legend(loc="upper right", fontsize=8)
-    for label, run in result.runs.items():
-        state = "" if run.enabled else " (refused)"
-        axes[1].plot(
-            run.t, run.error * 1e3, lw=0.7, label=f"{label}{state}: RMS {run.rms * 1e3:.3f} mrad", alpha=0.9
-        )
-    axes[1].set_ylabel("tracking error [mrad]")
-    axes[1].set_xlabel("time [s]")
-    axes[1].legend(loc="upper right", fontsize=8)
-    fig.suptitle(
-        f"{result.preset}: tracking error before and after friction compensation (lockstep ROS graph)"
-    )
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def plot_friction_map(fit_result, truth, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    plateaus = fit_result.plateaus
-    fig, ax = plt.subplots(figsize=(8, 5))
-    if plateaus:
-        v = np.array([p.velocity for p in plateaus])
-        f = np.array([p.torque for p in plateaus])
-        ax.plot(v, f, "ko", ms=4, label="plateau means (bag)")
-        vmax = float(np.max(np.abs(v))) * 1.1
-        vmin = max(float(np.min(np.abs(v))) / 10.0, 1e-6)
-    else:
-        vmax, vmin = 5.0, 1e-3
-    grid = np.concatenate([-np.geomspace(vmax, vmin, 200), np.geomspace(vmin, vmax, 200)])
-    if truth is not None:
-        ax.plot(grid, truth.joint_friction(grid), "k--", lw=1, label=f"truth ({truth.name})")
-    for name, m in fit_result.models.items():
-        try:
-            ax.plot(grid, m.steady_state(grid), lw=1, label=f"fit: {name}")
-        except Exception:  # a learned model without a steady-state map
-            continue
-    ax.set_xscale("symlog", linthresh=vmin * 10)
-    ax.set_xlabel("velocity [rad/s]")
-    ax.set_ylabel("friction torque [N m]")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    ax.set_title("Steady-state friction map: data, fits and truth")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
-def print_table(result: DemoResult) -> None:
-    nmse = result.fit_nmse
-
-    def fmt(x):
-        return "n/a" if x is None or not math.isfinite(x) else f"{x:.3f} %"
-
-    print()
-    print(
-        f"[{result.preset}] Model chosen: {result.model}   fit NMSE (validation): "
-        f"high velocity {fmt(nmse.get('high'))}, low velocity {fmt(nmse.get('low'))}"
-    )
-    if result.recommendation.get("rule"):
-        print(f"  chosen by: {result.recommendation['rule']}")
-    print(f"  tracking gains {result.gains}; reference {result.reference.get('type')}")
-    print()
-    print(
-        "| compensation | state | RMS error [mrad] | max error [mrad] | RMS reduction [%] "
-        "| stick fraction | hunting reversals |"
-    )
-    print("|---|---|---|---|---|---|---|")
-    for label, run in result.runs.items():
-        state = "-" if label == "none" else ("enabled" if run.enabled else run.reason)
-        print(
-            f"| {label} | {state} | {run.rms * 1e3:.4f} | {run.max * 1e3:.4f} | {result.reduction(label):.1f} "
-            f"| {run.metrics.get('stick_fraction', math.nan):.3f} | {run.metrics.get('hunting_reversals', 0)} |"
-        )
-    if result.best == "none":
-        print("\nbest: no compensation mode is enabled for this joint")
-    else:
-        print(f"\nbest enabled mode: {result.best} ({result.reduction(result.best):.1f} % lower RMS error)")
-    for w in result.warnings:
-        print(f"WARNING: {w}")
 
 
 def _resolution(preset_obj) -> float:
@@ -502,8 +59,9 @@ def _resolution(preset_obj) -> float:
 
 def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     """Steps 1-4 for one preset; raises RuntimeError/ParameterError naming what failed."""
+    from friction_ros.core.experiment.joint_scale import JointScale
+    from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
     from friction_ros.core.identification.export import dump_yaml
-    from friction_ros.core.joint_sizing import JointScale, tracking_gains, tracking_reference
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early
@@ -514,18 +72,18 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     bag = Path(args.bag) if args.bag else ROOT / "bags" / f"demo_{preset_name}_{stamp}"
     t_all = time.monotonic()
     if not args.bag:
-        _say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, lockstep) -> {bag}")
+        say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, lockstep) -> {bag}")
         t = time.monotonic()
         run_experiment(preset_name, args.profile, bag, args.joint, args.seed)
         res.timings["experiment"] = time.monotonic() - t
     else:
-        _say(f"1/4 using the bag you gave: {bag}")
+        say(f"1/4 using the bag you gave: {bag}")
     res.bag = str(bag)
     from friction_ros.core.bag import content_digest
 
     res.bag_digest = content_digest(bag, ["/joint_states", "/experiment_events"])[0] if not args.bag else ""
 
-    _say(f"2/4 fitting {', '.join(args.models)} from the bag")
+    say(f"2/4 fitting {', '.join(args.models)} from the bag")
     t = time.monotonic()
     fit_dir = results_dir / "fit"
     params_file = results_dir / "friction_params.yaml"
@@ -565,13 +123,13 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     verdicts = fit_result.gate
     res.gate = {m: v.as_dict() for m, v in verdicts.items()}
     res.params_file = str(params_file)
-    _say(f"   recommended model: {name}; parameters -> {params_file}")
+    say(f"   recommended model: {name}; parameters -> {params_file}")
     for m, v in verdicts.items():
-        _say(f"   {m:<12} {v.reason}")
+        say(f"   {m:<12} {v.reason}")
         if not v.enabled:
             res.warnings.append(f"{m} compensation refused by the safety gate: {v.reason}")
 
-    _say(
+    say(
         f"3/4 tracking runs ({args.duration:g} s each, lockstep): none, "
         + ", ".join(SCHEMES)
         + " (refused modes run only to show why)"
@@ -624,7 +182,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             "encoder resolution or an unmodelled effect dominate), or the fitted model explains little"
         )
 
-    _say("4/4 results")
+    say("4/4 results")
     plot_tracking(res, results_dir / "tracking_error.png")
     plot_friction_map(fit_result, preset, results_dir / "friction_map.png")
     res.timings["total"] = time.monotonic() - t_all
@@ -636,60 +194,8 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         str(results_dir / "friction_map.png"),
         str(results_dir / "demo_summary.json"),
     ]
-    (results_dir / "demo_summary.json").write_text(json.dumps(res.summary(), indent=2, default=_json_default))
+    (results_dir / "demo_summary.json").write_text(json.dumps(res.summary(), indent=2, default=json_default))
     return res
-
-
-#: an encoder cap below this [%] is named in the demo's warnings
-ENCODER_CAP_WARN = 90.0
-
-
-def encoder_cap(run: TrackingRun, resolution: float) -> float:
-    """The largest RMS reduction [%] any controller can show on this run's measured error: even a
-    joint that tracked perfectly reads ``ref - q round(ref / q)`` through an encoder of resolution
-    ``q``, so ``100 (1 - RMS(that) / RMS(run))`` (100 without an encoder)."""
-    if resolution <= 0 or not run.rms > 0:
-        return 100.0
-    ref = np.asarray(run.reference, dtype=float)
-    floor = float(np.sqrt(np.mean((ref - resolution * np.round(ref / resolution)) ** 2)))
-    return 100.0 * (1.0 - floor / run.rms)
-
-
-def map_error_vs_truth(fitted, truth, plateaus) -> dict:
-    """Steady-state map of the fit against the preset's truth (both directions).
-
-    ``sliding_percent``: largest |f_fit(v) - f_true(v)| / |f_true(v)| over the plateau speed range
-    (lowest to highest plateau speed); ``static_peak_percent``: signed relative error of the static
-    peak, the largest |f(v)| for speeds from 1e-6 up to the lowest plateau speed (fs for a Stribeck
-    curve), as (fit - truth) / truth, the worse direction.
-    """
-    speeds = sorted(abs(p.velocity) for p in plateaus if abs(p.velocity) > 0)
-    lo, hi = (speeds[0], speeds[-1]) if speeds else (1e-2, 1.0)
-    out = {"v_min": lo, "v_max": hi, "sliding_percent": math.nan, "static_peak_percent": math.nan}
-    slide, peak = [], []
-    for sign in (1.0, -1.0):
-        v = sign * np.geomspace(lo, max(hi, lo * 1.0001), 200)
-        ft, ff = np.asarray(truth(v)), np.asarray(fitted(v))
-        ok = np.abs(ft) > 0
-        if ok.any():
-            slide.append(float(np.max(np.abs(ff[ok] - ft[ok]) / np.abs(ft[ok]))))
-        vs = sign * np.geomspace(1e-6, lo, 200)
-        pt, pf = float(np.max(np.abs(truth(vs)))), float(np.max(np.abs(fitted(vs))))
-        if pt > 0:
-            peak.append((pf - pt) / pt)
-    if slide:
-        out["sliding_percent"] = 100.0 * max(slide)
-    if peak:
-        out["static_peak_percent"] = 100.0 * max(peak, key=abs)
-    return out
-
-
-def _json_default(x):
-    if isinstance(x, (np.floating, np.integer)):
-        return x.item()
-    if isinstance(x, np.ndarray):
-        return x.tolist()
-    return str(x)
 
 
 def run(args) -> DemoResult | dict:
@@ -715,7 +221,7 @@ def run(args) -> DemoResult | dict:
     results_dir.mkdir(parents=True, exist_ok=True)
     out: dict = {"presets": {}, "presets_ok": [], "presets_failed": {}}
     for name in PRESET_NAMES:
-        _say(f"=== preset {name} ===")
+        say(f"=== preset {name} ===")
         try:
             res = run_preset(args, name, results_dir / name)
         except (ParameterError, RuntimeError, FileNotFoundError) as exc:
@@ -733,7 +239,7 @@ def run(args) -> DemoResult | dict:
         if not worse:
             out["presets_ok"].append(name)
     out["presets_total"] = len(PRESET_NAMES)
-    (results_dir / "demo_summary.json").write_text(json.dumps(out, indent=2, default=_json_default))
+    (results_dir / "demo_summary.json").write_text(json.dumps(out, indent=2, default=json_default))
     print(
         f"\npresets ok: {len(out['presets_ok'])} of {len(PRESET_NAMES)}; summary {results_dir / 'demo_summary.json'}"
     )

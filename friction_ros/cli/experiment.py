@@ -15,7 +15,7 @@ Sizing: with a simulated joint (``--preset``) the program is sized to the joint 
 (``--sizing joint``): plateau speeds from below the Stribeck velocity down to what the encoder
 resolves up to a fraction of the speed limit, ramp torques and amplitudes from the breakaway
 torque, travel and loop gains from the inertia, current lag and delays
-(``friction_ros.core.joint_sizing``). On a real joint (``--no-sim``) give what a short probe
+(``friction_ros.core.experiment.experiment_sizing``). On a real joint (``--no-sim``) give what a short probe
 measured (``--breakaway``, ``--inertia``, ``--torque-limit``, ``--speed-limit``, ``--travel``,
 ``--resolution``) to size it the same way; without them the ``--profile`` values are used as they
 are (``--sizing profile``, scaled for the ABB M19-S). ``--set`` overrides any key afterwards.
@@ -50,42 +50,19 @@ from pathlib import Path
 import yaml
 
 from friction_ros.cli.bringup import Bringup, NodeSpec
-from friction_ros.core.excitation import (
-    EXIT_ABORTED,
-    EXIT_NOT_EXCITED,
-    PROFILES,
-    PROGRAM_NAMES,
-    ExcitationProgram,
-    resolve_config,
+from friction_ros.cli.experiment_config import (
+    flatten,
+    nest,
+    node_values,
+    parse_sets,
+    sized_config,
+    typed_like_defaults,
 )
-from friction_ros.core.joint_sizing import fit_to_limits
+from friction_ros.cli.experiment_summary import summarize
+from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
+from friction_ros.core.experiment.excitation_config import PROFILES, PROGRAM_NAMES, resolve_config
+from friction_ros.core.experiment.experiment_sizing import fit_to_limits
 from friction_ros.core.validation import ParameterError
-
-
-def _parse_sets(items: list[str]) -> dict[str, object]:
-    out: dict[str, object] = {}
-    for item in items:
-        if "=" not in item:
-            raise ParameterError(f"--set {item!r} must be KEY=VALUE, e.g. plateaus.v_max=2.0")
-        key, raw = item.split("=", 1)
-        try:
-            out[key.strip()] = yaml.safe_load(raw)
-        except yaml.YAMLError:
-            raise ParameterError(f"--set {item!r}: cannot parse the value {raw!r}") from None
-    return out
-
-
-def _nest(flat: dict[str, object]) -> dict:
-    nested: dict = {}
-    for key, value in flat.items():
-        parts = key.split(".")
-        d = nested
-        for p in parts[:-1]:
-            d = d.setdefault(p, {})
-            if not isinstance(d, dict):
-                raise ParameterError(f"--set {key}: {p} is not a section")
-        d[parts[-1]] = value
-    return nested
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -155,157 +132,11 @@ def _stop_proc(proc: subprocess.Popen, grace: float = 5.0) -> None:
             proc.wait()
 
 
-def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, states_topic: str) -> str:
-    """The text printed after a run: segments, aborts, breakaways, plateau map."""
-    from friction_ros.core.identification.pipeline import load_bag
-    from friction_ros.core.plateaus import plateau_map
-
-    data = load_bag(bag, topic=states_topic, joint=joint, events_topic=events_topic)
-    ev = data.events
-    starts = sum(e.event == 0 for e in ev)
-    ends = sum(e.event == 1 for e in ev)
-    aborts = [e for e in ev if e.event == 2]
-    programs = list(dict.fromkeys(e.program for e in ev))
-    lines = [
-        f"joint {joint}: {data.n} joint states ({data.duration:.1f} s), {len(ev)} events: {starts} START, "
-        f"{ends} END, {len(aborts)} ABORT; programs: {', '.join(programs) or '-'}"
-    ]
-    for e in aborts:
-        lines.append(f"  ABORT {e.program}/{e.segment} at {e.time:.2f} s: {e.note}")
-    brk = [e for e in ev if e.event == 1 and "breakaway" in e.program]
-    if brk:
-        lines.append(
-            "breakaway torques [N*m]: " + ", ".join(f"{e.segment[-1]}{abs(e.target):.4f}" for e in brk)
-        )
-    if any("plateau" in e.program for e in ev) and not any(
-        "plateau" in e.program and e.event == 1 for e in ev
-    ):
-        lines.append("plateau map: no plateau completed")
-    elif any("plateau" in e.program for e in ev):
-        truth = None
-        if preset:
-            import numpy as np
-
-            from friction_ros.core.presets import load_preset
-
-            truth_preset = load_preset(preset)
-            p = truth_preset.params
-            holding = p.gravity_force - p.load_torque  # the torque that holds a constant load
-
-            def truth(v: float) -> float:
-                # what a plateau measures on the simulated joint: joint-level friction + holding torque
-                return float(truth_preset.joint_friction(np.array([v]))[0]) + holding
-
-        pm = plateau_map(bag, joint, topic=states_topic, events_topic=events_topic)
-        lines.append(f"plateau map (first {pm.settle:g} s of each plateau discarded):")
-        lines.append(pm.to_text(truth))
-    return "\n".join(lines)
-
-
-# the control period of the experiment node and the plant in the ROS graph (their default)
-NODE_PERIOD = 1e-3
-PROBE = ("breakaway", "inertia", "torque_limit", "speed_limit", "travel", "resolution")
-
-
-#: --set limits that bound the joint scale the program is sized to
-_SCALE_LIMITS = {
-    "limits.max_travel": "travel",
-    "limits.max_velocity": "speed_limit",
-    "limits.max_torque": "torque_limit",
-}
-
-
-def sized_config(args, preset, sets: dict | None = None) -> dict:
-    """The program's sections sized to the joint (preset or probe values), or {} for the profile.
-
-    Limits given with ``--set`` (``limits.max_travel``/``max_velocity``/``max_torque``) bound the
-    joint's travel, speed and torque before sizing, so the plateaus, amplitudes and ramps are
-    derived within them."""
-    from dataclasses import replace
-
-    from friction_ros.core.joint_sizing import JointScale, experiment_config
-
-    given = {k: getattr(args, k) for k in PROBE if getattr(args, k) is not None}
-    sizing = args.sizing or ("joint" if (preset is not None or given) else "profile")
-    if sizing == "profile":
-        if given:
-            raise ParameterError(
-                f"--{next(iter(given)).replace('_', '-')} sizes the program to the joint: drop --sizing profile"
-            )
-        return {}
-    if preset is not None:
-        scale = JointScale.from_preset(preset, period=NODE_PERIOD, **given)
-    else:
-        missing = [k for k in PROBE if k not in given]
-        if missing:
-            raise ParameterError(
-                "--sizing joint on a real joint needs the probe values "
-                + ", ".join("--" + k.replace("_", "-") for k in missing)
-                + " (or --sizing profile)"
-            )
-        scale = JointScale.from_probe(**given, period=NODE_PERIOD)
-    bounds = {}
-    for key, field in _SCALE_LIMITS.items():
-        value = (sets or {}).get(key)
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
-            bounds[field] = min(float(getattr(scale, field)), float(value))
-    if bounds:
-        try:
-            scale = replace(scale, **bounds)
-        except ParameterError as exc:
-            raise ParameterError(f"the --set limits leave no room for the experiment: {exc}") from None
-    return experiment_config(scale, args.profile)
-
-
-def _flat(d: dict, prefix: str = "") -> dict:
-    out: dict = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(_flat(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
-def _node_values(config: dict, profile: str, sized_flat: dict) -> dict:
-    """The experiment node's parameters: the sized values and whatever the limits fit changed."""
-    from friction_ros.core.excitation import SECTIONS, profile_defaults
-
-    base = _flat({s: profile_defaults(profile)[s] for s in SECTIONS})
-    fitted = _flat({s: config[s] for s in SECTIONS})
-    changed = {k: v for k, v in fitted.items() if base.get(k) != v and k not in sized_flat}
-    out = dict(sized_flat)
-    out.update({k: fitted[k] for k in sized_flat if k in fitted})
-    out.update(changed)
-    return _typed_like_defaults(out, profile)
-
-
-def _typed_like_defaults(flat: dict, profile: str) -> dict:
-    """Plain Python values typed like the declared defaults (ROS parameters are typed: an int where
-    a double is declared is refused)."""
-    from friction_ros.core.excitation import profile_defaults
-
-    base = _flat(profile_defaults(profile))
-    out = {}
-    for k, v in flat.items():
-        ref = base.get(k)
-        if isinstance(v, (list, tuple)):
-            v = [float(x) if isinstance(ref, list) and ref and isinstance(ref[0], float) else x for x in v]
-        elif isinstance(ref, float) and not isinstance(v, (bool, str)):
-            v = float(v)
-        elif isinstance(ref, int) and not isinstance(ref, bool) and not isinstance(v, (bool, str)):
-            v = int(v)
-        elif hasattr(v, "item"):  # numpy scalar
-            v = v.item()
-        out[k] = v
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     params_tmp = None
     try:
-        sets = _parse_sets(args.set)
+        sets = parse_sets(args.set)
         preset = None if args.no_sim else args.preset
         preset_obj = None
         if preset:
@@ -313,12 +144,12 @@ def main(argv: list[str] | None = None) -> int:
 
             preset_obj = load_preset(preset)
         sized = sized_config(args, preset_obj, sets)
-        sized_flat = _typed_like_defaults(_flat(sized), args.profile)
+        sized_flat = typed_like_defaults(flatten(sized), args.profile)
         sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
-        core = {"program": args.program, "profile": args.profile, **_nest({**sized_flat, **sets})}
+        core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets})}
         # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
         program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
-        sized_flat = _node_values(program.config, args.profile, sized_flat)
+        sized_flat = node_values(program.config, args.profile, sized_flat)
         if sized_flat:
             import tempfile
 

@@ -34,6 +34,8 @@ from friction_ros.core.control.controller import (
     controller_from_ros_parameters,
     controller_parameter_schema,
 )
+from friction_ros.core.experiment.references import reference_from_config
+from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import (
     DUPLICATE,
     REJECTED,
@@ -41,8 +43,6 @@ from friction_ros.core.input_gate import (
     JointInputGate,
 )
 from friction_ros.core.presets import control_period_field
-from friction_ros.core.references import reference_from_config
-from friction_ros.core.trajectory import TrajectoryReference
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns

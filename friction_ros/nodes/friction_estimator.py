@@ -128,7 +128,7 @@ class FrictionEstimatorNode(ParameterNode):
         if self._n % self._publish_every:
             return
         out = FrictionEstimate()
-        out.header.stamp = msg.stamp()
+        out.header.stamp.sec, out.header.stamp.nanosec = msg.sec, msg.nanosec
         out.joint_name = self.joint
         model, names, coefs = to_fields(self.estimator.model_config())
         out.model = model

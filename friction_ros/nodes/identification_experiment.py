@@ -1,4 +1,4 @@
-"""identification_experiment: run an excitation program (friction_ros.core.excitation) on one joint.
+"""identification_experiment: run an excitation program (friction_ros.core.experiment.excitation) on one joint.
 
 Drives the joint directly with a joint torque, event-driven like the controller: every
 ``joint_states`` message is one control period and is answered by one ``joint_commands`` message
@@ -42,16 +42,9 @@ from friction_msgs.msg import ExperimentEvent
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.excitation import (
-    DEFAULTS,
-    EVENT_NAMES,
-    EXIT_ABORTED,
-    EXIT_NOT_EXCITED,
-    PROFILES,
-    SECTIONS,
-    ExcitationProgram,
-    profile_defaults,
-)
+from friction_ros.core.experiment.events import EVENT_NAMES
+from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
+from friction_ros.core.experiment.excitation_config import DEFAULTS, PROFILES, SECTIONS, profile_defaults
 from friction_ros.core.input_gate import select_sample
 from friction_ros.core.presets import control_period_field
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns

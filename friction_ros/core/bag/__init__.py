@@ -16,6 +16,7 @@ Writing::
 """
 
 from .cdr import decode, decode_batch, encode
+from .contents import Bag, JointSeries, RawMessage, TopicData, TopicInfo
 from .digest import content_digest
 from .errors import (
     BagError,
@@ -28,18 +29,7 @@ from .errors import (
 )
 from .msgdef import MsgDef, find_msg_file, load_installed, parse_msg, parse_schema, schema_text, type_hash
 from .qos import dump_qos, make_qos, parse_qos
-from .reader import (
-    Bag,
-    JointSeries,
-    RawMessage,
-    TopicData,
-    TopicInfo,
-    bag_files,
-    bag_info,
-    iter_messages,
-    read_bag,
-    read_joint_states,
-)
+from .reader import bag_files, bag_info, iter_messages, read_bag, read_joint_states
 from .writer import RUN_METADATA_NAME, BagWriter, package_version, run_metadata
 
 __all__ = [

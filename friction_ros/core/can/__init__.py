@@ -1,6 +1,7 @@
 """CAN drive protocols (pure codecs), joint conversion, axis safety logic and the drive emulator.
 
-Nothing here imports rclpy; :mod:`friction_ros.core.can.emulator` and :mod:`friction_ros.core.can.local_bus` touch a python-can bus.
+Nothing here imports rclpy; :mod:`friction_ros.core.can.emulator` touches a python-can bus (the
+``friction_local`` socket bus lives outside the core, in :mod:`friction_ros.can_bus.local_bus`).
 """
 
 from friction_ros.core.can.axis import AxisConfig, CycleResult, DriveAxis, JointSample

@@ -1,6 +1,6 @@
 """Compensating controllers (pure core): PID, friction compensation, the seeds' schemes, façade."""
 
-from friction_ros.core.control.compensation import FrictionCompensator, LuGreObserver
+from friction_ros.core.control.compensation import FrictionCompensator
 from friction_ros.core.control.controller import (
     CONTROLLER_DEFAULTS,
     CONTROLLER_MODES,
@@ -31,7 +31,6 @@ __all__ = [
     "ControllerTerms",
     "FrictionCompensator",
     "GainScheduling",
-    "LuGreObserver",
     "Pid",
     "PidOutput",
     "SlidingMode",

@@ -9,11 +9,10 @@ Terms (N*m, added to the command; friction opposes motion so compensation has th
   ``u_in = u_c + u_f_hat(theta_dot)``): ``tau_fb = g_c * (1 - w) * F_hat(theta_dot)`` with the
   measured or estimated velocity; a dynamic model is driven by the measured velocity.
 * blended: both, weights ``w`` = ``blend`` and ``1 - w``.
-* observer: the LuGre observer of Canudas de Wit et al. (1995, IEEE TAC 40(3), eq. (12)):
-  ``dz_hat/dt = v - sigma0 |v| z_hat / g(v) + L e``, ``F_hat = sigma0 z_hat + sigma1 dz_hat/dt + fv v``
-  with ``e = theta_d - theta`` and observer gain ``L >= 0`` (the correction raises the friction
-  estimate while the joint lags the reference). For non-LuGre models ``observer`` falls back to
-  ``feedback``.
+* observer: the LuGre observer of Canudas de Wit et al. (1995)
+  (:class:`~friction_ros.core.estimation.lugre_observer.LuGreObserver`) driven by the measured
+  velocity and the tracking error ``e = theta_d - theta``. For non-LuGre models ``observer`` falls
+  back to ``feedback``.
 
 Feedback-path stability bound (``feedback_bound`` f, default 0.5; :meth:`FrictionCompensator.bound_feedback`):
 the presliding stiffness/damping of a dynamic model fed back from measured motion is limited to
@@ -38,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.estimation.lugre_observer import LuGreObserver
 from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
 
 SOURCES = ("none", "feedforward", "feedback", "blended", "observer")
@@ -103,55 +103,6 @@ def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
     if smoothing == "linear" and v_eps > 0.0 and abs(v) < v_eps:
         return float(model.steady_state(math.copysign(v_eps, v))) * abs(v) / v_eps if v != 0.0 else 0.0
     return float(model.steady_state(v))
-
-
-class LuGreObserver:
-    """LuGre friction observer after Canudas de Wit et al. (1995), see the module docstring.
-
-    The z equation is integrated exactly over a step with v and e held (it is linear in z),
-    so it stays stable for stiff bristles (sigma0 ~ 1e5 N*m/rad) at 1 ms.
-    """
-
-    def __init__(self, model, gain: float = 0.0):
-        c = model.coefficients
-        for k in ("sigma0", "fc", "fs", "vs"):
-            if k not in c:
-                raise ParameterError(f"LuGre observer needs a LuGre model: coefficient {k!r} missing")
-        self.model = model
-        self.gain = check_real("friction.observer_gain", gain, 0.0)
-        self.z = 0.0
-        self.zdot = 0.0
-
-    def reset(self, z: float = 0.0) -> None:
-        self.z = float(z)
-        self.zdot = 0.0
-
-    def g(self, v: float) -> float:
-        c = self.model.coefficients
-        return c["fc"] + (c["fs"] - c["fc"]) * math.exp(-(abs(v / c["vs"]) ** c.get("delta", 2.0)))
-
-    def step(self, v: float, dt: float, error: float = 0.0) -> float:
-        """Advance z_hat by dt with velocity v and tracking error e; return F_hat."""
-        c = self.model.coefficients
-        s0 = c["sigma0"]
-        a = s0 * abs(v) / self.g(v)
-        b = v + self.gain * error
-        z0 = self.z
-        if a * dt > 1e-9:
-            zs = b / a
-            self.z = zs + (z0 - zs) * math.exp(-a * dt)
-        else:
-            self.z = z0 + b * dt
-        self.zdot = (self.z - z0) / dt
-        s1 = c.get("sigma1", 0.0)
-        vd = c.get("vd", 0.0)
-        if vd > 0.0:
-            s1 *= math.exp(-((v / vd) ** 2))
-        return s0 * self.z + s1 * self.zdot + c.get("fv", 0.0) * v
-
-    @property
-    def state(self) -> np.ndarray:
-        return np.array([self.z])
 
 
 def _presliding_bound(

@@ -47,6 +47,7 @@ from typing import Any
 import numpy as np
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.estimation.lugre_observer import LuGreObserver
 from friction_ros.core.estimation.measurement import DisturbanceObserver, TorqueBalanceEstimator
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
 from friction_ros.core.validation import (
@@ -215,7 +216,7 @@ class OnlineFrictionEstimator:
         self.rls = None
         self.lugre = None
         if self.model_name == "lugre":
-            from friction_ros.core.control.compensation import LuGreObserver, build_model
+            from friction_ros.core.control.compensation import build_model
 
             if not cfg["lugre"]:
                 raise ParameterError(f"{n}.lugre is missing: model = lugre needs a LuGre model config")

@@ -6,54 +6,33 @@ base models up here, so neither of the two has to import the other's importer.
 
 from __future__ import annotations
 
+from . import dahl, gms, lugre, static, stiction
 from .base import FrictionModel
-from .dahl import Dahl
-from .gms import GMS
-from .lugre import LuGre
-from .static import (
-    Coulomb,
-    CoulombViscous,
-    GADupont,
-    GAExponential,
-    GANonLinear,
-    GASevenParameter,
-    GATustin,
-    Gaussian,
-    LoadDependent,
-    Lorentzian,
-    Polynomial,
-    Stribeck,
-    StribeckEps,
-    Tustin,
-    Viscous,
-    ZeroFriction,
-)
-from .stiction import GKF, Karnopp
 
 #: every model an asymmetric wrapper can be built on (all models but ``asymmetric`` itself)
 BASE_MODEL_CLASSES: dict[str, type[FrictionModel]] = {
     cls.name: cls
     for cls in (
-        ZeroFriction,
-        Coulomb,
-        Viscous,
-        CoulombViscous,
-        Stribeck,
-        Tustin,
-        Gaussian,
-        Lorentzian,
-        StribeckEps,
-        GAExponential,
-        GATustin,
-        GANonLinear,
-        GADupont,
-        GASevenParameter,
-        Polynomial,
-        LoadDependent,
-        Karnopp,
-        GKF,
-        Dahl,
-        LuGre,
-        GMS,
+        static.ZeroFriction,
+        static.Coulomb,
+        static.Viscous,
+        static.CoulombViscous,
+        static.Stribeck,
+        static.Tustin,
+        static.Gaussian,
+        static.Lorentzian,
+        static.StribeckEps,
+        static.GAExponential,
+        static.GATustin,
+        static.GANonLinear,
+        static.GADupont,
+        static.GASevenParameter,
+        static.Polynomial,
+        static.LoadDependent,
+        stiction.Karnopp,
+        stiction.GKF,
+        dahl.Dahl,
+        lugre.LuGre,
+        gms.GMS,
     )
 }

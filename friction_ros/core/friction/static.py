@@ -178,11 +178,7 @@ class StribeckEps(StaticModel):
     name = "stribeck_eps"
     KIND = K.K_STRIBECK_EPS
     COEFS = (
-        _FC,
-        _FS,
-        _VS,
-        _DELTA,
-        _FV,
+        *Stribeck.COEFS,
         Field(
             "eps",
             lo=0.0,

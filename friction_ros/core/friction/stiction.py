@@ -55,11 +55,7 @@ class Karnopp(GKF):
     name = "karnopp"
     KIND = K.K_KARNOPP
     COEFS = (
-        _FC,
-        _FS,
-        _VS,
-        _DELTA,
-        _FV,
+        *Stribeck.COEFS,
         Field(
             "dv",
             lo=0.0,

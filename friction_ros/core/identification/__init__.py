@@ -1,24 +1,22 @@
 """Offline friction identification (pure core, no rclpy): bag arrays -> fitted models -> report.
 
-Modules: ``data`` (loading, time alignment, differentiation, plateaus, breakaway, split),
-``static_fit`` (robust LS on the plateau map), ``ga`` (seed 001's genetic algorithm),
+Modules: ``records`` (time alignment, differentiation: the uniform record), ``bag_loading`` (a
+joint of a bag as a record), ``velocity_regimes``, ``plateau_detection``, ``breakaway_detection``,
+``plateau_map`` (the static map printed after an experiment), ``training_split``,
+``excitation_checks`` (what a record excites), ``static_fit`` (robust LS on the plateau map), ``ga`` (seed 001's genetic algorithm),
 ``dynamic_fit`` (output error with DE/GA + Nelder-Mead, inertia jointly), ``learned`` (ANFIS,
 nu-SVR per direction), ``identifiability`` (collinearity flags, confidence intervals), ``metrics``
 (seed 003 eq. 4 NMSE, AIC/BIC, recommendation), ``report`` (Markdown, PNG, JSON, YAML),
 ``seed001`` (seed 001's unity-feedback position output error), ``synthetic`` (known-truth runs).
 
-Entry points: :func:`fit_bag` and :func:`fit_records` (see ``pipeline``).
+Entry points: :func:`fit_bag` and :func:`fit_records` (``pipeline``, which compares the models;
+``model_fits`` turns each family's fit into a ``ModelResult`` of ``fit_results``).
 """
 
-from friction_ros.core.identification.data import ExcitationError, JointData, prepare
-from friction_ros.core.identification.pipeline import (
-    DEFAULT_MODELS,
-    FitResult,
-    ModelResult,
-    fit_bag,
-    fit_records,
-    load_bag,
-)
+from friction_ros.core.identification.bag_loading import load_bag
+from friction_ros.core.identification.fit_results import FitResult, ModelResult
+from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_bag, fit_records
+from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 __all__ = [
     "DEFAULT_MODELS",

@@ -27,10 +27,10 @@ from scipy import signal
 from scipy.optimize import differential_evolution, minimize
 from scipy.signal import savgol_filter
 
-from friction_ros.core.identification.data import JointData
 from friction_ros.core.identification.ga import run_ga
 from friction_ros.core.identification.linsolve import solve_grams
 from friction_ros.core.identification.models import FitSpec
+from friction_ros.core.identification.records import JointData
 from friction_ros.core.validation import check_choice
 
 

@@ -3,7 +3,7 @@
 :func:`gate_fit` builds the identified plant's scale (the fitted inertia, the recommended model's
 breakaway and the data's encoder resolution and sample period, plus the current-loop lag and
 delays the user measured), derives the tracking gains and a reference from it
-(:mod:`friction_ros.core.joint_sizing`) and runs :func:`friction_ros.core.control.compensation_gate.gate_modes`.
+(:mod:`friction_ros.core.experiment.tracking_design`) and runs :func:`friction_ros.core.control.compensation_gate.gate_modes`.
 The verdicts are kept in ``FitResult.gate`` and in the options the parameter document is built
 with, so the written file enables only modes that passed.
 """
@@ -37,7 +37,8 @@ def gate_fit(
     are used, with the fitted inertia. ``current_lag``/``delay`` [s]: the drive's current-loop time
     constant and pure delays (the control period is added by the loop itself).
     """
-    from friction_ros.core.joint_sizing import JointScale, tracking_gains, tracking_reference
+    from friction_ros.core.experiment.joint_scale import JointScale
+    from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
 
     name = res.recommended
     if name is None or res.models[name].config is None:

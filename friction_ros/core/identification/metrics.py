@@ -78,7 +78,7 @@ def compare(y_hat, y, high_mask, k: int, low_mask=None, noise_var: float | None 
     high). A subset with fewer than 200 samples or whose measured torque does not vary more than
     its noise has NaN metrics and a ``*_note`` saying why, never a huge number. ``scored``: the
     samples every metric (NMSE, AIC/BIC too) is computed on, default all; the pipeline leaves out
-    long standstills (:func:`~friction_ros.core.identification.data.standstill_mask`), where the
+    long standstills (:func:`~friction_ros.core.identification.velocity_regimes.standstill_mask`), where the
     friction is whatever torque holds the joint and no model can be scored
     (``n_rest_excluded`` counts them).
     """

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.core.identification import export
-from friction_ros.core.identification.data import concat_records
+from friction_ros.core.identification.records import concat_records
 
 
 def _clean(x):
@@ -296,7 +296,7 @@ def make_plots(res, out: Path) -> dict:
     # predictions on validation
     preds = {n: res.models[n].extra["validation_prediction"] for n in names}
     hm = res.high_threshold
-    from friction_ros.core.identification.data import velocity_envelope
+    from friction_ros.core.identification.velocity_regimes import velocity_envelope
 
     env = velocity_envelope(va.velocity, va.dt)
     low_idx = np.nonzero(env <= hm)[0]

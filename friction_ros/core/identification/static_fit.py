@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from friction_ros.core.identification.data import ExcitationError, Plateau, mirrored_pairs
+from friction_ros.core.identification.plateau_detection import Plateau, mirrored_pairs
+from friction_ros.core.identification.records import ExcitationError
 
 
 @dataclass

@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from friction_ros.core.identification.data import END, START, Event
+from friction_ros.core.experiment.events import END, START, Event
 from friction_ros.core.validation import check_choice
 
 
@@ -183,7 +183,7 @@ def plateau_experiment(
     With it the ABB preset slides steadily down to ~0.025 rad/s (the default 16 speeds put five
     plateaus in the knee); slower plateaus still stick-slip on the 1.05e-4 rad encoder (without
     quantisation all plateaus down to 0.003 rad/s are steady) and are rejected by
-    :func:`~friction_ros.core.identification.data.find_plateaus` from their torque oscillation.
+    :func:`~friction_ros.core.identification.plateau_detection.find_plateaus` from their torque oscillation.
     """
     check_choice("order", order, ["descending", "ascending"])
     if speeds is None:

@@ -72,12 +72,6 @@ class JointSample:
         self.velocity = velocity
         self.effort = effort
 
-    def stamp(self):
-        """The header stamp as builtin_interfaces/Time (imports the ROS message package)."""
-        from builtin_interfaces.msg import Time
-
-        return Time(sec=self.sec, nanosec=self.nanosec)
-
 
 class JointStateEncoder:
     """Serialise sensor_msgs/JointState for fixed joint names to CDR bytes in one ``struct.pack``.

@@ -1,26 +1,4 @@
-"""Experiments and gains sized to the joint: one scale in, an excitation program and tracking gains out.
-
-A joint is described by what a short safe probe measures (or a plant preset provides):
-:class:`JointScale` (breakaway torque, inertia, torque/speed/travel limits, encoder resolution,
-current-loop lag, delays, a constant load). Everything else is derived from it, so the same rules
-serve every preset in ``params/``, a preset a user writes, and a real joint.
-
-**Loop tuning rule** (used for the experiment's velocity loop and the tracking PD). The loop is
-``L(s) = C(s) / (J s^2) * e^{-s T} / (1 + s tau)`` with ``tau`` the current-loop lag plus the
-velocity filter's time constant and ``T`` the pure delay: one control period (the command answers
-the previous sample) plus half a period (zero-order hold) plus measurement and actuation delays.
-With viscous damping ``B`` (friction's viscous part, back-EMF of a voltage drive) the plant is
-``1 / (s (J s + B))``. For a PD ``C = K_p + K_d s`` with the zero at ``w_c / a``
-(``K_p = K_d w_c / a``) the phase at the crossover ``w_c`` is
-``-90 - atan(w_c J / B) + atan(a) - atan(w_c tau) - w_c T``. Requiring the phase margin ``PM``
-gives ``atan(w_c J/B) + atan(w_c tau) + w_c T = 90 + atan(a) - PM``, solved for ``w_c`` by
-bisection; then ``|L(j w_c)| = 1`` gives ``K_d = |B + j J w_c| / (sqrt(1 + 1/a^2) g)`` with ``g``
-the lag's gain at ``w_c``. Defaults: ``PM = 45 deg``, ``a = 4`` (zero a factor four below the crossover).
-Encoder bound: one count reads as ``count_velocity = resolution / max(filter, period)`` in
-the measured velocity; ``K_d count_velocity <= (torque_limit - |load|) / 2``, else both gains are
-scaled down (same zero, lower crossover). The velocity loop of the experiment is the same law on
-the velocity error's integral (its ``p`` is the PD's ``K_d``, its ``i`` the PD's ``K_p``), which is
-why it doubles as the position-loop gains of the plateaus.
+"""Excitation programs sized to a joint (:class:`~friction_ros.core.experiment.joint_scale.JointScale`).
 
 **Experiment rule** (seed 004 B.3 procedures, seed 003 A.3 excitation, scaled), ``F_b`` the
 breakaway estimate, ``F_c`` the Coulomb level, ``v_s`` the Stribeck velocity (1/e of the drop):
@@ -56,276 +34,13 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
-from friction_ros.core.validation import ParameterError, check_real
-
-#: motor-side speed assumed when a preset names none [rad/s] (about 2900 rpm) [ASSUMED]
-MOTOR_SPEED_LIMIT = 300.0
-#: travel of a linear axis when none is given [m] [ASSUMED]
-LINEAR_TRAVEL = 0.3
-#: travel of a rotary joint when none is given [rad]
-ROTARY_TRAVEL = 100.0
-DEFAULT_PHASE_MARGIN = 45.0
-#: share of the available torque one encoder count may command through the derivative gain
-ENCODER_TORQUE_SHARE = 0.5
-ZERO_RATIO = 4.0
-
-
-@dataclass(frozen=True)
-class JointScale:
-    """What sizing needs to know of a joint (joint units: rad or m; torque N*m or N)."""
-
-    breakaway: float
-    inertia: float
-    torque_limit: float
-    speed_limit: float
-    travel: float
-    resolution: float
-    period: float = 1e-3
-    current_lag: float = 0.0
-    delay: float = 0.0
-    load: float = 0.0
-    stribeck_velocity: float = math.nan
-    coulomb: float = math.nan
-    viscous: float = 0.0
-    damping: float = math.nan
-    velocity_filter: float = 0.0
-
-    def __post_init__(self) -> None:
-        check_real("breakaway", self.breakaway, 0.0, lo_open=True, unit="N*m")
-        check_real("inertia", self.inertia, 0.0, lo_open=True, unit="kg*m^2")
-        check_real("torque_limit", self.torque_limit, 0.0, lo_open=True, unit="N*m")
-        check_real("speed_limit", self.speed_limit, 0.0, lo_open=True, unit="rad/s")
-        check_real("travel", self.travel, 0.0, lo_open=True, unit="rad")
-        check_real("resolution", self.resolution, 0.0, lo_open=True, unit="rad")
-        check_real("period", self.period, 1e-5, 0.1, unit="s")
-        check_real("current_lag", self.current_lag, 0.0, unit="s")
-        check_real("delay", self.delay, 0.0, unit="s")
-        check_real("velocity_filter", self.velocity_filter, 0.0, unit="s")
-        check_real("load", self.load, None, unit="N*m")
-        if not math.isfinite(self.damping):
-            object.__setattr__(self, "damping", float(self.viscous))
-        if self.torque_limit <= abs(self.load) + self.breakaway:
-            raise ParameterError(
-                f"torque_limit = {self.torque_limit:g} is out of range: must exceed |load| + breakaway = "
-                f"{abs(self.load) + self.breakaway:g} [N*m], or the joint cannot be moved both ways"
-            )
-
-    @classmethod
-    def from_probe(
-        cls,
-        breakaway: float,
-        inertia: float,
-        torque_limit: float,
-        speed_limit: float,
-        travel: float,
-        resolution: float,
-        **more: Any,
-    ) -> JointScale:
-        """A real joint: the values a short safe probe measured (and its known limits)."""
-        return cls(
-            breakaway=breakaway,
-            inertia=inertia,
-            torque_limit=torque_limit,
-            speed_limit=speed_limit,
-            travel=travel,
-            resolution=resolution,
-            **more,
-        )
-
-    @classmethod
-    def from_preset(cls, preset, period: float | None = None, **overrides: Any) -> JointScale:
-        """A simulated joint: the scale a probe would measure on ``preset`` (a loaded Preset).
-
-        ``period``: the control period [s], by default the preset's ``control_period`` (the plant
-        node steps at it, so the program and the loops run at it too)."""
-        if period is None:
-            period = float(getattr(preset, "control_period", 0.0) or 1e-3)
-        p = preset.params
-        r = p.ratio
-        eta = p.gear_efficiency
-        gain = p.torque_constant * r * eta  # joint torque per motor current
-        v = np.geomspace(1e-6, 100.0, 400) / max(r, 1.0)
-        f_pos = np.abs(preset.joint_friction(v))
-        f_neg = np.abs(preset.joint_friction(-v))
-        both = np.maximum(f_pos, f_neg)
-        breakaway = float(max(f_pos[0], f_neg[0], 1e-12))
-        fmin = float(np.min(both))
-        coulomb = float(both[np.argmin(both)])
-        vs = math.nan
-        drop = float(both[0]) - fmin
-        if drop > 0.05 * float(both[0]):
-            k = int(np.nonzero(both - fmin <= drop / math.e)[0][0])
-            vs = float(v[k])
-        viscous = r * r * eta * p.motor_damping + p.load_damping
-        damping = viscous
-        if p.actuation == "voltage" and p.resistance > 0:  # back-EMF: Kt Ke / R at the motor
-            damping += r * r * eta * p.torque_constant * p.back_emf_constant / p.resistance
-        # actuator: what the current (or voltage) limit allows at the joint
-        if p.actuation == "current" and p.current_limit > 0:
-            t_max = p.current_limit * gain
-        elif p.actuation == "voltage" and p.voltage_limit > 0:
-            i_max = p.voltage_limit / max(p.resistance, 1e-12)
-            if p.current_limit > 0:
-                i_max = min(i_max, p.current_limit)
-            t_max = i_max * gain
-        else:
-            t_max = 10.0 * breakaway + abs(p.load_torque - p.gravity_force)
-        speed = MOTOR_SPEED_LIMIT / r
-        if p.actuation == "voltage" and p.voltage_limit > 0 and p.back_emf_constant > 0:
-            speed = min(speed, 0.8 * p.voltage_limit / p.back_emf_constant / r)
-        travel = LINEAR_TRAVEL if p.lead_pitch > 0 else ROTARY_TRAVEL
-        if p.encoder_cpr > 0:
-            counts_per_unit = p.encoder_cpr * p.encoder_ratio / (2.0 * math.pi)
-            if p.encoder_location == "motor":
-                counts_per_unit *= r
-            resolution = 1.0 / counts_per_unit
-        else:
-            resolution = 1e-7
-        lag = p.current_time_constant if p.actuation == "current" else 0.0
-        if p.actuation == "voltage" and p.resistance > 0:
-            lag = p.inductance / p.resistance
-        v_filter = 1.0 / (2.0 * math.pi * p.velocity_filter_hz) if p.velocity_filter_hz > 0 else 0.0
-        lag += v_filter
-        J = p.reflected_inertia * r * r * eta
-        scale = cls(
-            breakaway=breakaway,
-            inertia=J,
-            torque_limit=t_max,
-            speed_limit=speed,
-            travel=travel,
-            resolution=resolution,
-            period=period,
-            current_lag=lag,
-            delay=p.measurement_delay + p.actuation_delay,
-            load=p.load_torque - p.gravity_force,
-            stribeck_velocity=vs,
-            coulomb=coulomb,
-            viscous=viscous,
-            damping=damping,
-            velocity_filter=v_filter,
-        )
-        return replace(scale, **overrides) if overrides else scale
-
-    @property
-    def count_velocity(self) -> float:
-        """Velocity read when the encoder steps by one count [rad/s or m/s]: ``resolution /
-        max(velocity_filter, period)`` (a differenced count, smoothed by the velocity filter)."""
-        return self.resolution / max(self.velocity_filter, self.period)
-
-    @property
-    def loop_delay(self) -> float:
-        """Pure delay of a sampled loop: one period of answer delay + half a period of hold + delays."""
-        return 1.5 * self.period + self.delay
-
-
-def crossover(
-    lag: float,
-    delay: float,
-    phase_margin_deg: float = DEFAULT_PHASE_MARGIN,
-    a: float = ZERO_RATIO,
-    damping_ratio: float = math.inf,
-) -> float:
-    """Crossover ``w_c`` [rad/s] solving ``atan(w J/B) + atan(w tau) + w T = 90 + atan(a) - PM``.
-
-    ``damping_ratio = J / B`` (inertia over viscous damping; ``inf`` for a pure inertia, whose
-    phase is then the -180 deg of ``1 / (J s^2)``)."""
-    budget = math.pi / 2 + math.atan(a) - math.radians(phase_margin_deg)
-    if budget <= math.pi / 2 if math.isinf(damping_ratio) else budget <= 0:
-        raise ParameterError(
-            f"phase_margin = {phase_margin_deg:g} deg is out of range: must be < {math.degrees(math.atan(a)):.1f}"
-        )
-
-    def phase(w):
-        mech = math.pi / 2 if math.isinf(damping_ratio) else math.atan(w * damping_ratio)
-        return mech + math.atan(w * lag) + w * delay
-
-    lo, hi = 0.0, 1.0
-    while phase(hi) < budget and hi < 1e9:
-        hi *= 2.0
-    for _ in range(100):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if phase(mid) < budget else (lo, mid)
-    return lo
-
-
-def _pd_design(scale: JointScale, phase_margin_deg: float, a: float) -> tuple[float, float, float]:
-    """``(K_p, K_d, w_c)`` of the phase-margin rule with the encoder bound (see tracking_gains)."""
-    ratio = scale.inertia / scale.damping if scale.damping > 0 else math.inf
-    wc = crossover(scale.current_lag, scale.loop_delay, phase_margin_deg, a, ratio)
-    lag_gain = 1.0 / math.sqrt(1.0 + (wc * scale.current_lag) ** 2)
-    # |C(j w_c)| |P(j w_c)| g = 1 with |C| = K_d w_c sqrt(1 + 1/a^2), |P| = 1 / (w_c |B + j J w_c|)
-    plant = math.hypot(scale.damping, scale.inertia * wc)
-    kd = plant / (math.sqrt(1.0 + 1.0 / (a * a)) * lag_gain)
-    kp = kd * wc / a
-    k = ENCODER_TORQUE_SHARE * (scale.torque_limit - abs(scale.load)) / (kd * scale.count_velocity)
-    if k >= 1.0:
-        return kp, kd, wc
-    # lower gains, same zero w_z = w_c / a: the crossover falls to w_c' where
-    # K_d' |j w_c' + w_z| = w_c' |B + j J w_c'| (the lag and delay phase only shrink)
-    kd_b, wz = kd * k, wc / a
-    lo, hi = 0.0, wc
-    for _ in range(100):
-        w = 0.5 * (lo + hi)
-        gain = kd_b * math.hypot(w, wz) / (w * math.hypot(scale.damping, scale.inertia * w))
-        lo, hi = (w, hi) if gain > 1.0 else (lo, w)
-    return kd_b * wz, kd_b, lo
-
-
-def tracking_gains(
-    scale: JointScale, phase_margin_deg: float = DEFAULT_PHASE_MARGIN, a: float = ZERO_RATIO
-) -> dict[str, float]:
-    """PD gains ``{"p": K_p, "d": K_d}`` for position tracking (module docstring's phase-margin rule).
-
-    Encoder bound: the derivative acts on the measured velocity, in which one encoder count reads
-    as ``count_velocity``; ``K_d count_velocity <= (torque_limit - |load|) / 2`` keeps a single count
-    from saturating the drive (a coarse encoder otherwise drives a count-sized limit cycle). When it
-    binds, both gains are scaled down together (same zero, lower crossover, more phase margin).
-    """
-    kp, kd, _ = _pd_design(scale, phase_margin_deg, a)
-    return {"p": kp, "d": kd}
-
-
-def tracking_crossover(scale: JointScale, phase_margin_deg: float = DEFAULT_PHASE_MARGIN) -> float:
-    """Crossover [rad/s] of the loop closed with :func:`tracking_gains` (encoder bound included)."""
-    return _pd_design(scale, phase_margin_deg, ZERO_RATIO)[2]
-
-
-def tracking_reference(scale: JointScale, duration: float = 20.0, seed: int = 1) -> dict[str, Any]:
-    """Band-limited random position reference sized to the joint (``references`` config format).
-
-    The RMS speed of a band-limited random signal of amplitude ``A`` and cut-off ``f_c`` is about
-    ``A 2 pi f_c / sqrt(3)``. ``f_c`` = 1 Hz or a decade below the crossover of
-    :func:`tracking_gains`, whichever is lower; ``A`` so that the RMS speed is three Stribeck
-    velocities (2 % of the speed limit when unknown, at least 30 counts/s), and at least three times
-    the PD's dead band ``F_b / K_p`` (a smaller reference would leave the joint stuck); within a fifth
-    of the travel; ``f_c`` lowered if the RMS speed would exceed a tenth of the speed limit. The
-    joint then reverses about ``2 f_c`` times a second and spends its time at friction-dominated
-    speeds.
-    """
-    kp, _, wc = _pd_design(scale, DEFAULT_PHASE_MARGIN, ZERO_RATIO)
-    cutoff = min(1.0, wc / (2.0 * math.pi) / 10.0)
-    v_target = (
-        3.0 * scale.stribeck_velocity if math.isfinite(scale.stribeck_velocity) else 0.02 * scale.speed_limit
-    )
-    v_target = min(v_target, 0.1 * scale.speed_limit)
-    v_target = max(v_target, 30.0 * scale.resolution)  # 30 counts per second at least
-    amp = v_target * math.sqrt(3.0) / (2.0 * math.pi * cutoff)
-    amp = min(max(amp, 3.0 * scale.breakaway / kp), 0.2 * scale.travel)
-    v_rms = amp * 2.0 * math.pi * cutoff / math.sqrt(3.0)
-    if v_rms > 0.1 * scale.speed_limit:
-        cutoff *= 0.1 * scale.speed_limit / v_rms
-    return {
-        "type": "band_limited_random",
-        "amplitude": float(amp),
-        "cutoff": float(cutoff),
-        "duration": float(duration),
-        "seed": int(seed),
-    }
+from friction_ros.core.experiment.joint_scale import JointScale
+from friction_ros.core.experiment.tracking_design import tracking_crossover, tracking_gains
+from friction_ros.core.validation import ParameterError
 
 
 def _time_to_move(x: float, force: float, J: float, B: float) -> float:
@@ -380,8 +95,8 @@ def plateau_loop_softening(scale: JointScale, kv: float, ki: float) -> float:
 
 
 def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, Any]:
-    """An excitation-program config (``friction_ros.core.excitation`` format) sized to ``scale``."""
-    from friction_ros.core.excitation import profile_defaults
+    """An excitation-program config (``friction_ros.core.experiment.excitation`` format) sized to ``scale``."""
+    from friction_ros.core.experiment.excitation_config import profile_defaults
 
     c = copy.deepcopy(profile_defaults(profile))
     quick = profile == "quick"
@@ -526,7 +241,7 @@ def fit_to_limits(config: dict[str, Any], keep: set[str] | frozenset[str] = froz
     after the run started). Torque-driven programs (breakaway, chirp, presliding) are left as they
     are: their travel depends on the joint.
     """
-    from friction_ros.core.excitation import random_velocity
+    from friction_ros.core.experiment.velocity_programs import random_velocity
 
     c = copy.deepcopy(config)
     lim = c["limits"]

@@ -27,6 +27,9 @@ Types (``type`` key):
                        ``hold`` seconds (piecewise constant, seeded).
 
 Time before ``start_time`` holds the initial value for every type.
+
+One concept in one module (slightly over 500 lines): the nine generators share the base class,
+its validation and the config factory, and each is short; a reader compares them side by side.
 """
 
 from __future__ import annotations

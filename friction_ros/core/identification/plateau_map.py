@@ -6,9 +6,9 @@ one row per constant-velocity plateau: mean velocity and torque with their sprea
 deviation over the plateau, first ``settle`` seconds discarded), plus :meth:`PlateauMap.aggregate`,
 the seed 004 "mean over the repeats per set-point" with the spread across repeats.
 
-It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.pipeline.load_bag`:
+It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.bag_loading.load_bag`:
 uniform grid, Savitzky-Golay velocity from position, torque from ``effort``) and its event-based
-plateau extraction (:func:`friction_ros.core.identification.data.find_plateaus`), so the map printed
+plateau extraction (:func:`friction_ros.core.identification.plateau_detection.find_plateaus`), so the map printed
 after an experiment is exactly what ``friction-fit`` fits. ``settle`` defaults to what each
 plateau's START note says (``settle=<s>``, sized per plateau by the runner), else seed 004's 0.2 s.
 
@@ -24,8 +24,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from friction_ros.core.identification import data as D
-from friction_ros.core.identification.pipeline import load_bag
+from friction_ros.core.experiment.events import ABORT, END, START, Event, completed_segments, start_settle
+from friction_ros.core.identification.bag_loading import load_bag
+from friction_ros.core.identification.plateau_detection import find_plateaus
+from friction_ros.core.identification.records import ExcitationError
 
 
 @dataclass
@@ -117,15 +119,15 @@ def _path(bag_or_path) -> str:
     return os.fspath(p)
 
 
-def _settle_from(events: list[D.Event]) -> float | None:
-    vals = [D.start_settle(e, math.nan) for e in events if e.event == D.START]
+def _settle_from(events: list[Event]) -> float | None:
+    vals = [start_settle(e, math.nan) for e in events if e.event == START]
     vals = [v for v in vals if math.isfinite(v)]
     return max(vals) if vals else None
 
 
 def experiment_events(
     bag_or_path, joint: str | None = None, events_topic: str = "/experiment_events"
-) -> list[D.Event]:
+) -> list[Event]:
     """All ExperimentEvent markers of the bag (times in s from the first joint state)."""
     return load_bag(_path(bag_or_path), joint=joint, events_topic=events_topic).events
 
@@ -140,18 +142,18 @@ def plateau_map(
 ) -> PlateauMap:
     """Plateau means and spreads from the START/END markers of a bag (see the module docstring).
 
-    Raises :class:`~friction_ros.core.identification.data.ExcitationError` (a ParameterError) with a
+    Raises :class:`~friction_ros.core.identification.records.ExcitationError` (a ParameterError) with a
     clear message when the bag is unreadable, lacks the topic/joint, or has no plateau markers.
     """
     path = _path(bag_or_path)
     data = load_bag(path, topic=topic, joint=joint, events_topic=events_topic)
-    pairs = D._segment_pairs(data.events, "plateau")
+    pairs = completed_segments(data.events, "plateau")
     if not pairs:
-        raise D.ExcitationError(
+        raise ExcitationError(
             f"bag {path}: no plateau START/END markers on {events_topic}: record the 'plateaus' "
             "program with friction-experiment (or use friction-fit's automatic plateau detection)"
         )
-    plateaus = D.find_plateaus(data, settle=settle)
+    plateaus = find_plateaus(data, settle=settle)
     rows = []
     for p in plateaus:
         mid = 0.5 * (p.t_start + p.t_end)
@@ -171,7 +173,7 @@ def plateau_map(
                 p.t_end,
             )
         )
-    aborted = [f"{e.segment}: {e.note}" for e in data.events if e.event == D.ABORT]
+    aborted = [f"{e.segment}: {e.note}" for e in data.events if e.event == ABORT]
     shown = settle if settle is not None else (_settle_from(data.events) or 0.2)  # the longest one
     return PlateauMap(rows, joint or "", shown, path, aborted)
 
@@ -183,5 +185,5 @@ def breakaway_torques(
     return [
         (e.segment, e.target)
         for e in experiment_events(bag_or_path, joint, events_topic)
-        if e.event == D.END and "breakaway" in e.program and math.isfinite(e.target)
+        if e.event == END and "breakaway" in e.program and math.isfinite(e.target)
     ]

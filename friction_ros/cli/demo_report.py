@@ -1,0 +1,118 @@
+"""The demo's outputs for a reader: tracking and friction-map plots, the console table, JSON values."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from friction_ros.cli.demo_results import DemoResult
+
+
+def plot_tracking(result: DemoResult, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True)
+    base = result.runs["none"]
+    axes[0].plot(base.t, base.reference, "k", lw=1, label="reference")
+    axes[0].plot(base.t, base.position, lw=0.8, label="no compensation")
+    if result.best != "none":
+        best = result.runs[result.best]
+        axes[0].plot(best.t, best.position, lw=0.8, label=f"{result.best}")
+    axes[0].set_ylabel("position [rad]")
+    axes[0].legend(loc="upper right", fontsize=8)
+    for label, run in result.runs.items():
+        state = "" if run.enabled else " (refused)"
+        axes[1].plot(
+            run.t, run.error * 1e3, lw=0.7, label=f"{label}{state}: RMS {run.rms * 1e3:.3f} mrad", alpha=0.9
+        )
+    axes[1].set_ylabel("tracking error [mrad]")
+    axes[1].set_xlabel("time [s]")
+    axes[1].legend(loc="upper right", fontsize=8)
+    fig.suptitle(
+        f"{result.preset}: tracking error before and after friction compensation (lockstep ROS graph)"
+    )
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def plot_friction_map(fit_result, truth, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    plateaus = fit_result.plateaus
+    fig, ax = plt.subplots(figsize=(8, 5))
+    if plateaus:
+        v = np.array([p.velocity for p in plateaus])
+        f = np.array([p.torque for p in plateaus])
+        ax.plot(v, f, "ko", ms=4, label="plateau means (bag)")
+        vmax = float(np.max(np.abs(v))) * 1.1
+        vmin = max(float(np.min(np.abs(v))) / 10.0, 1e-6)
+    else:
+        vmax, vmin = 5.0, 1e-3
+    grid = np.concatenate([-np.geomspace(vmax, vmin, 200), np.geomspace(vmin, vmax, 200)])
+    if truth is not None:
+        ax.plot(grid, truth.joint_friction(grid), "k--", lw=1, label=f"truth ({truth.name})")
+    for name, m in fit_result.models.items():
+        try:
+            ax.plot(grid, m.steady_state(grid), lw=1, label=f"fit: {name}")
+        except Exception:  # a learned model without a steady-state map
+            continue
+    ax.set_xscale("symlog", linthresh=vmin * 10)
+    ax.set_xlabel("velocity [rad/s]")
+    ax.set_ylabel("friction torque [N m]")
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    ax.set_title("Steady-state friction map: data, fits and truth")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def print_table(result: DemoResult) -> None:
+    nmse = result.fit_nmse
+
+    def fmt(x):
+        return "n/a" if x is None or not math.isfinite(x) else f"{x:.3f} %"
+
+    print()
+    print(
+        f"[{result.preset}] Model chosen: {result.model}   fit NMSE (validation): "
+        f"high velocity {fmt(nmse.get('high'))}, low velocity {fmt(nmse.get('low'))}"
+    )
+    if result.recommendation.get("rule"):
+        print(f"  chosen by: {result.recommendation['rule']}")
+    print(f"  tracking gains {result.gains}; reference {result.reference.get('type')}")
+    print()
+    print(
+        "| compensation | state | RMS error [mrad] | max error [mrad] | RMS reduction [%] "
+        "| stick fraction | hunting reversals |"
+    )
+    print("|---|---|---|---|---|---|---|")
+    for label, run in result.runs.items():
+        state = "-" if label == "none" else ("enabled" if run.enabled else run.reason)
+        print(
+            f"| {label} | {state} | {run.rms * 1e3:.4f} | {run.max * 1e3:.4f} | {result.reduction(label):.1f} "
+            f"| {run.metrics.get('stick_fraction', math.nan):.3f} | {run.metrics.get('hunting_reversals', 0)} |"
+        )
+    if result.best == "none":
+        print("\nbest: no compensation mode is enabled for this joint")
+    else:
+        print(f"\nbest enabled mode: {result.best} ({result.reduction(result.best):.1f} % lower RMS error)")
+    for w in result.warnings:
+        print(f"WARNING: {w}")
+
+
+def json_default(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    return str(x)

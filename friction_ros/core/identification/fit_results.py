@@ -1,0 +1,73 @@
+"""What a fit returns: one :class:`ModelResult` per model and the :class:`FitResult` of a record set."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from friction_ros.core.identification import export
+from friction_ros.core.identification.breakaway_detection import Breakaway
+from friction_ros.core.identification.excitation_checks import (
+    Excitation,
+)
+from friction_ros.core.identification.plateau_detection import (
+    Plateau,
+)
+from friction_ros.core.identification.records import JointData
+from friction_ros.core.validation import ParameterError
+
+
+@dataclass
+class ModelResult:
+    """One fitted model with everything the report needs."""
+
+    name: str
+    method: str  # "plateaus", "time-domain (de)", "learned"
+    coefficients: dict
+    config: dict | None
+    metrics: dict
+    identifiability: dict
+    seconds: float
+    steady_state: Callable[[np.ndarray], np.ndarray]
+    predict: Callable[[JointData], np.ndarray]
+    notes: list[str] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+
+
+@dataclass
+class FitResult:
+    """Everything one fit produced; ``files`` lists what :func:`fit_bag` wrote."""
+
+    models: dict[str, ModelResult]
+    recommended: str | None
+    train: list[JointData]
+    validation: list[JointData]
+    plateaus: list[Plateau]
+    breakaways: list[Breakaway]
+    excitation: Excitation
+    high_threshold: float
+    options: dict
+    files: dict[str, str] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+    recommendation: dict = field(default_factory=dict)
+    gate: dict = field(default_factory=dict)
+
+    @property
+    def inertia(self) -> float:
+        m = self.models.get(self.recommended) if self.recommended else None
+        return float(m.coefficients.get("J", 0.0)) if m else 0.0
+
+    def parameter_document(self, model: str | None = None, **gate_options) -> dict:
+        """``gate_options``: ``gate`` (verdicts), ``gains``, ``load_feedforward`` (export.parameter_document)."""
+        name = model or self.recommended
+        m = self.models[name]
+        if m.config is None:
+            raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
+        opts = dict(self.options.get("gate_options") or {}, **gate_options)
+        opts.setdefault("load_feedforward", float(self.options.get("load_offset", 0.0) or 0.0))
+        return export.parameter_document(
+            m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset"), **opts
+        )
