@@ -146,6 +146,35 @@ def test_import_graph_sees_function_level_imports():
 
 
 @pytest.mark.ros
+def test_every_package_import_resolves_also_inside_functions():
+    """Every ``from friction_ros.x import y`` in the package, tests, benchmarks and scripts (module
+    level and inside functions, which only run on some paths) names a module and a name that exist."""
+    import importlib
+
+    missing = []
+    for folder in ("friction_ros", "test", "bench", "scripts"):
+        for path in sorted((ROOT / folder).rglob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if not (isinstance(node, ast.ImportFrom) and node.level == 0 and node.module):
+                    continue
+                if not node.module.startswith("friction_ros"):
+                    continue
+                where = f"{path.relative_to(ROOT)}:{node.lineno}"
+                try:
+                    module = importlib.import_module(node.module)
+                except ImportError as exc:
+                    missing.append(f"{where} {node.module} ({exc})")
+                    continue
+                for alias in node.names:
+                    if alias.name == "*" or hasattr(module, alias.name):
+                        continue
+                    try:
+                        importlib.import_module(f"{node.module}.{alias.name}")
+                    except ImportError:
+                        missing.append(f"{where} {node.module}.{alias.name}")
+    assert not missing, "imports that fail:\n" + "\n".join(missing)
+
+
 def test_custom_messages_round_trip_between_processes():
     """Each friction_msgs message published in another process arrives field-for-field equal."""
     import rclpy

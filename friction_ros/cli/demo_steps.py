@@ -132,7 +132,7 @@ def _track_once(
     from rclpy.executors import SingleThreadedExecutor
 
     from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
-    from friction_ros.nodes.node_utils import RECORDED_QOS
+    from friction_ros.nodes.qos import RECORDED_QOS
 
     specs = [
         NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),

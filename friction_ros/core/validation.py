@@ -51,7 +51,7 @@ def check_real(
                 raise TypeError
         except TypeError:
             raise ParameterError(
-                f"{name} = {value!r} has type {type(value).__name__}: must be float"
+                f"{name} = {value!r} has type {type(value).__name__}: must be float, a number"
                 + ("" if allowed == "finite" else f" {allowed}")
                 + unit_s
             ) from None
