@@ -297,7 +297,8 @@ def node_work_per_cycle(n: int = 20_000) -> float:
     from sensor_msgs.msg import JointState
 
     from friction_ros.core.can import odrive as od
-    from friction_ros.core.can.axis import DriveAxis, axis_config
+    from friction_ros.core.can.axis import DriveAxis
+    from friction_ros.core.can.axis_config import axis_config
     from friction_ros.core.config import flatten
     from friction_ros.core.wire import JointStateDecoder
     from friction_ros.nodes.drive_interface import parameter_schema

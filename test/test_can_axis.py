@@ -8,9 +8,11 @@ import pytest
 from can_support import StandInPlant
 
 from friction_ros.core.can import axis as ax
+from friction_ros.core.can import axis_config, faults
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
-from friction_ros.core.can.axis import AxisConfig, DriveAxis
+from friction_ros.core.can.axis import DriveAxis
+from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
@@ -64,7 +66,7 @@ def test_fault_constants_match_drive_state_msg():
         "LIMIT",
         "BUS",
     ):
-        assert getattr(ax, f"FAULT_{name}") == getattr(DriveState, f"FAULT_{name}")
+        assert getattr(faults, f"FAULT_{name}") == getattr(DriveState, f"FAULT_{name}")
 
 
 def test_enable_waits_for_telemetry_and_sends_the_odrive_sequence():
@@ -88,14 +90,14 @@ def test_torque_command_conversion_and_limits():
     a, _ = enabled_axis(conversion=conv, torque_limit=2.0, current_limit=10.0)
     a.set_command(1.0, 0.0)
     res = a.cycle(0.001)
-    assert torque_of(res.frames) == pytest.approx(-0.1) and not res.flags & ax.FAULT_LIMIT
+    assert torque_of(res.frames) == pytest.approx(-0.1) and not res.flags & faults.FAULT_LIMIT
     a.set_command(5.0, 0.001)  # > torque_limit 2 N*m
     res = a.cycle(0.002)
-    assert res.joint_torque_command == pytest.approx(2.0) and res.flags & ax.FAULT_LIMIT
+    assert res.joint_torque_command == pytest.approx(2.0) and res.flags & faults.FAULT_LIMIT
     a2, _ = enabled_axis(conversion=conv, torque_limit=10.0, current_limit=1.0)  # 1 A -> 0.5 N*m joint
     a2.set_command(-3.0, 0.0)
     res = a2.cycle(0.001)
-    assert res.joint_torque_command == pytest.approx(-0.5) and res.flags & ax.FAULT_LIMIT
+    assert res.joint_torque_command == pytest.approx(-0.5) and res.flags & faults.FAULT_LIMIT
 
 
 def test_velocity_limit_blocks_accelerating_torque_only():
@@ -116,7 +118,7 @@ def test_nan_and_inf_commands_are_rejected_with_zero_torque():
         feed(a, telemetry(), 0.001)
         res = a.cycle(0.002)
         assert res.joint_torque_command == 0.0 and torque_of(res.frames) == 0.0
-        assert res.flags & ax.FAULT_COMMAND_REJECTED
+        assert res.flags & faults.FAULT_COMMAND_REJECTED
     assert a.counters.commands_rejected == 3
 
 
@@ -125,7 +127,7 @@ def test_watchdog_zeroes_torque_after_timeout_and_recovers():
     a.set_command(0.8, 0.0)
     assert torque_of(a.cycle(0.049).frames) == pytest.approx(0.8)
     res = a.cycle(0.051)
-    assert torque_of(res.frames) == 0.0 and res.flags & ax.FAULT_COMMAND_WATCHDOG
+    assert torque_of(res.frames) == 0.0 and res.flags & faults.FAULT_COMMAND_WATCHDOG
     a.cycle(0.06)
     assert a.counters.watchdog_trips == 1 and a.enabled
     a.set_command(0.5, 0.07)
@@ -138,7 +140,7 @@ def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
     feed(a, telemetry(), 0.010)
     assert a.cycle(0.014).sample is not None
     res = a.cycle(0.0151)  # newest telemetry 5.1 ms old
-    assert res.sample is None and res.flags & ax.FAULT_TELEMETRY_STALE
+    assert res.sample is None and res.flags & faults.FAULT_TELEMETRY_STALE
     assert torque_of(res.frames) == 0.0 and states_of(res.frames) == [od.AxisState.IDLE]
     assert not a.enabled and "telemetry stale" in a.fault_reason
     # logged once when it starts, as an error naming the age, the rule and the action
@@ -147,13 +149,13 @@ def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
     assert not [e for e in a.cycle(0.016).events if e.kind == "telemetry_stale"]  # not again
     feed(a, telemetry(), 0.0165)
     res = a.cycle(0.017)  # fresh again: still latched, no torque frames; the clear is logged
-    assert not a.enabled and torque_of(res.frames) is None and res.flags & ax.FAULT_TELEMETRY_STALE
+    assert not a.enabled and torque_of(res.frames) is None and res.flags & faults.FAULT_TELEMETRY_STALE
     (ev,) = [e for e in res.events if e.kind == "telemetry_stale"]
     assert ev.text == "telemetry_stale cleared after 2 ms; drive stays disabled until ~/enable"
     feed(a, telemetry(), 0.0172)
     a.request_enable()
     res = a.cycle(0.0175)
-    assert res.flags == ax.FAULT_COMMAND_WATCHDOG and a.enabled
+    assert res.flags == faults.FAULT_COMMAND_WATCHDOG and a.enabled
     assert [e.text for e in res.events if e.kind == "telemetry_stale"] == [
         "telemetry_stale fault reset by ~/enable"
     ]
@@ -162,8 +164,8 @@ def test_stale_telemetry_latches_fault_disables_and_publishes_nothing():
 
 def test_stale_timeout_is_derived_from_the_telemetry_period_and_validated():
     cfg = AxisConfig(telemetry_period=0.01)
-    assert cfg.stale_after == pytest.approx(ax.STALE_PERIODS * 0.01 + ax.JITTER_MARGIN)
-    assert AxisConfig(telemetry_period=0.001).stale_after == pytest.approx(0.003 + ax.JITTER_MARGIN)
+    assert cfg.stale_after == pytest.approx(axis_config.STALE_PERIODS * 0.01 + axis_config.JITTER_MARGIN)
+    assert AxisConfig(telemetry_period=0.001).stale_after == pytest.approx(0.003 + axis_config.JITTER_MARGIN)
     assert AxisConfig(telemetry_period=0.01, telemetry_timeout=0.05).stale_after == 0.05
     with pytest.raises(ParameterError, match=r"shorter than 2 telemetry periods \(20 ms\).*use 0"):
         AxisConfig(telemetry_period=0.01, telemetry_timeout=0.015)
@@ -192,7 +194,7 @@ def test_late_frames_within_the_margin_are_tolerated_and_a_dead_drive_faults_in_
         a.set_command(0.5, t)
         r = a.cycle(t)
         events += r.events
-        assert a.enabled and not r.flags & ax.FAULT_TELEMETRY_STALE, (t, r.flags)
+        assert a.enabled and not r.flags & faults.FAULT_TELEMETRY_STALE, (t, r.flags)
         k += 1
         t = k * 0.001
     last = next_frame - period  # the drive dies after its frame at `last`
@@ -294,7 +296,7 @@ def test_drive_that_does_not_enter_closed_loop_gets_one_more_enable_then_a_fault
         feed(a, telemetry(state=od.AxisState.IDLE), t)
         r = a.cycle(t)
     assert t == pytest.approx(0.45) and not a.enabled
-    assert r.flags & ax.FAULT_DRIVE_ERROR and states_of(r.frames) == [od.AxisState.IDLE]
+    assert r.flags & faults.FAULT_DRIVE_ERROR and states_of(r.frames) == [od.AxisState.IDLE]
     assert "did not enter closed loop" in a.fault_reason and "IDLE" in a.fault_reason
     assert torque_of(r.frames) == 0.0 and a.counters.fault_trips == 1
 
@@ -311,7 +313,7 @@ def test_drive_that_takes_the_second_enable_runs_and_one_that_drops_out_faults()
         assert a.enabled and not r.flags and torque_of(r.frames) == pytest.approx(0.5)
     feed(a, telemetry(state=od.AxisState.IDLE), 0.8)  # drops out of closed loop without an error
     r = a.cycle(0.8)
-    assert not a.enabled and r.flags & ax.FAULT_DRIVE_ERROR and "left closed loop" in a.fault_reason
+    assert not a.enabled and r.flags & faults.FAULT_DRIVE_ERROR and "left closed loop" in a.fault_reason
     a.request_enable()  # explicit re-enable clears it
     feed(a, telemetry(state=od.AxisState.IDLE), 0.81)
     r = a.cycle(0.81)
@@ -327,25 +329,25 @@ def test_no_heartbeat_no_closed_loop_check():
     for t in (0.3, 0.6, 0.9):
         feed(a, telemetry()[:2], t)
         r = a.cycle(t)
-        assert a.enabled and not r.flags & ax.FAULT_DRIVE_ERROR and not states_of(r.frames)
+        assert a.enabled and not r.flags & faults.FAULT_DRIVE_ERROR and not states_of(r.frames)
 
 
 def test_drive_error_latches_and_clear_on_enable():
     a, _ = enabled_axis(telemetry_timeout=1.0)
     feed(a, telemetry(err=od.ERROR_CURRENT_LIMIT_VIOLATION, state=1), 0.1)
     res = a.cycle(0.1)
-    assert res.flags & ax.FAULT_DRIVE_ERROR and not a.enabled and states_of(res.frames) == [1]
+    assert res.flags & faults.FAULT_DRIVE_ERROR and not a.enabled and states_of(res.frames) == [1]
     a.request_enable()
     feed(a, telemetry(err=od.ERROR_CURRENT_LIMIT_VIOLATION, state=1), 0.101)  # in flight: ignored
     res = a.cycle(0.102)
-    assert a.enabled and not res.flags & ax.FAULT_DRIVE_ERROR
+    assert a.enabled and not res.flags & faults.FAULT_DRIVE_ERROR
 
 
 def test_bus_fault_and_shutdown_frames():
     a, _ = enabled_axis(telemetry_timeout=1.0)
     a.report_bus_fault("bus-off")
     res = a.cycle(0.01)
-    assert res.flags & ax.FAULT_BUS and not a.enabled and states_of(res.frames) == [1]
+    assert res.flags & faults.FAULT_BUS and not a.enabled and states_of(res.frames) == [1]
     assert states_of(a.shutdown_frames()) == [od.AxisState.IDLE]
 
 

@@ -13,7 +13,8 @@ import pytest
 
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
-from friction_ros.core.can.axis import AxisConfig, DriveAxis
+from friction_ros.core.can.axis import DriveAxis
+from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
 

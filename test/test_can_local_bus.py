@@ -470,7 +470,7 @@ def test_killed_emulator_logs_one_stale_fault_within_the_timeout_idles_the_drive
     from std_srvs.srv import SetBool
     from test_can_e2e import KT, PdController
 
-    from friction_ros.core.can.axis import AxisConfig
+    from friction_ros.core.can.axis_config import AxisConfig
 
     timeout = AxisConfig(telemetry_period=0.001).stale_after  # what the node derives at 1 kHz
     enc_id = (1 << 5) | od.Cmd.GET_ENCODER_ESTIMATES
@@ -548,7 +548,7 @@ def test_healthy_emulator_under_cpu_load_gives_no_stale_fault_in_25_s():
     fault is logged and the drive disabled."""
     import importlib.util
 
-    from friction_ros.core.can.axis import AxisConfig
+    from friction_ros.core.can.axis_config import AxisConfig
 
     spec = importlib.util.spec_from_file_location("drive_soak", HERE.parent / "bench" / "drive_soak.py")
     soak = importlib.util.module_from_spec(spec)

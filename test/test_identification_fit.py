@@ -71,7 +71,8 @@ def test_outputs_json_yaml_report(gms_fit):
     assert np.abs(js["models"]["gms4"]["steady_state"]["velocity"]).max() >= 0.9 * vmax
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     assert set(doc) == {"compensating_controller", "friction_estimator", "plant_simulator"}
-    from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
+    from friction_ros.core.control.controller import CompensatingController
+    from friction_ros.core.control.controller_config import config_from_ros_parameters
     from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
     from friction_ros.core.friction import model_from_config
     from friction_ros.core.presets import preset_from_config
@@ -100,7 +101,7 @@ def _round_trip(out):
     from friction_ros.core.presets import make_plant
 
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
-    from friction_ros.core.control.controller import config_from_ros_parameters
+    from friction_ros.core.control.controller_config import config_from_ros_parameters
 
     fitted, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
     truth = make_plant("abb_m19s").params.friction_motor.to_config()
@@ -145,7 +146,7 @@ def _round_trip_benchmark_length(
     Tables 2/3: 40 s, seed 1) instead of five 4 s ones: RMS error with the true (J = 0.0012,
     ``truth``) and the fitted (parameter file) feed-forward, on the plant with friction ``truth``
     (default: the preset's) and a 0.1 ms current loop; ``none``: also without friction feed-forward."""
-    from friction_ros.core.control.controller import config_from_ros_parameters
+    from friction_ros.core.control.controller_config import config_from_ros_parameters
     from friction_ros.core.harness import run_closed_loop
     from friction_ros.core.presets import make_plant
 
@@ -236,7 +237,8 @@ def test_damped_gms_fit_recovers_presliding_damping(damped_fit):
     doc = yaml.safe_load((out / "friction_params.yaml").read_text())
     cfg = doc["compensating_controller"]["ros__parameters"]["friction"]
     assert cfg["sigma1"] == pytest.approx(c["sigma1"])
-    from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
+    from friction_ros.core.control.controller import CompensatingController
+    from friction_ros.core.control.controller_config import config_from_ros_parameters
 
     ctrl_cfg, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
     assert CompensatingController(ctrl_cfg).friction.model["sigma1"] == pytest.approx(c["sigma1"])

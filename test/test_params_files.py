@@ -5,7 +5,8 @@ from pathlib import Path
 import yaml
 
 from friction_ros.cli.bringup import specs_from_config
-from friction_ros.core.control.controller import CompensatingController, config_from_ros_parameters
+from friction_ros.core.control.controller import CompensatingController
+from friction_ros.core.control.controller_config import config_from_ros_parameters
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
 from friction_ros.core.experiment.references import reference_from_config
 

@@ -22,7 +22,8 @@ from collections.abc import Callable
 import can
 
 from friction_ros.core.can import odrive
-from friction_ros.core.can.axis import AxisConfig, DriveAxis
+from friction_ros.core.can.axis import DriveAxis
+from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.validation import ParameterError
 

@@ -29,11 +29,8 @@ from trajectory_msgs.msg import JointTrajectory
 
 from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.control.controller import (
-    ControllerTerms,
-    controller_from_ros_parameters,
-    controller_parameter_schema,
-)
+from friction_ros.core.control.controller import ControllerTerms, controller_from_ros_parameters
+from friction_ros.core.control.controller_config import controller_parameter_schema
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import (

@@ -4,7 +4,8 @@ Nothing here imports rclpy; :mod:`friction_ros.core.can.emulator` touches a pyth
 ``friction_local`` socket bus lives outside the core, in :mod:`friction_ros.can_bus.local_bus`).
 """
 
-from friction_ros.core.can.axis import AxisConfig, CycleResult, DriveAxis, JointSample
+from friction_ros.core.can.axis import CycleResult, DriveAxis, JointSample
+from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.frame import DecodeStats, Frame
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.can.mit import MitCodec, MitDecoder, MitRanges

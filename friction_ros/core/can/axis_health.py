@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import math
 
-from friction_ros.core.can.axis import LATCHING, DriveAxis, fault_text
+from friction_ros.core.can.axis import DriveAxis
+from friction_ros.core.can.faults import LATCHING, fault_text
 
 OK, WARN, ERROR = 0, 1, 2  # the levels of diagnostic_msgs/DiagnosticStatus
 

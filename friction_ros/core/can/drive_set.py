@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import re
 
-from friction_ros.core.can.axis import AxisConfig
+from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.validation import ParameterError
 
 JOINT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")

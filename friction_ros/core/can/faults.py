@@ -18,6 +18,34 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
+# Same values as friction_msgs/msg/DriveState FAULT_* (checked by a test).
+FAULT_NONE = 0
+FAULT_TELEMETRY_STALE = 1
+FAULT_DRIVE_ERROR = 2
+FAULT_COMMAND_WATCHDOG = 4
+FAULT_COMMAND_REJECTED = 8
+FAULT_LIMIT = 16
+FAULT_BUS = 32
+LATCHING = FAULT_TELEMETRY_STALE | FAULT_DRIVE_ERROR | FAULT_BUS
+
+FAULT_NAMES = {
+    FAULT_TELEMETRY_STALE: "telemetry_stale",
+    FAULT_DRIVE_ERROR: "drive_error",
+    FAULT_COMMAND_WATCHDOG: "command_watchdog",
+    FAULT_COMMAND_REJECTED: "command_rejected",
+    FAULT_LIMIT: "limit",
+    FAULT_BUS: "bus",
+}
+
+
+# Held kinds count as cleared only after being absent this long (one log line per episode).
+FAULT_HOLD = {FAULT_LIMIT: 1.0}
+DISABLE_ACTION = "drive disabled (zero torque, idle) until ~/enable"
+
+
+def fault_text(flags: int) -> str:
+    return ",".join(name for bit, name in FAULT_NAMES.items() if flags & bit) or "none"
+
 
 class FaultEvent(NamedTuple):
     t: float

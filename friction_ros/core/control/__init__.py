@@ -1,13 +1,8 @@
 """Compensating controllers (pure core): PID, friction compensation, the seeds' schemes, façade."""
 
 from friction_ros.core.control.compensation import FrictionCompensator
-from friction_ros.core.control.controller import (
-    CONTROLLER_DEFAULTS,
-    CONTROLLER_MODES,
-    CompensatingController,
-    ControllerTerms,
-    default_config,
-)
+from friction_ros.core.control.controller import CompensatingController, ControllerTerms
+from friction_ros.core.control.controller_config import CONTROLLER_DEFAULTS, CONTROLLER_MODES, default_config
 from friction_ros.core.control.pid import ANTIWINDUP_STRATEGIES, PID_DEFAULTS, Pid, PidOutput
 from friction_ros.core.control.schemes import (
     DNPF,

@@ -1,0 +1,171 @@
+"""The compensating controller's configuration: its fields (:data:`CONTROLLER_FIELDS`, defaults,
+units and meaning), the ROS parameter layout of the compensating_controller node
+(:func:`controller_parameter_schema`) and its mapping to the core config
+(:func:`config_from_ros_parameters`). :class:`~friction_ros.core.control.controller.CompensatingController`
+validates a config against these once.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from typing import Any
+
+from friction_ros.core.config import Field, Schema, unflatten
+from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, COMPENSATION_SCHEMA
+from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS
+from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA
+from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
+from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
+
+CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
+VELOCITY_SOURCES = ("measured", "differentiated")
+
+_INF = math.inf
+#: The plain (not section) controller settings: default, meaning, range, unit.
+CONTROLLER_FIELDS: tuple[Field, ...] = (
+    Field(
+        "mode",
+        "pid",
+        "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
+        choices=CONTROLLER_MODES,
+    ),
+    Field(
+        "feedforward_gain",
+        0.0,
+        "velocity feedforward gain (command += gain * reference velocity)",
+        lo=0.0,
+        unit="N*m*s/rad",
+    ),
+    Field(
+        "inertia",
+        0.0,
+        "J_hat for the inertia feedforward J_hat * reference acceleration",
+        lo=0.0,
+        unit="kg*m^2",
+    ),
+    Field(
+        "load_feedforward",
+        0.0,
+        "constant torque added to the command: holds a known load such as gravity",
+        unit="N*m",
+    ),
+    Field("u_clamp_max", PLAUSIBLE_EFFORT, "upper torque limit", unit="N*m", allow_inf=True),
+    Field("u_clamp_min", -PLAUSIBLE_EFFORT, "lower torque limit (< u_clamp_max)", unit="N*m", allow_inf=True),
+    Field("rate_limit", _INF, "torque rate limit", lo=0.0, lo_open=True, unit="N*m/s", allow_inf=True),
+    Field(
+        "velocity_source",
+        "measured",
+        "measured (joint_states velocity) or differentiated (filtered position difference)",
+        choices=VELOCITY_SOURCES,
+    ),
+    Field("velocity_filter_time_constant", 0.0, "velocity filter time constant", lo=0.0, unit="s"),
+    Field(
+        "position_jump_limit",
+        _INF,
+        "reject position samples that jump more than this (lost encoder bits)",
+        lo=0.0,
+        lo_open=True,
+        unit="rad",
+        allow_inf=True,
+    ),
+    Field(
+        "limit_cycle_detection",
+        True,
+        "switch friction compensation off (latched) when it causes a limit cycle",
+    ),
+    Field(
+        "limit_cycle_min_frequency",
+        LIMIT_CYCLE_DEFAULTS["min_frequency"],
+        "limit cycle: lowest oscillation frequency that counts",
+        lo=1.0,
+        unit="Hz",
+    ),
+    Field(
+        "limit_cycle_min_amplitude",
+        LIMIT_CYCLE_DEFAULTS["min_amplitude"],
+        "limit cycle: smallest error amplitude (RMS) that counts (also 4 encoder counts)",
+        lo=0.0,
+        unit="rad",
+    ),
+    Field(
+        "limit_cycle_window",
+        LIMIT_CYCLE_DEFAULTS["window"],
+        "limit cycle: averaging time constant of the detector (window + hold <= 0.1 s)",
+        lo=0.005,
+        hi=1.0,
+        unit="s",
+    ),
+    Field(
+        "limit_cycle_hold",
+        LIMIT_CYCLE_DEFAULTS["hold"],
+        "limit cycle: how long the oscillation must hold before the fallback (window + hold <= 0.1 s)",
+        lo=0.0,
+        hi=1.0,
+        unit="s",
+    ),
+)
+
+#: Full default configuration (nested). Sections of modes that are not selected are ignored.
+CONTROLLER_DEFAULTS: dict[str, Any] = {
+    **{f.name: f.default for f in CONTROLLER_FIELDS},
+    "pid": dict(PID_DEFAULTS),
+    "friction": dict(COMPENSATION_DEFAULTS),
+    "dnpf": dict(DNPF.DEFAULTS),
+    "gain_scheduling": dict(GainScheduling.DEFAULTS),
+    "cascade": dict(Cascade.DEFAULTS),
+    "sliding_mode": dict(SlidingMode.DEFAULTS),
+}
+CONFIG_SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+
+
+def controller_parameter_schema(friction_model: bool = True, reference: bool = True) -> list[Field | Schema]:
+    """The compensating_controller's ROS layout of the controller (see :func:`config_from_ros_parameters`).
+
+    Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
+    ``friction`` (the library model config: ``model`` + its coefficients) and ``reference`` (the
+    built-in reference generator). ``friction_model`` / ``reference``: give ``friction.model``
+    (``none``) and ``reference.type`` (``constant``) defaults (a parameter file that sets any key of
+    the section brings its own).
+    """
+    items: list[Field | Schema] = list(CONTROLLER_FIELDS)
+    for s in SCHEME_SECTIONS:
+        items.append(
+            PID_SCHEMA if s == "pid" else Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
+        )
+    items.append(COMPENSATION_SCHEMA)
+    items.append(
+        Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
+    )
+    items.append(
+        Schema.from_defaults("reference", {"type": "constant"} if reference else {}, "reference generator")
+    )
+    return items
+
+
+def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """compensating_controller ROS parameters (nested) -> (core controller config, reference config).
+
+    The ROS layout (README "Key parameters", written by ``friction-fit``) keeps the friction model and
+    the way it is applied apart: ``friction`` is a library model config (``{model: gms, fc: ...}``)
+    and ``compensation`` holds source, gain, blend, smoothing; the core keeps the model inside its
+    ``friction`` section. ``reference`` configures the built-in reference generator. Dotted keys
+    are accepted too. Keys of the node itself (joint_name, control_period ...) are ignored here.
+    """
+    if any("." in str(k) for k in values):
+        values = unflatten(values)
+    cfg: dict[str, Any] = {
+        k: copy.deepcopy(values[k]) for k in CONTROLLER_DEFAULTS if k in values and k != "friction"
+    }
+    comp = dict(values.get("compensation") or {})
+    model = dict(values.get("friction") or {})
+    comp["model"] = model if model.get("model", "none") not in ("none", "", None) else None
+    cfg["friction"] = comp
+    return cfg, dict(values.get("reference") or {"type": "constant"})
+
+
+def default_config() -> dict[str, Any]:
+    """A deep copy of :data:`CONTROLLER_DEFAULTS`."""
+    return copy.deepcopy(CONTROLLER_DEFAULTS)
