@@ -9,7 +9,7 @@ import numpy as np
 
 from friction_ros.core.validation import ParameterError, check_keys
 
-from . import _kernels as K
+from . import _kernels
 from .base import DynamicModel, FrictionModel
 from .catalog import BASE_MODEL_CLASSES
 
@@ -25,7 +25,7 @@ class Asymmetric(FrictionModel):
     """
 
     name = "asymmetric"
-    KIND = K.K_ASYMMETRIC
+    KIND = _kernels.K_ASYMMETRIC
 
     def __init__(
         self,

@@ -16,7 +16,7 @@ import numpy as np
 from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 
-from . import _kernels as K
+from . import _kernels
 
 
 class FrictionModel:
@@ -29,7 +29,7 @@ class FrictionModel:
 
     name: ClassVar[str] = "base"
     COEFS: ClassVar[tuple[Field, ...]] = ()
-    KIND: ClassVar[int] = K.K_NONE
+    KIND: ClassVar[int] = _kernels.K_NONE
     is_dynamic: ClassVar[bool] = False
     #: True when the model's torque depends on the transmitted (load) torque (gearbox term)
     load_dependent: ClassVar[bool] = False
@@ -191,7 +191,7 @@ class DynamicModel(FrictionModel):
 
     def step(self, v: float, dt: float) -> float:
         """Advance the state by ``dt`` at velocity ``v`` (held constant) and return the friction torque."""
-        return float(K.friction_eval(self.KIND, self._p, self._state, float(v), float(dt), 0.0))
+        return float(_kernels.friction_eval(self.KIND, self._p, self._state, float(v), float(dt), 0.0))
 
     def simulate(self, v_traj: Any, dt: float, reset: bool = True) -> np.ndarray:
         """Torque after each step of the zero-order-held velocity trajectory ``v_traj`` (from rest)."""
@@ -200,7 +200,7 @@ class DynamicModel(FrictionModel):
         if reset:
             self.reset()
         out = np.empty(v.size)
-        K.simulate_kernel(self.KIND, self._p, self._state, v, float(dt), out)
+        _kernels.simulate_kernel(self.KIND, self._p, self._state, v, float(dt), out)
         return out
 
     def _check_rows(self, pm: np.ndarray) -> None:
@@ -253,11 +253,11 @@ class DynamicModel(FrictionModel):
         self._check_rows(pm)
         check_real(f"{self.name}.dt", dt, 0.0, lo_open=True, unit="s")
         v = np.ascontiguousarray(v_traj, dtype=float).ravel()
-        if use_numba and K.HAVE_NUMBA:
+        if use_numba and _kernels.HAVE_NUMBA:
             kp = self.batch_kernel_params(pm)
             st0 = np.ascontiguousarray(np.tile(self.initial_state(), (pm.shape[0], 1)))
             out = np.empty((pm.shape[0], v.size))
-            K.simulate_batch_kernel(self.KIND, kp, st0, v, float(dt), out)
+            _kernels.simulate_batch_kernel(self.KIND, kp, st0, v, float(dt), out)
             return out
         return self._simulate_batch_numpy(pm, v, float(dt))
 

@@ -6,7 +6,7 @@ import numpy as np
 
 from friction_ros.core.config import Field
 
-from . import _kernels as K
+from . import _kernels
 from .base import DynamicModel
 
 
@@ -19,7 +19,7 @@ class Dahl(DynamicModel):
     """
 
     name = "dahl"
-    KIND = K.K_DAHL
+    KIND = _kernels.K_DAHL
     STATE_NAMES = ("F",)
     COEFS = (
         Field(

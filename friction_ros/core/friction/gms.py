@@ -9,7 +9,7 @@ import numpy as np
 from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
-from . import _kernels as K
+from . import _kernels
 from .base import DynamicModel, stribeck_np
 
 ALPHA_SUM_TOL = 1e-6
@@ -36,7 +36,7 @@ class GMS(DynamicModel):
     """
 
     name = "gms"
-    KIND = K.K_GMS
+    KIND = _kernels.K_GMS
     COEFS = (
         Field(
             "fc",

@@ -6,7 +6,7 @@ import numpy as np
 
 from friction_ros.core.config import Field
 
-from . import _kernels as K
+from . import _kernels
 from .base import DynamicModel, stribeck_np
 
 
@@ -24,7 +24,7 @@ class LuGre(DynamicModel):
     """
 
     name = "lugre"
-    KIND = K.K_LUGRE
+    KIND = _kernels.K_LUGRE
     STATE_NAMES = ("z",)
     COEFS = (
         Field(

@@ -11,7 +11,7 @@ import numpy as np
 from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
-from . import _kernels as K
+from . import _kernels
 from .base import StaticModel, stribeck_np
 
 # The coefficients the static maps share; each model's docstring gives the equation it uses them in.
@@ -55,7 +55,7 @@ class ZeroFriction(StaticModel):
     """No friction: F = 0."""
 
     name = "none"
-    KIND = K.K_NONE
+    KIND = _kernels.K_NONE
 
     def _steady(self, v):
         return np.zeros_like(v)
@@ -65,7 +65,7 @@ class Coulomb(StaticModel):
     """Coulomb friction F = Fc sgn(v) (seed 004 eq. (1); seed 002 eq. (3); seed 001 eq. (2))."""
 
     name = "coulomb"
-    KIND = K.K_COULOMB
+    KIND = _kernels.K_COULOMB
     COEFS = (_FC,)
 
     def _steady(self, v):
@@ -76,7 +76,7 @@ class Viscous(StaticModel):
     """Viscous friction F = Fv v (seed 004 eq. (2); seed 001 eq. (3))."""
 
     name = "viscous"
-    KIND = K.K_VISCOUS
+    KIND = _kernels.K_VISCOUS
     COEFS = (
         Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient Fv: F = Fv v (seed 004 eq. (2))"),
     )
@@ -89,7 +89,7 @@ class CoulombViscous(StaticModel):
     """Coulomb + viscous F = Fc sgn(v) + Fv v (seed 004 eq. (3); seed 002 eq. (1) with C_r)."""
 
     name = "coulomb_viscous"
-    KIND = K.K_COULOMB_VISCOUS
+    KIND = _kernels.K_COULOMB_VISCOUS
     COEFS = (
         _FC,
         Field(
@@ -112,7 +112,7 @@ class Stribeck(StaticModel):
     """
 
     name = "stribeck"
-    KIND = K.K_STRIBECK
+    KIND = _kernels.K_STRIBECK
     COEFS = (_FC, _FS, _VS, _DELTA, _FV)
 
     def _validate(self):
@@ -156,7 +156,7 @@ class Lorentzian(StaticModel):
     """Lorentzian (Hess & Soom) F = [Fc + (Fs - Fc) / (1 + (v/vs)^2)] sgn(v) + Fv v (seed 004 eq. (7))."""
 
     name = "lorentzian"
-    KIND = K.K_LORENTZIAN
+    KIND = _kernels.K_LORENTZIAN
     COEFS = (_FC, _FS, _VS, _FV)
 
     def _validate(self):
@@ -176,7 +176,7 @@ class StribeckEps(StaticModel):
     """
 
     name = "stribeck_eps"
-    KIND = K.K_STRIBECK_EPS
+    KIND = _kernels.K_STRIBECK_EPS
     COEFS = (
         *Stribeck.COEFS,
         Field(
@@ -205,7 +205,7 @@ class GAExponential(StaticModel):
     """
 
     name = "ga_exponential"
-    KIND = K.K_GA_EXPONENTIAL
+    KIND = _kernels.K_GA_EXPONENTIAL
     COEFS = (
         Field("fs", lo=0.0, unit="N*m", doc="static level F_ST (seed 001 eq. (21), Table 5.2)"),
         Field(
@@ -237,7 +237,7 @@ class GATustin(StaticModel):
     """Seed 001 modified Tustin model, eq. (22): F = (Ff0 - Ffc [1 - exp(-(|v|/Vc)^x)] + sigma |v|) sgn(v)."""
 
     name = "ga_tustin"
-    KIND = K.K_GA_TUSTIN
+    KIND = _kernels.K_GA_TUSTIN
     COEFS = (
         Field("ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (seed 001 eq. (22))"),
         Field("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction Ffc (seed 001 eq. (22))"),
@@ -267,7 +267,7 @@ class GANonLinear(StaticModel):
     """
 
     name = "ga_nonlinear"
-    KIND = K.K_GA_NONLINEAR
+    KIND = _kernels.K_GA_NONLINEAR
     COEFS = (
         Field("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (seed 001 eq. (23))"),
         Field("alpha1", lo=0.0, unit="N*m", doc="decaying level: alpha1 exp(-beta1 |v|) (seed 001 eq. (23))"),
@@ -292,7 +292,7 @@ class GADupont(StaticModel):
     """Seed 001 Dupont model, eq. (24): F = (c0 + c1 |v| + c2 exp(-(|v|/c3)^c4)) sgn(v)."""
 
     name = "ga_dupont"
-    KIND = K.K_GA_DUPONT
+    KIND = _kernels.K_GA_DUPONT
     COEFS = (
         Field("c0", lo=0.0, unit="N*m", doc="constant level c0 (seed 001 eq. (24))"),
         Field("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (seed 001 eq. (24))"),
@@ -315,7 +315,7 @@ class GASevenParameter(StaticModel):
     """
 
     name = "ga_seven_parameter"
-    KIND = K.K_GA_SEVEN
+    KIND = _kernels.K_GA_SEVEN
     COEFS = (
         Field("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (seed 001 eq. (25))"),
         Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: Fv |v| (seed 001 eq. (25))"),
@@ -343,7 +343,7 @@ class Polynomial(StaticModel):
     """
 
     name = "polynomial"
-    KIND = K.K_POLYNOMIAL
+    KIND = _kernels.K_POLYNOMIAL
     COEFS = (
         Field(
             "pos",
@@ -386,7 +386,7 @@ class LoadDependent(StaticModel):
     """
 
     name = "load_dependent"
-    KIND = K.K_LOAD_DEPENDENT
+    KIND = _kernels.K_LOAD_DEPENDENT
     load_dependent = True
     COEFS = (
         _FC,

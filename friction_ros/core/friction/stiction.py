@@ -11,7 +11,7 @@ import numpy as np
 
 from friction_ros.core.config import Field
 
-from . import _kernels as K
+from . import _kernels
 from .static import _DELTA, _FC, _FS, _FV, _VS, Stribeck
 
 
@@ -22,7 +22,7 @@ class GKF(Stribeck):
     """
 
     name = "gkf"
-    KIND = K.K_GKF
+    KIND = _kernels.K_GKF
     COEFS = (_FC, _FS, _VS, _DELTA, _FV)
     band = 0.0
 
@@ -53,7 +53,7 @@ class Karnopp(GKF):
     """
 
     name = "karnopp"
-    KIND = K.K_KARNOPP
+    KIND = _kernels.K_KARNOPP
     COEFS = (
         *Stribeck.COEFS,
         Field(

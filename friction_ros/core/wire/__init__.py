@@ -28,8 +28,8 @@ from .messages import (
     DRIVE_STATE_FLOATS,
     DRIVE_STATE_UINTS,
     ControllerStateEncoder,
+    DecodedJointState,
     DriveStateEncoder,
-    JointSample,
     JointStateDecoder,
     JointStateEncoder,
 )
@@ -45,7 +45,7 @@ __all__ = [
     "U32",
     "ControllerStateEncoder",
     "DriveStateEncoder",
-    "JointSample",
+    "DecodedJointState",
     "JointStateDecoder",
     "JointStateEncoder",
     "Writer",

@@ -7,7 +7,7 @@ reads it as usual. Each encoder writes a template of its message once with :clas
 and compiles it (:func:`~.cdr.compile_template`) into one ``struct.Struct``: a message is then one
 ``pack`` (~0.2-0.5 us). Layout: XCDR1 little endian as Fast DDS writes it (see :mod:`.cdr`).
 
-* sensor_msgs/JointState: :class:`JointStateEncoder`, :class:`JointStateDecoder` -> :class:`JointSample`
+* sensor_msgs/JointState: :class:`JointStateEncoder`, :class:`JointStateDecoder` -> :class:`DecodedJointState`
 * friction_msgs/ControllerState: :class:`ControllerStateEncoder`
 * friction_msgs/DriveState: :class:`DriveStateEncoder`
 """
@@ -53,7 +53,7 @@ DRIVE_STATE_UINTS = ("axis_state", "axis_error", "fault_flags")
 
 
 # ------------------------------------------------------------------------------ sensor_msgs/JointState
-class JointSample:
+class DecodedJointState:
     """A decoded sensor_msgs/JointState (attribute names as the message; sequences are tuples).
 
     ``select_joint`` / ``select_effort`` accept it like the message. ``stamp_ns`` is the header stamp
@@ -121,7 +121,7 @@ class JointStateEncoder:
 
 
 class JointStateDecoder:
-    """CDR bytes of sensor_msgs/JointState (a ``raw=True`` subscription) -> :class:`JointSample`.
+    """CDR bytes of sensor_msgs/JointState (a ``raw=True`` subscription) -> :class:`DecodedJointState`.
 
     The layout of the last message (string lengths and contents, sequence lengths) is compiled into
     one ``struct.Struct``; a message with the same layout is decoded with one ``unpack_from`` and one
@@ -138,16 +138,18 @@ class JointStateDecoder:
         self._names: tuple[str, ...] = ()
         self._slices = ((0, 0), (0, 0), (0, 0))
 
-    def decode(self, data: bytes) -> JointSample:
+    def decode(self, data: bytes) -> DecodedJointState:
         st = self._struct
         if st is not None and data[:2] == b"\x00\x01" and len(data) >= st.size:
             v = st.unpack_from(data)
             if self._check(v) == self._consts:
                 (a0, b0), (a1, b1), (a2, b2) = self._slices
-                return JointSample(v[0], v[1], self._frame_id, self._names, v[a0:b0], v[a1:b1], v[a2:b2])
+                return DecodedJointState(
+                    v[0], v[1], self._frame_id, self._names, v[a0:b0], v[a1:b1], v[a2:b2]
+                )
         return self._compile(data)
 
-    def _compile(self, data: bytes) -> JointSample:
+    def _compile(self, data: bytes) -> DecodedJointState:
         if data[:2] != b"\x00\x01":
             return self._fallback(data)
         fmt = ["<4xiI"]
@@ -225,15 +227,15 @@ class JointStateDecoder:
         self._names = names
         self._slices = tuple(slices)
         (a0, b0), (a1, b1), (a2, b2) = self._slices
-        return JointSample(v[0], v[1], frame_id, names, v[a0:b0], v[a1:b1], v[a2:b2])
+        return DecodedJointState(v[0], v[1], frame_id, names, v[a0:b0], v[a1:b1], v[a2:b2])
 
     @staticmethod
-    def _fallback(data: bytes) -> JointSample:
+    def _fallback(data: bytes) -> DecodedJointState:
         from friction_ros.core.bag.cdr import decode
 
         m = decode(_joint_state_defs(), "sensor_msgs/msg/JointState", data)
         stamp = m["header"]["stamp"]
-        return JointSample(
+        return DecodedJointState(
             stamp["sec"],
             stamp["nanosec"],
             m["header"]["frame_id"],
