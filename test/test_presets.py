@@ -153,12 +153,8 @@ def test_seed000_gearhead_preset_runs_with_backlash():
 def test_one_preset_to_plant_path():
     """resolve_preset / make_plant: a preset, a parameter file's sections and keywords build the plant
     one way; the preset owns the control period."""
-    from friction_ros.core.presets import (
-        CONTROL_PERIOD_RANGE,
-        DEFAULT_CONTROL_PERIOD,
-        make_plant,
-        resolve_preset,
-    )
+    from friction_ros.core.control_period import CONTROL_PERIOD_RANGE, DEFAULT_CONTROL_PERIOD
+    from friction_ros.core.presets import make_plant, resolve_preset
 
     base = load_preset("abb_m19s")
     same = resolve_preset("abb_m19s")

@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD
+from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
 
 # the ROS graph's control period (plant_simulator / compensating_controller / experiment default)
 GRAPH_PERIOD = DEFAULT_CONTROL_PERIOD

@@ -33,10 +33,11 @@ from typing import Any
 import numpy as np
 
 from friction_ros.core.control.controller import CompensatingController, ControllerTerms
+from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
 from friction_ros.core.experiment.references import Reference, reference_from_config
 from friction_ros.core.plant.servo import GearheadServoPlant
-from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD, Preset, make_plant
+from friction_ros.core.presets import Preset, make_plant
 from friction_ros.core.validation import check_real
 
 

@@ -20,9 +20,9 @@ sections overridden by a parameter file's and/or by keywords) gives a :class:`Pr
 emulator, the plant_simulator node and the CLIs all go this way.
 
 The control period is owned by the plant's preset: ``Preset.control_period`` (the ``control_period``
-of the YAML file, validated by :func:`check_control_period`), by default
-:data:`DEFAULT_CONTROL_PERIOD`. The nodes' ``control_period`` parameters (``control_rate_hz`` =
-1 / period in drive_interface) take their default and range from :data:`DEFAULT_CONTROL_PERIOD` and
+of the YAML file, validated by :func:`~friction_ros.core.control_period.check_control_period`), by default
+:data:`~friction_ros.core.control_period.DEFAULT_CONTROL_PERIOD`. The nodes' ``control_period`` parameters (``control_rate_hz`` =
+1 / period in drive_interface) take their default and range from :data:`~friction_ros.core.control_period.DEFAULT_CONTROL_PERIOD` and
 :data:`CONTROL_PERIOD_RANGE`; plant_simulator hands its ``control_period`` to the preset it builds
 and steps the plant at ``Preset.control_period``.
 """
@@ -38,11 +38,11 @@ from typing import Any
 import numpy as np
 import yaml
 
-from friction_ros.core.config import Field
+from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD, check_control_period
 from friction_ros.core.friction import FrictionModel
 from friction_ros.core.plant.params import PlantParams
 from friction_ros.core.plant.servo import GearheadServoPlant
-from friction_ros.core.validation import ParameterError, check_keys, check_real
+from friction_ros.core.validation import ParameterError, check_keys
 from friction_ros.core.yaml_files import load_yaml
 
 NODE_NAME = "plant_simulator"
@@ -58,30 +58,6 @@ PRESET_NAMES: tuple[str, ...] = (
 _SECTION_KEYS = ("preset", "description", "control_period", "plant", "friction_motor", "friction_load")
 _OVERRIDE_KEYS = ("control_period", "plant", "friction_motor", "friction_load")
 _FRICTION_SIDES = ("friction_motor", "friction_load")
-
-#: The control period [s] of a plant whose preset does not give one, and the default of every node's
-#: ``control_period`` parameter (drive_interface: ``control_rate_hz`` = 1 / it).
-DEFAULT_CONTROL_PERIOD = 1e-3
-#: The range [s] a control period must lie in (the plant's preset and the nodes' parameters).
-CONTROL_PERIOD_RANGE = (1e-5, 0.1)
-
-
-def control_period_field(doc: str, hi: float = CONTROL_PERIOD_RANGE[1]) -> Field:
-    """A node's read-only ``control_period`` parameter [s]: default and range from this module."""
-    return Field(
-        "control_period",
-        DEFAULT_CONTROL_PERIOD,
-        doc,
-        lo=CONTROL_PERIOD_RANGE[0],
-        hi=hi,
-        unit="s",
-        read_only=True,
-    )
-
-
-def check_control_period(name: str, value: Any) -> float:
-    """``value`` as a control period [s] within :data:`CONTROL_PERIOD_RANGE`, else ParameterError."""
-    return check_real(name, value, *CONTROL_PERIOD_RANGE, unit="s")
 
 
 def params_dir() -> Path:

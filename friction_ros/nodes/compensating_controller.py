@@ -31,6 +31,7 @@ from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control.controller import ControllerTerms, controller_from_ros_parameters
 from friction_ros.core.control.controller_config import controller_parameter_schema
+from friction_ros.core.control_period import control_period_field
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import (
@@ -39,7 +40,6 @@ from friction_ros.core.input_gate import (
     RESYNC,
     JointInputGate,
 )
-from friction_ros.core.presets import control_period_field
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns

@@ -60,7 +60,7 @@ from friction_ros.core.can.drive_set import axis_values, changed_values, check_d
 from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
-from friction_ros.core.presets import DEFAULT_CONTROL_PERIOD
+from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher

@@ -21,9 +21,9 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.control_period import control_period_field
 from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
-from friction_ros.core.presets import control_period_field
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.parameters import (

@@ -42,11 +42,11 @@ from friction_msgs.msg import ExperimentEvent
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.control_period import control_period_field
 from friction_ros.core.experiment.events import EVENT_NAMES
 from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
 from friction_ros.core.experiment.excitation_config import DEFAULTS, PROFILES, SECTIONS, profile_defaults
 from friction_ros.core.input_gate import select_sample
-from friction_ros.core.presets import control_period_field
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.parameters import ParameterNode, declare_config

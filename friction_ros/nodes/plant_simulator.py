@@ -29,9 +29,10 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.control_period import control_period_field
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
 from friction_ros.core.plant.servo import MAX_COMMAND
-from friction_ros.core.presets import control_period_field, resolve_preset
+from friction_ros.core.presets import resolve_preset
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
