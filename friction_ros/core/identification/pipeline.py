@@ -20,7 +20,6 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.core.identification import learned, metrics
-from friction_ros.core.identification.bag_loading import load_bag
 from friction_ros.core.identification.breakaway_detection import find_breakaways
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
@@ -29,6 +28,7 @@ from friction_ros.core.identification.excitation_checks import (
     excitation,
 )
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
+from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.model_fits import (
     direction_part,
     fit_static_plateaus,
@@ -338,6 +338,8 @@ def fit_bag(
     torque_delay: float = 0.0,
     plant_preset: str | None = None,
     gate: dict | None = None,
+    columns: dict | None = None,
+    time_scale: float = 1.0,
     **options,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
@@ -356,10 +358,12 @@ def fit_bag(
         bag_paths = [bag_paths]
     check_model_names(models)
     recs = [
-        load_bag(
+        load_log(
             p,
             topic,
             joint,
+            columns=columns,
+            time_scale=time_scale,
             events_topic=events_topic,
             current_topic=current_topic,
             current_field=current_field,
