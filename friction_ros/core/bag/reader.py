@@ -2,7 +2,10 @@
 
 ``read_bag(path)`` accepts a rosbag2 directory (``metadata.yaml`` + ``*.mcap``, or ``*.mcap`` files only)
 or a single ``.mcap`` file, written by this package, ``ros2 bag record``, rosbags or any MCAP writer
-using the ``ros2`` profile, with zstd/lz4/no chunk compression. Message definitions come from the
+using the ``ros2`` profile, with zstd/lz4/no chunk compression. SQLite3 storage (``metadata.yaml``
+saying ``sqlite3``, a directory of ``*.db3`` files, or a ``.db3`` file) is read through the
+``rosbags`` library by :mod:`~friction_ros.core.bag.rosbags_reader` into the same containers
+(also by ``bag_info`` and ``iter_messages``). Message definitions come from the
 schemas embedded in the file (``ros2msg``); when a schema is empty or ``ros2idl``, the installed
 ``.msg`` files are used.
 
@@ -36,13 +39,42 @@ def _gather(big: np.ndarray, pos: np.ndarray, width: int, dtype: str) -> np.ndar
 
 
 # ------------------------------------------------------------------------------------------ bag files
+def storage_of(path: str | os.PathLike) -> str:
+    """``"sqlite3"`` for SQLite3 rosbag2 storage (metadata, ``*.db3`` files only, a .db3/SQLite file), else ``"mcap"``."""
+    from .rosbags_reader import is_sqlite_file
+
+    p = Path(path)
+    if p.is_file():
+        return "sqlite3" if is_sqlite_file(p) else "mcap"
+    if not p.is_dir():
+        return "mcap"
+    meta = p / "metadata.yaml"
+    if meta.is_file():
+        try:
+            storage = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"].get(
+                "storage_identifier"
+            )
+        except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+            storage = None
+        if storage:
+            return "sqlite3" if storage == "sqlite3" else "mcap"
+    if not any(p.glob("*.mcap")) and any(p.glob("*.db3")):
+        return "sqlite3"
+    return "mcap"
+
+
 def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
-    """(bag path, MCAP files) of a rosbag2 directory or a single ``.mcap`` file."""
+    """(bag path, storage files) of a rosbag2 directory or a single ``.mcap``/``.db3`` file."""
     p = Path(path)
     if not p.exists():
         raise BagError(f"{p}: no such bag file or directory")
     if p.is_file():
         return p, [p]
+    if storage_of(p) == "sqlite3":
+        files = sorted(p.glob("*.db3"), key=lambda f: (len(f.name), f.name))
+        if not files:
+            raise BagError(f"{p}: sqlite3 bag directory contains no .db3 file")
+        return p, files
     meta = p / "metadata.yaml"
     files: list[Path] = []
     if meta.is_file():
@@ -51,7 +83,7 @@ def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
             storage = info.get("storage_identifier", "")
             if storage and storage != "mcap":
                 raise UnsupportedBagError(
-                    f"{p}: storage {storage!r} is not supported: only MCAP bags can be read"
+                    f"{p}: storage {storage!r} is not supported: MCAP and sqlite3 bags can be read"
                 )
             if info.get("compression_mode") == "file":
                 raise UnsupportedBagError(
@@ -65,9 +97,7 @@ def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
     if not files:
         files = sorted(p.glob("*.mcap"), key=lambda f: (len(f.name), f.name))
     if not files:
-        if any(p.glob("*.db3")):
-            raise UnsupportedBagError(f"{p}: sqlite3 (.db3) rosbag2 storage is not supported: only MCAP")
-        raise NotMcapError(f"{p}: directory contains no .mcap file")
+        raise NotMcapError(f"{p}: directory contains no .mcap or .db3 file")
     return p, files
 
 
@@ -210,6 +240,10 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | str | None = None)
     """
     if isinstance(topics, str):
         topics = [topics]
+    if storage_of(path) == "sqlite3":
+        from .rosbags_reader import read_sqlite_bag
+
+        return read_sqlite_bag(path, topics)
     ld = _Loaded(path, topics)
     out: dict[str, TopicData] = {}
     for topic, info in ld.info.items():
@@ -253,12 +287,21 @@ def read_joint_states(path: str | os.PathLike, joint: str, topic: str = "/joint_
 
 def bag_info(path: str | os.PathLike) -> Bag:
     """Topics, types, counts, QoS and metadata of a bag without decoding payloads (``Bag.topics`` empty)."""
+    if storage_of(path) == "sqlite3":
+        from .rosbags_reader import sqlite_bag_info
+
+        return sqlite_bag_info(path)
     ld = _Loaded(path, [])
     return Bag(ld.path, ld.files, ld.info, {}, ld.metadata, ld.truncated, ld.warnings, ld.skipped)
 
 
 def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:
     """Raw serialized messages of all (or the given) topics in log-time order (for replay)."""
+    if storage_of(path) == "sqlite3":
+        from .rosbags_reader import iter_sqlite_messages
+
+        yield from iter_sqlite_messages(path, topics)
+        return
     ld = _Loaded(path, topics)
     rows = []
     for topic in ld.defs:
