@@ -1,8 +1,13 @@
-"""friction-fit: identify friction models from bags; write a report, a JSON summary and ROS parameters.
+"""friction-fit: identify friction models from bags or CSV logs; write a report, a JSON summary and ROS parameters.
 
 Example::
 
     friction-fit bags/run_1 --joint joint1 --models coulomb stribeck lugre gms4 --out fit_run_1
+    friction-fit log.csv --columns time=t,position=q,velocity=dq,effort=tau --time-scale 1e-9
+
+Inputs: rosbag2 directories (MCAP or SQLite3), ``.mcap``/``.db3`` files, or ``.csv`` logs with a
+header line (time, position/velocity, effort or current columns: see
+:mod:`friction_ros.core.identification.csv_loading` for the names found automatically).
 
 Writes ``<out>/report.md``, ``<out>/summary.json``, ``<out>/plots/*.png`` and the parameter file
 (``<out>/friction_params.yaml`` or ``--params-out``) for compensating_controller,
@@ -20,7 +25,26 @@ import sys
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="friction-fit", description=__doc__.splitlines()[0])
-    p.add_argument("bags", nargs="+", help="rosbag2 directories or .mcap files")
+    p.add_argument(
+        "bags",
+        nargs="+",
+        help="rosbag2 directories (MCAP or SQLite3), .mcap/.db3 files or .csv logs",
+    )
+    p.add_argument(
+        "--columns",
+        default=None,
+        metavar="ROLE=NAME,...",
+        help=(
+            "CSV column of each role, e.g. time=t,position=q,velocity=dq,effort=tau (roles: "
+            f"{', '.join(CSV_ROLES)}; default: found by header name)"
+        ),
+    )
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=1.0,
+        help="CSV time column unit in seconds, e.g. 1e-9 for nanoseconds, 1e-3 for ms (default 1)",
+    )
     p.add_argument(
         "--topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)"
     )
@@ -130,6 +154,31 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 FITTED_HEADER = "# friction-fit:"
+CSV_ROLES = ("time", "position", "velocity", "effort", "current")
+
+
+def parse_columns(text: str | None) -> dict[str, str] | None:
+    """``time=t,position=q`` -> {"time": "t", "position": "q"}; ParameterError on bad syntax or role."""
+    from friction_ros.core.validation import ParameterError
+
+    if text is None:
+        return None
+    out: dict[str, str] = {}
+    for item in text.split(","):
+        role, sep, name = item.partition("=")
+        role, name = role.strip(), name.strip()
+        if not sep or not role or not name:
+            raise ParameterError(
+                f"--columns {text!r}: {item.strip()!r} is not ROLE=NAME: write e.g. time=t,position=q,effort=tau"
+            )
+        if role not in CSV_ROLES:
+            raise ParameterError(
+                f"--columns {text!r}: unknown role {role!r}: roles are {', '.join(CSV_ROLES)}"
+            )
+        if role in out:
+            raise ParameterError(f"--columns {text!r}: role {role!r} is given twice")
+        out[role] = name
+    return out
 
 
 def check_outputs(args) -> None:
@@ -149,9 +198,10 @@ def check_outputs(args) -> None:
     bags = [Path(b).resolve() for b in args.bags]
     pf = Path(args.params_out) if args.params_out else out / "friction_params.yaml"
     for target, name in ((out.resolve(), "--out"), (pf.resolve(), "--params-out")):
-        for b in bags:
+        for b in bags:  # a bag directory, a .mcap/.db3 file or a .csv log: all inputs
             if target == b or b in target.parents or (name == "--out" and target in b.parents):
-                raise ParameterError(f"{name} {target} overlaps the input bag {b}: choose another path")
+                kind = "log" if b.suffix.lower() == ".csv" else "bag"
+                raise ParameterError(f"{name} {target} overlaps the input {kind} {b}: choose another path")
     if pf.is_dir():
         raise ParameterError(f"--params-out {pf} is a directory: must be a file path")
     if pf.exists() and not args.force:
@@ -171,6 +221,7 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         check_outputs(args)
+        columns = parse_columns(args.columns)
     except ParameterError as exc:
         print(f"friction-fit: error: {exc}", file=sys.stderr)
         return 2
@@ -234,6 +285,8 @@ def main(argv: list[str] | None = None) -> int:
                 eps=args.eps,
                 high_threshold=args.high_threshold,
                 progress=on_progress,
+                columns=columns,
+                time_scale=args.time_scale,
             )
         finally:
             if progress is not None:

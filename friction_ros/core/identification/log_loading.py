@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from friction_ros.core.identification.records import ExcitationError, JointData
+from friction_ros.core.identification.records import JointData
 
 #: bag options that have no meaning for a CSV log (they name topics/fields of a bag)
 _BAG_ONLY = ("events_topic", "current_topic", "current_field")
@@ -32,10 +32,10 @@ def load_log(
 ) -> JointData:
     """Load one joint from a CSV log or a bag into :class:`JointData`.
 
-    ``columns`` (role -> column name) and ``time_scale`` [s per time unit] apply to CSV logs;
-    ``topic`` and the bag options (``events_topic``, ``current_topic``, ``current_field``) to bags.
-    ``torque_constant``, ``gear_ratio``, ``velocity_window``, ``acceleration_window`` and
-    ``torque_delay`` apply to both.
+    ``columns`` (role -> column name) and ``time_scale`` [s per time unit] apply to CSV logs (a
+    bag's record gets a warning that they were ignored); ``topic`` and the bag options
+    (``events_topic``, ``current_topic``, ``current_field``) to bags. ``torque_constant``, ``gear_ratio``, ``velocity_window``,
+    ``acceleration_window`` and ``torque_delay`` apply to both.
     """
     if is_csv(path):
         from friction_ros.core.identification.csv_loading import load_csv
@@ -44,8 +44,10 @@ def load_log(
         return load_csv(path, joint, columns, time_scale=time_scale, **opts)
     from friction_ros.core.identification.bag_loading import load_bag
 
-    if columns:
-        raise ExcitationError(f"{path}: columns apply to .csv logs only, not to bags: drop --columns")
-    if time_scale != 1.0:
-        raise ExcitationError(f"{path}: time_scale applies to .csv logs only, not to bags: drop --time-scale")
-    return load_bag(path, topic, joint, **bag_options)
+    data = load_bag(path, topic, joint, **bag_options)
+    ignored = [n for n, used in (("columns", bool(columns)), ("time_scale", time_scale != 1.0)) if used]
+    if ignored:
+        data.meta["warnings"] = [
+            f"{path}: {' and '.join(ignored)} apply to .csv logs only: ignored for this bag"
+        ] + data.meta.get("warnings", [])
+    return data
