@@ -45,6 +45,8 @@ ROLES: dict[str, tuple[str, ...]] = {
 }
 #: SI unit suffixes dropped from a header before matching (``position_rad``, ``torque_Nm``)
 _UNIT_SUFFIXES = ("rad_s", "rad/s", "rads", "rad", "s", "sec", "nm", "n_m", "n*m", "a", "amp", "amps")
+#: time units that need ``time_scale`` (``time_ms``, ``stamp [ns]``): their factor to seconds
+TIME_UNITS = {"ns": 1e-9, "us": 1e-6, "ms": 1e-3}
 #: qualifiers of a set-point column (``position_desired``, ``tau_cmd``): ignored, never a joint name
 _REFERENCE = ("des", "desired", "ref", "reference", "cmd", "command", "target", "setpoint", "sp", "goal")
 #: qualifiers of the measured signal (``position_measured``): the role itself, not a joint name
@@ -64,8 +66,17 @@ def _base(header: str) -> str:
     return h.strip()
 
 
+def _time_unit(header: str) -> str | None:
+    """``ns``/``us``/``ms`` when a header carries that unit (``time_ms``, ``stamp [ns]``, ``t (us)``)."""
+    low = header.strip().strip("\"'").lower()
+    for u in TIME_UNITS:
+        if re.search(rf"(^|[\s_\[(]){u}[\])]?$", low):
+            return u
+    return None
+
+
 def _strip_unit(low: str) -> str:
-    for u in _UNIT_SUFFIXES:
+    for u in (*_UNIT_SUFFIXES, *TIME_UNITS):
         for sep in ("_", " "):
             if low.endswith(sep + u) and len(low) > len(u) + 1:
                 return low[: -len(u) - 1]
@@ -250,6 +261,12 @@ def load_csv(
         raise ExcitationError(
             f"csv {path}: no position or velocity column among {', '.join(headers)}: {hint}; recognised: "
             f"{', '.join(ROLES['position'] + ROLES['velocity'])}"
+        )
+    unit = _time_unit(headers[roles["time"]])
+    if unit and not abs(scale / TIME_UNITS[unit] - 1.0) < 1e-9:
+        raise ExcitationError(
+            f"csv {path}: time column {headers[roles['time']]!r} looks like {unit} but time_scale is {scale:g} s: "
+            f"pass --time-scale {TIME_UNITS[unit]:g} (time_scale=)"
         )
     use_current = "current" in roles and (torque_constant is not None or "effort" not in roles)
     if not use_current and "effort" not in roles:
