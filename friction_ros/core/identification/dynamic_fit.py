@@ -104,16 +104,26 @@ class DynamicFit:
         # the same signals as the fit: the inertial term must carry the same bandwidth as the
         # friction states (presliding ringing appears in both and cancels in the measured torque)
         v, a = fit_signals(data, self.signals)
-        return self.spec.design(self.theta, v, a, data.dt)
+        return self.spec.design(self.theta, v, a, data.dt, self.spec.load_matrix(data, v))
 
     def predict(self, data: JointData) -> np.ndarray:
         """Predicted joint torque J a + F_hat over a record (states start from rest)."""
         return self._design(data) @ self.beta
 
     def friction(self, data: JointData) -> np.ndarray:
-        """Predicted friction torque F_hat (without the inertial term)."""
+        """Predicted friction torque F_hat (without the inertial and the load-torque terms; with the
+        load- and position-dependent friction)."""
         X = self._design(data)
-        return X[:, :-1] @ self.beta[:-1]
+        b = self.beta.copy()
+        b[-1] = 0.0
+        for i, n in enumerate(self.spec.linear_all):
+            if n.startswith(("gravity_", "offset", "spring")):
+                b[i] = 0.0
+        return X @ b
+
+    @property
+    def load_coefficients(self) -> dict:
+        return self.spec.load_coefficients(self.beta)
 
 
 class _Cost:
@@ -126,20 +136,21 @@ class _Cost:
         self.inputs = []
         for r in records:
             v, a = fit_signals(r, self.sig)
-            self.inputs.append((v, a, r.torque, r.dt, self.sig.sos(r.dt)))
+            self.inputs.append((v, a, r.torque, r.dt, self.sig.sos(r.dt), spec.load_matrix(r, v)))
+        self.free = spec.free
         self.n = sum(r.n for r in records)
         self.evals = 0
 
     def grams(self, thetas: np.ndarray) -> np.ndarray:
         g = None
-        for v, a, tau, dt, sos in self.inputs:
-            gi = self.spec.grams(thetas, v, a, tau, dt, sos)
+        for v, a, tau, dt, sos, load in self.inputs:
+            gi = self.spec.grams(thetas, v, a, tau, dt, sos, load)
             g = gi if g is None else g + gi
         return g
 
     def batch_theta(self, thetas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         self.evals += thetas.shape[0]
-        betas, sse = solve_grams(self.grams(thetas))
+        betas, sse = solve_grams(self.grams(thetas), self.free)
         mse = sse / self.n
         return np.where(np.isfinite(mse), mse, np.inf), betas
 

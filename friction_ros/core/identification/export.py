@@ -177,6 +177,8 @@ def parameter_document(
     gate=None,
     gains: dict | None = None,
     load_feedforward: float = 0.0,
+    load: dict | None = None,
+    residual: dict | None = None,
 ) -> dict:
     """The ROS parameter YAML document for the three nodes.
 
@@ -186,7 +188,11 @@ def parameter_document(
     joint (``torque_constant`` 1 N*m/A, gear ratio 1, ideal sensing), which the node runs as it is.
     ``gate``: the
     safety gate's verdicts (:func:`compensation_section`); ``gains``: the tracking PD written as
-    ``pid``; ``load_feedforward``: a constant load the controller holds.
+    ``pid``; ``load_feedforward``: a constant load the controller holds. ``load``: the identified
+    load, gravity and position terms (:class:`~friction_ros.core.friction.joint_load.JointLoad`
+    config), ``residual``: a learned residual model's config
+    (:mod:`~friction_ros.core.friction.learned_residual`); both go to compensating_controller as
+    feedforward.
     """
     plant: dict = {"actuation": "torque", "motor_inertia": float(inertia), "torque_constant": 1.0}
     if plant_preset:
@@ -203,6 +209,8 @@ def parameter_document(
                 "inertia": float(inertia),
                 **({"pid": {k: float(v) for k, v in gains.items()}} if gains else {}),
                 **({"load_feedforward": float(load_feedforward)} if load_feedforward else {}),
+                **({"load": load} if load else {}),
+                **({"residual": residual} if residual else {}),
                 "friction": config,
                 "compensation": compensation_section(gate),
             }

@@ -68,6 +68,8 @@ class FitResult:
             raise ParameterError(f"model {name!r} has no friction-library form: choose a parametric model")
         opts = dict(self.options.get("gate_options") or {}, **gate_options)
         opts.setdefault("load_feedforward", float(self.options.get("load_offset", 0.0) or 0.0))
+        opts.setdefault("load", m.extra.get("load"))
+        opts.setdefault("residual", m.extra.get("residual"))
         return export.parameter_document(
             m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset"), **opts
         )

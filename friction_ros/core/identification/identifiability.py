@@ -107,7 +107,7 @@ def time_domain_jacobian(fit, records, rel_step: float = 1e-4):
     base = []
     regs = []
     for r, v in zip(records, vel):
-        X = spec.design(fit.theta, v, r.acceleration, r.dt)
+        X = spec.design(fit.theta, v, r.acceleration, r.dt, spec.load_matrix(r, v))
         base.append(X @ fit.beta - r.torque)
         regs.append(X)
     res = np.concatenate(base)
@@ -118,7 +118,10 @@ def time_domain_jacobian(fit, records, rel_step: float = 1e-4):
         xp[i] += h
         th = spec.from_search(xp)
         pred = np.concatenate(
-            [spec.design(th, v, r.acceleration, r.dt) @ fit.beta for r, v in zip(records, vel)]
+            [
+                spec.design(th, v, r.acceleration, r.dt, spec.load_matrix(r, v)) @ fit.beta
+                for r, v in zip(records, vel)
+            ]
         )
         dth = th[i] - fit.theta[i]
         cols_res.append((pred - (res + np.concatenate([r.torque for r in records]))) / dth)

@@ -2,7 +2,8 @@
 
 Each dynamic friction model is simulated in a *normalised* form in which the coefficients that
 enter linearly are factored out (variable projection, Golub & Pereyra 1973). The kernels return,
-per candidate, the Gram matrix ``X^T X`` of the regressor columns ``[phi_1 .. phi_m, v, a, tau]``
+per candidate, the Gram matrix ``X^T X`` of the regressor columns ``[phi_1 .. phi_m, v, a, (load
+terms), tau]``
 so the linear coefficients (static level, element weights, micro-damping, viscous coefficient,
 inertia J) are solved exactly by (non-negative) least squares outside the kernel. This keeps the
 global search low-dimensional and removes the scale ambiguities between them.
@@ -106,14 +107,16 @@ def dahl_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def dahl_gram(P, vm, v, a, tau, dt, sos):
-    """Gram of [L phi(vm), v, a, tau]; the states are driven by the interval-mean velocity vm.
+def dahl_gram(P, vm, E, dt, sos):
+    """Gram of [L phi(vm), E]; the states are driven by the interval-mean velocity vm.
 
-    ``L`` = the causal filter ``sos`` (see :func:`_filter_feats`); pass ``v``, ``a``, ``tau``
-    already filtered with the same sections so every column sees the same filter."""
+    ``E`` (n x q): the columns that do not depend on the parameters, target last: ``[v, a, (load
+    and position terms), tau]``. ``L`` = the causal filter ``sos`` (see :func:`_filter_feats`); pass
+    ``E`` already filtered with the same sections so every column sees the same filter."""
     npop = P.shape[0]
-    n = v.shape[0]
-    m = 4
+    n = E.shape[0]
+    q = E.shape[1]
+    m = 1 + q
     grams = np.zeros((npop, m, m))
     for p in prange(npop):
         st = P[p, 0]
@@ -128,9 +131,8 @@ def dahl_gram(P, vm, v, a, tau, dt, sos):
                 g = s + (g - s) * math.exp(-st * abs(vk) * dt)
             feats[0] = g
             _filter_feats(feats, 1, sos, zf)
-            feats[1] = v[k]
-            feats[2] = a[k]
-            feats[3] = tau[k]
+            for j in range(q):
+                feats[1 + j] = E[k, j]
             _accumulate(gram, feats, m)
         _symmetrise(gram, m)
         grams[p] = gram
@@ -165,11 +167,12 @@ def lugre_features(theta, v, dt):
 
 
 @njit(cache=True, parallel=True)
-def lugre_gram(P, vm, v, a, tau, dt, sos):
-    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`)."""
+def lugre_gram(P, vm, E, dt, sos):
+    """Gram of [L phi(vm), E] (see :func:`dahl_gram`)."""
     npop = P.shape[0]
-    n = v.shape[0]
-    m = 5
+    n = E.shape[0]
+    q = E.shape[1]
+    m = 2 + q
     grams = np.zeros((npop, m, m))
     for p in prange(npop):
         r, vs, delta, s0 = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
@@ -182,9 +185,8 @@ def lugre_gram(P, vm, v, a, tau, dt, sos):
             feats[0] = w
             feats[1] = zd
             _filter_feats(feats, 2, sos, zf)
-            feats[2] = v[k]
-            feats[3] = a[k]
-            feats[4] = tau[k]
+            for j in range(q):
+                feats[2 + j] = E[k, j]
             _accumulate(gram, feats, m)
         _symmetrise(gram, m)
         grams[p] = gram
@@ -239,8 +241,8 @@ def gms_features(theta, v, dt, damped=False):
 
 
 @njit(cache=True, parallel=True)
-def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
-    """Gram of [L phi(vm), v, a, tau] (see :func:`dahl_gram`).
+def gms_gram(P, vm, E, dt, sos, damped=False):
+    """Gram of [L phi(vm), E] (see :func:`dahl_gram`).
 
     ``damped``: the last column of P is the presliding damping time constant
     ``s = sigma1 / sum_j k_j`` [s] and each regressor is ``G_i + s dG_i/dt``, with dG_i/dt the
@@ -248,9 +250,10 @@ def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
     sum_i dF_i/dt, dF_i/dt = (F_i(t) - F_i(t - h)) / h): since F_i = beta_i G_i and k_i = beta_i /
     x_i, the damping force is ``sum_i beta_i s dG_i/dt`` and the element weights stay linear."""
     npop = P.shape[0]
-    n = v.shape[0]
+    n = E.shape[0]
+    q = E.shape[1]
     ne = P.shape[1] - 4 - (1 if damped else 0)
-    m = ne + 3
+    m = ne + q
     grams = np.zeros((npop, m, m))
     for p in prange(npop):
         r, vs, delta, attraction_n = P[p, 0], P[p, 1], P[p, 2], P[p, 3]
@@ -273,9 +276,8 @@ def gms_gram(P, vm, v, a, tau, dt, sos, damped=False):
                 else:
                     feats[i] = G[i]
             _filter_feats(feats, ne, sos, zf)
-            feats[ne] = v[k]
-            feats[ne + 1] = a[k]
-            feats[ne + 2] = tau[k]
+            for j in range(q):
+                feats[ne + j] = E[k, j]
             _accumulate(gram, feats, m)
         _symmetrise(gram, m)
         grams[p] = gram

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import signal
 
 from friction_ros.core.identification import kernels
+from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.validation import ParameterError
 
 DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (seed 003 A.2.1/A.2.2)
@@ -73,6 +74,8 @@ class FitSpec:
     # equality constraints c . beta = d on the linear coefficients (order of linear_all), see
     # fix_steady_state; enforced in grams() as heavily weighted pseudo-observations
     linear_constraints: list[tuple[np.ndarray, float]] = field(default_factory=list)
+    # load, gravity and position terms identified jointly (load_terms.LoadTerms); None = none
+    load: LoadTerms | None = None
 
     # ------------------------------------------------------------------ search-space transforms
     def to_search(self, theta: np.ndarray) -> np.ndarray:
@@ -89,8 +92,27 @@ class FitSpec:
         return list(zip(lo.tolist(), hi.tolist()))
 
     @property
+    def load_names(self) -> list[str]:
+        return [] if self.load is None else self.load.names
+
+    @property
     def linear_all(self) -> list[str]:
-        return [*self.linear, *(["fv"] if self.viscous else []), "J"]
+        """Linear coefficients in design-column order: model, ``fv``, load terms, ``J`` (last)."""
+        return [*self.linear, *(["fv"] if self.viscous else []), *self.load_names, "J"]
+
+    @property
+    def free(self) -> np.ndarray | None:
+        """Mask of the linear coefficients that may take either sign (the load terms'), or None."""
+        if not self.load_names:
+            return None
+        n_model = len(self.linear) + (1 if self.viscous else 0)
+        return np.array([False] * n_model + list(self.load.free) + [False])
+
+    def load_matrix(self, data, v: np.ndarray) -> np.ndarray | None:
+        """The load-term columns of a record (``data``: JointData) for fit velocity ``v``."""
+        if not self.load_names:
+            return None
+        return self.load.columns(data.position, v, data.transmitted)
 
     @property
     def n_params(self) -> int:
@@ -121,11 +143,19 @@ class FitSpec:
         unless ``mid_velocity`` is off."""
         return mid_velocity(v) if self.mid_velocity else np.ascontiguousarray(v, dtype=float)
 
-    def design(self, theta: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float) -> np.ndarray:
-        """Full design matrix [phi, (v), a] for one theta."""
+    def design(
+        self, theta: np.ndarray, v: np.ndarray, a: np.ndarray, dt: float, load: np.ndarray | None = None
+    ) -> np.ndarray:
+        """Full design matrix [phi, (v), (load columns), a] for one theta (``load``: :meth:`load_matrix`)."""
         cols = [self.features(theta, v, dt)]
         if self.viscous:
             cols.append(np.asarray(v, dtype=float)[:, None])
+        if load is not None:
+            cols.append(load)
+        elif self.load_names:
+            raise ParameterError(
+                f"{self.name}: the design needs the load columns ({', '.join(self.load_names)})"
+            )
         cols.append(np.asarray(a, dtype=float)[:, None])
         return np.hstack(cols)
 
@@ -137,8 +167,9 @@ class FitSpec:
         tau: np.ndarray,
         dt: float,
         sos: np.ndarray | None = None,
+        load: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Gram matrices of L [phi, v, a, tau] for every row of P (npop x m x m).
+        """Gram matrices of L [phi, v, (load), a, tau] for every row of P (npop x m x m).
 
         ``sos``: second-order sections of a causal filter ``L`` applied to every column alike (the
         model is linear in beta, so ``L tau = sum beta_j L phi_j + fv L v + J L a`` holds exactly);
@@ -149,22 +180,28 @@ class FitSpec:
         a = np.ascontiguousarray(a, dtype=float)
         tau = np.ascontiguousarray(tau, dtype=float)
         sos = np.zeros((0, 6)) if sos is None else np.ascontiguousarray(sos, dtype=float)
+        if load is None and self.load_names:
+            raise ParameterError(
+                f"{self.name}: the Gram needs the load columns ({', '.join(self.load_names)})"
+            )
+        # the columns that do not depend on theta, target last: [v, (load), a, tau]
+        E = np.column_stack([v, *([] if load is None else [load]), a, tau])
         if sos.shape[0]:
-            vf, af, tf = (np.ascontiguousarray(signal.sosfilt(sos, x)) for x in (v, a, tau))
-        else:
-            vf, af, tf = v, a, tau
+            E = signal.sosfilt(sos, E, axis=0)
+        E = np.ascontiguousarray(E)
         f = self.family
         if f == "gms":
-            g = kernels.gms_gram(P, self.state_velocity(v), vf, af, tf, dt, sos, self.damped)
+            g = kernels.gms_gram(P, self.state_velocity(v), E, dt, sos, self.damped)
         elif f in ("dahl", "lugre"):
             kern = {"dahl": kernels.dahl_gram, "lugre": kernels.lugre_gram}[f]
-            g = kern(P, self.state_velocity(v), vf, af, tf, dt, sos)
+            g = kern(P, self.state_velocity(v), E, dt, sos)
         else:
             out = []
             for theta in P:
-                X = np.hstack([self.features(theta, v, dt), v[:, None], a[:, None], tau[:, None]])
+                phi = self.features(theta, v, dt)
                 if sos.shape[0]:
-                    X = signal.sosfilt(sos, X, axis=0)
+                    phi = signal.sosfilt(sos, phi, axis=0)
+                X = np.hstack([phi, E])
                 out.append(X.T @ X)
             g = np.array(out)
         if not self.viscous:  # drop the v row/column (index m_phi)
@@ -228,6 +265,8 @@ class FitSpec:
         lin = dict(zip(self.linear_all, beta.tolist()))
         J = lin.pop("J")
         fv = lin.pop("fv", 0.0)
+        for n in self.load_names:
+            lin.pop(n)
         f = self.family
         if f == "coulomb":
             c = {"fc": lin["fc"]}
@@ -279,6 +318,11 @@ class FitSpec:
         else:  # pragma: no cover
             raise ParameterError(f"unknown family {f!r}")
         return {**c, "J": J}
+
+    def load_coefficients(self, beta: np.ndarray) -> dict:
+        """The fitted load-term coefficients (keys = LoadTerms.names) from the linear beta."""
+        lin = dict(zip(self.linear_all, np.asarray(beta, dtype=float).tolist()))
+        return {n: lin[n] for n in self.load_names}
 
     def initial_theta(self, static: dict | None) -> np.ndarray:
         """A starting point for the local search from a static fit (fc, fs, vs, delta) if any."""

@@ -28,6 +28,14 @@ from friction_ros.core.identification.excitation_checks import (
     excitation,
 )
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
+from friction_ros.core.identification.load_terms import (
+    LoadTerms,
+    Selection,
+    backbone_fit,
+    parse_terms,
+    select_terms,
+    with_transmitted,
+)
 from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.model_fits import (
     direction_part,
@@ -89,6 +97,10 @@ def fit_records(
     two_stage: bool = True,
     progress: Callable[[str, float], None] | None = None,
     label: str = "data",
+    load="auto",
+    ripple_period: float = 2.0 * math.pi,
+    load_eps: float | None = None,
+    validation_records: list[JointData] | None = None,
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -97,6 +109,16 @@ def fit_records(
     in all) and validates on the rest; ``"window"`` on the single most exciting ``train_seconds``
     window (:func:`~friction_ros.core.identification.training_split.training_window`); ``"first"`` on the
     first ``train_seconds`` (seed 003 A.3).
+
+    ``load``: the load, gravity and position terms identified jointly with every model
+    (:mod:`~friction_ros.core.identification.load_terms`): ``"auto"`` (default: chosen by validation
+    when the records have no constant-velocity plateaus; with plateaus, the experiment's own load
+    offset handling applies), ``"none"``, a term list such as ``"gravity,offset,ripple=4"`` or a
+    :class:`~friction_ros.core.identification.load_terms.LoadTerms`. ``ripple_period`` [rad]: the
+    period of the position-dependent friction (2 pi / N for the motor angle of an N:1 gear);
+    ``load_eps`` [rad/s]: the linear zone of sgn(v) in those terms (default: ``eps``, at least
+    three times the velocity noise). ``validation_records``: validate on these whole records and
+    train on the whole of ``records`` (cross-validation over runs, :func:`cross_validate_runs`).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
     t_start = time.perf_counter()
@@ -106,12 +128,16 @@ def fit_records(
         raise ParameterError("records = []: need at least one record")
     for r in records:
         check_motion(r, r.meta.get("source", label))
-    load, load_note = load_offset([p for r in records for p in find_plateaus(r)])
-    if load:
-        records = [dataclasses.replace(r, torque=r.torque - load) for r in records]
+    offset, offset_note = load_offset([p for r in records for p in find_plateaus(r)])
+    if offset:
+        records = [dataclasses.replace(r, torque=r.torque - offset) for r in records]
     train, val, val_from = [], [], []
     windows = []
-    for r in records:
+    if validation_records:
+        train = list(records)
+        val = list(validation_records)
+        val_from = [(r, np.ones(r.n, bool)) for r in val]
+    for r in [] if validation_records else records:
         if r.duration > train_seconds + 1.0:
             if train_window == "first":
                 segs = [(0, split(r, train_seconds)[0].n)]
@@ -126,7 +152,7 @@ def fit_records(
                 windows.append((float(r.t[i0]), float(r.t[i1 - 1])))
             val.append(concat_records([r.slice(a, b) for a, b in mask_runs(keep)]))
             val_from.append((r, keep))
-    if not val:  # records too short to split: validate on the training data (reported)
+    if not val and not validation_records:  # records too short to split: validate on the training data
         train = list(records)
         val = list(records)
         val_from = [(r, np.ones(r.n, bool)) for r in records]
@@ -137,8 +163,8 @@ def fit_records(
         warnings_pre = []
     for r in records:  # what reading the data found: a truncated bag, missing positions ...
         warnings_pre += [f"{r.meta.get('source', label)}: {w}" for w in r.meta.get("warnings", [])]
-    if load:
-        warnings_pre.append(load_note)
+    if offset:
+        warnings_pre.append(offset_note)
 
     def predict_val(model) -> np.ndarray:
         # dynamic states run through the whole record (one simulation); validation = outside the window
@@ -175,6 +201,19 @@ def fit_records(
             # the plateaus still determine the static models: fit those, name what was skipped
             names = [n for n in names if n not in dynamic]
             warnings_pre.append(f"dynamic models skipped ({', '.join(dynamic)}): {why}")
+    terms, selection = _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps)
+    if terms.load_friction:  # the torque the gear transmits, from the selection backbone
+        tr = (selection.inertia, selection.joint_load)
+        train, val = with_transmitted(train, *tr), with_transmitted(val, *tr)
+        val_from = [
+            (r, keep)
+            for r, keep in zip(with_transmitted([f for f, _ in val_from], *tr), [k for _, k in val_from])
+        ]
+    if not terms.empty:
+        warnings_pre.append(
+            f"load terms identified with every model: {terms.describe()}"
+            + (" (chosen by validation)" if selection is not None and load == "auto" else "")
+        )
     vall = concat_records(val)
     mv = moving_mask(vall.velocity, vall.resolution, vall.dt)
     hm, thr = high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
@@ -192,7 +231,9 @@ def fit_records(
 
     for name in [n for n in names if n not in LEARNED]:
         spec = spec_for(name, eps)
-        if not spec.dynamic and static_from_plateaus:
+        if not terms.empty:
+            spec.load = terms
+        if not spec.dynamic and static_from_plateaus and terms.empty:
             res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
             if progress:
                 progress(name, 1.0)
@@ -238,6 +279,10 @@ def fit_records(
             res = wrap_dynamic(name, fit, eps, grid, identifiability_check, fit_train)
             if per:
                 res = with_direction_levels(res, per, static0)
+            if not terms.empty:
+                res.extra["load"] = terms.joint_load(fit.load_coefficients).to_config()
+                res.extra["load_coefficients"] = fit.load_coefficients
+                res.extra["load_part"] = _load_part(fit)
         yhat = predict_val(res)
         res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm, scored=scored)
         res.extra["validation_prediction"] = yhat
@@ -246,10 +291,16 @@ def fit_records(
         t0 = time.perf_counter()
         ref = _best_parametric(results)
         J = results[ref].coefficients.get("J", 0.0) if ref else 0.0
-        vx, fy, src = learning_data(plateaus, train, J, eps)
+        load_part = results[ref].extra.get("load_part") if ref else None
+        ltrain = train
+        if load_part is not None:  # learn the friction map on the torque less the reference's load terms
+            ltrain = [dataclasses.replace(r, torque=r.torque - load_part(r)) for r in train]
+        vx, fy, src = learning_data(plateaus, ltrain, J, eps)
         dm = learned.fit_directional(name, vx, fy)
         k = 8 if name == "anfis" else dm.positive.n_support + dm.negative.n_support + 2
         pred = static_predictor(dm.steady_state, J)
+        if load_part is not None:
+            pred = (lambda p, lp: lambda r: p(r) + lp(r))(pred, load_part)
         yhat = np.concatenate([pred(r) for r in val])
         res = ModelResult(
             name,
@@ -275,14 +326,9 @@ def fit_records(
             {n: (r.steady_state, r.metrics.get("n_params", 1)) for n, r in candidates.items()}, plateaus
         )
     rec = recommendation["model"]
-    if rec is not None:
-        nm = float(results[rec].metrics.get("nmse_percent", math.nan))
-        if math.isfinite(nm) and nm > EXPLAINS_LITTLE_NMSE:
-            warnings.append(
-                f"the recommended model {rec} explains little of the measured torque (validation NMSE {nm:.1f} % "
-                f"> {EXPLAINS_LITTLE_NMSE:g} %): a load or gravity term, more excitation or a sensor problem is "
-                "missing; do not compensate with it before checking"
-            )
+    verdict = _verdict(results, rec, val, vall, terms, eps)
+    if verdict["explains_little"]:
+        warnings.append(verdict["text"])
     for r in results.values():
         r.extra["steady_state_grid"] = {
             "velocity": grid.tolist(),
@@ -299,9 +345,13 @@ def fit_records(
         thr,
         {
             "train_seconds": train_seconds,
-            "load_offset": load,
+            "load_offset": offset,
             "train_window": train_window,
             "train_windows_s": windows,
+            "load_terms": terms.describe(),
+            "load_selection": selection.table() if selection is not None else [],
+            "validation_records": len(validation_records or []),
+            "verdict": verdict,
             "optimizer": optimizer,
             "seed": seed,
             "eps": eps,
@@ -311,6 +361,75 @@ def fit_records(
         seconds=time.perf_counter() - t_start,
         recommendation=recommendation,
     )
+
+
+def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
+    """(LoadTerms, Selection | None) for the ``load`` option of :func:`fit_records`."""
+    if load_eps is None:  # sgn(v) must not flip on velocity noise: at least 3 sigma of it
+        r = concat_records(train)
+        noise = (
+            float(np.median(np.abs(np.diff(r.velocity, 2)))) / (0.6745 * math.sqrt(6.0)) if r.n > 3 else 0.0
+        )
+        load_eps = max(eps, 3.0 * noise)
+    terms = load
+    if isinstance(load, str):
+        if load == "auto" and len(plateaus) >= 3:
+            terms = "none"  # an experiment with plateaus: its load offset is measured on them
+        terms = parse_terms(terms, ripple_period=ripple_period, eps=load_eps)
+    if terms == "auto":
+        sel = select_terms(train, val, eps=load_eps, ripple_period=ripple_period)
+        return sel.terms, sel
+    if not isinstance(terms, LoadTerms):
+        raise ParameterError(f"load = {load!r} is not allowed: must be auto, none, a term list or LoadTerms")
+    if terms.load_friction:  # the transmitted torque needs a first fit of the other terms
+        base = dataclasses.replace(terms, load_friction=False)
+        _, fit = backbone_fit(base, train, val, terms.eps)
+        jl = base.joint_load(fit.load_coefficients)
+        return terms, Selection(terms, [], math.nan, float(fit.coefficients.get("J", 0.0)), jl)
+    return terms, None
+
+
+def _verdict(results, rec, val, vall, terms, eps) -> dict:
+    """Does the recommended model explain the torque? If not, what the residual follows (diagnosis)."""
+    from friction_ros.core.identification import diagnosis
+
+    out = {"explains_little": False, "text": "", "suggestions": []}
+    if rec is None:
+        return out
+    nm = float(results[rec].metrics.get("nmse_percent", math.nan))
+    if not (math.isfinite(nm) and nm > EXPLAINS_LITTLE_NMSE):
+        return out
+    used = {"load-dependent friction" if t == "load_friction" else t for t in terms.describe().split(", ")}
+    if terms.ripple:
+        used.add("position-dependent friction")
+    resid = vall.torque - np.asarray(results[rec].extra["validation_prediction"])
+    tips = diagnosis.suggestions(val, resid, used, max(eps, terms.eps))
+    what = "explains nothing" if nm >= metrics.NO_SIGNAL_NMSE else "explains little"
+    text = (
+        f"the recommended model {rec} {what} of the measured torque (validation NMSE {nm:.1f} % > "
+        f"{EXPLAINS_LITTLE_NMSE:g} %): do not compensate with it before checking; "
+        + (
+            "; ".join(tips)
+            if tips
+            else "a load or gravity term, more excitation or a sensor problem is missing"
+        )
+    )
+    return {"explains_little": True, "text": text, "suggestions": tips, "nmse_percent": nm}
+
+
+def _load_part(fit) -> Callable[[JointData], np.ndarray]:
+    """record -> the load-term torque of a fit (its load columns times their coefficients)."""
+    from friction_ros.core.identification.dynamic_fit import fit_signals
+
+    spec = fit.spec
+    idx = [spec.linear_all.index(n) for n in spec.load_names]
+    b = fit.beta[idx]
+
+    def part(r: JointData) -> np.ndarray:
+        v, _ = fit_signals(r, fit.signals)
+        return spec.load_matrix(r, v) @ b
+
+    return part
 
 
 def _best_parametric(results: dict[str, ModelResult]) -> str | None:

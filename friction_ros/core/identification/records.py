@@ -50,6 +50,9 @@ class JointData:
     resolution: float = 0.0
     t0: float = 0.0
     meta: dict = field(default_factory=dict)
+    # torque the gear transmits to the link (load_terms.transmitted_torque), for load-dependent
+    # friction; None until a load model has been estimated
+    transmitted: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -73,6 +76,7 @@ class JointData:
             self.resolution,
             self.t0,
             dict(self.meta),
+            None if self.transmitted is None else self.transmitted[i0:i1],
         )
 
 
@@ -273,6 +277,7 @@ def concat_records(records: list[JointData]) -> JointData:
     def cat(k: str) -> np.ndarray:
         return np.concatenate([getattr(r, k) for r in records])
 
+    tr = None if any(r.transmitted is None for r in records) else cat("transmitted")
     return JointData(
         cat("t"),
         cat("position"),
@@ -282,4 +287,5 @@ def concat_records(records: list[JointData]) -> JointData:
         records[0].dt,
         [],
         records[0].resolution,
+        transmitted=tr,
     )

@@ -1,0 +1,269 @@
+"""Load, gravity and position-dependent regressors, identified jointly with inertia and friction.
+
+Real joints carry more than friction (:mod:`friction_ros.core.friction.joint_load` has the
+equations). Each term enters the measured torque linearly, so it is one more column of the
+output-error fit's linear part (variable projection, :mod:`~friction_ros.core.identification.models`):
+
+=================  ==========================================  ===============  ================
+term               column(s)                                   coefficient(s)   sign
+=================  ==========================================  ===============  ================
+``gravity``        sin q, cos q                                a, b             free
+``offset``         1                                           offset           free
+``spring``         q                                           spring           free
+``load_friction``  abs(tau_tr) sgn_eps(v)                      k_L              >= 0
+``ripple`` (H)     sgn_eps(v) cos(k w q), sgn_eps(v) sin(k w q) c_k, s_k         free
+=================  ==========================================  ===============  ================
+
+with ``a sin q + b cos q = gravity sin(q + gravity_phase)``, ``gravity = hypot(a, b)``,
+``gravity_phase = atan2(b, a)``, ``w = 2 pi / ripple_period`` and ``tau_tr = J a + tau_load(q)``
+the torque the gear transmits, estimated from a first fit without the load-dependent term
+(:func:`transmitted_torque`).
+
+Which terms a log needs is decided by validation (:func:`select_terms`): forward selection on the
+Coulomb-viscous backbone (linear, so every candidate costs one least-squares solve), a term kept
+only when it lowers the validation MSE by at least ``min_gain`` (2 %); the number of ripple
+harmonics H the same way (the smallest H within 1 % of the best).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.validation import ParameterError
+
+#: the load terms a user can name (``--load gravity,offset,ripple=4``)
+TERMS = ("gravity", "offset", "spring", "load_friction", "ripple")
+MAX_RIPPLE = 8  # harmonics tried by the automatic selection
+MIN_GAIN = 0.02  # relative validation-MSE reduction a term must bring to be kept
+
+
+@dataclass(frozen=True)
+class LoadTerms:
+    """Which load/position terms a fit identifies (see the module table)."""
+
+    gravity: bool = False
+    offset: bool = False
+    spring: bool = False
+    load_friction: bool = False
+    ripple: int = 0
+    ripple_period: float = 2.0 * math.pi
+    eps: float = 1e-3
+
+    @property
+    def names(self) -> list[str]:
+        out = []
+        if self.gravity:
+            out += ["gravity_sin", "gravity_cos"]
+        if self.offset:
+            out.append("offset")
+        if self.spring:
+            out.append("spring")
+        if self.load_friction:
+            out.append("load_friction")
+        for k in range(1, self.ripple + 1):
+            out += [f"ripple_cos{k}", f"ripple_sin{k}"]
+        return out
+
+    @property
+    def free(self) -> list[bool]:
+        """Per column: may the coefficient take either sign (all but the load-dependent friction)."""
+        return [n != "load_friction" for n in self.names]
+
+    @property
+    def empty(self) -> bool:
+        return not self.names
+
+    def describe(self) -> str:
+        parts = [t for t in TERMS[:4] if getattr(self, t)]
+        if self.ripple:
+            parts.append(f"ripple={self.ripple} (period {self.ripple_period:.4g} rad)")
+        return ", ".join(parts) or "none"
+
+    def columns(self, q, v, transmitted=None) -> np.ndarray:
+        """The regressor columns (n x len(names)) for angle q, velocity v and transmitted torque."""
+        q = np.asarray(q, dtype=float)
+        cols = []
+        sg = np.clip(np.asarray(v, dtype=float) / self.eps, -1.0, 1.0)
+        if self.gravity:
+            cols += [np.sin(q), np.cos(q)]
+        if self.offset:
+            cols.append(np.ones_like(q))
+        if self.spring:
+            cols.append(q)
+        if self.load_friction:
+            if transmitted is None:
+                raise ParameterError("load_friction: the record has no transmitted-torque estimate")
+            cols.append(np.abs(np.asarray(transmitted, dtype=float)) * sg)
+        w = 2.0 * math.pi / self.ripple_period
+        for k in range(1, self.ripple + 1):
+            cols += [sg * np.cos(k * w * q), sg * np.sin(k * w * q)]
+        return np.column_stack(cols) if cols else np.zeros((q.size, 0))
+
+    def joint_load(self, coefficients: dict) -> JointLoad:
+        """The runtime :class:`JointLoad` of fitted coefficients (keys = :attr:`names`)."""
+        c = {n: float(coefficients.get(n, 0.0)) for n in self.names}
+        a, b = c.get("gravity_sin", 0.0), c.get("gravity_cos", 0.0)
+        return JointLoad(
+            gravity=math.hypot(a, b),
+            gravity_phase=math.atan2(b, a) if (a or b) else 0.0,
+            offset=c.get("offset", 0.0),
+            spring=c.get("spring", 0.0),
+            load_friction=min(max(c.get("load_friction", 0.0), 0.0), 1.0),
+            ripple_period=self.ripple_period,
+            ripple_cos=[c[f"ripple_cos{k}"] for k in range(1, self.ripple + 1)],
+            ripple_sin=[c[f"ripple_sin{k}"] for k in range(1, self.ripple + 1)],
+            eps=self.eps,
+        )
+
+
+def parse_terms(text: str | None, *, ripple_period: float = 2.0 * math.pi, eps: float = 1e-3):
+    """``"auto"`` -> "auto"; ``"none"``/"" -> LoadTerms(); ``"gravity,offset,ripple=4"`` -> LoadTerms.
+
+    A bad name or count raises ParameterError naming it and the allowed values.
+    """
+    text = "none" if text is None else str(text).strip().lower()
+    if text == "auto":
+        return "auto"
+    if not (ripple_period > 0 and math.isfinite(ripple_period)):
+        raise ParameterError(f"ripple_period = {ripple_period!r} is out of range: must be > 0 [rad]")
+    out = LoadTerms(ripple_period=float(ripple_period), eps=float(eps))
+    if text in ("none", ""):
+        return out
+    for item in (p.strip() for p in text.split(",") if p.strip()):
+        name, _, count = item.partition("=")
+        name = name.strip()
+        if name not in TERMS:
+            raise ParameterError(
+                f"load term {name!r} is not allowed: must be auto, none or a comma list of {', '.join(TERMS)} "
+                "(ripple=<harmonics>)"
+            )
+        if name == "ripple":
+            try:
+                h = int(count) if count else 2
+            except ValueError:
+                raise ParameterError(
+                    f"ripple={count!r}: the harmonic count must be an integer 1..20"
+                ) from None
+            if not 1 <= h <= 20:
+                raise ParameterError(f"ripple={h} is out of range: must be 1..20 harmonics")
+            out = replace(out, ripple=h)
+        else:
+            if count:
+                raise ParameterError(f"load term {item!r}: only ripple takes a value (ripple=<harmonics>)")
+            out = replace(out, **{name: True})
+    return out
+
+
+def transmitted_torque(record, inertia: float, load: JointLoad, acceleration=None) -> np.ndarray:
+    """tau_tr = J a + tau_load(q): the torque the gear passes to the link (joint_load docstring)."""
+    a = record.acceleration if acceleration is None else acceleration
+    return inertia * np.asarray(a, dtype=float) + load.load_torque(record.position)
+
+
+# ------------------------------------------------------------------------------------ selection
+@dataclass
+class Selection:
+    """What :func:`select_terms` chose and the validation MSE of every step (for the report)."""
+
+    terms: LoadTerms
+    steps: list[tuple[str, float, float, bool]]  # (candidate, validation MSE, MSE before it, kept)
+    baseline_mse: float
+    inertia: float
+    joint_load: JointLoad
+
+    def table(self) -> list[str]:
+        rows = [f"no load terms: validation MSE {self.baseline_mse:.4g} N^2*m^2"]
+        for name, mse, before, kept in self.steps:
+            change = 100.0 * (mse / before - 1.0) if before > 0 else 0.0
+            rows.append(f"{name}: {mse:.4g} ({change:+.1f} % vs before it){', kept' if kept else ''}")
+        return rows
+
+
+def backbone_fit(terms: LoadTerms, train, val, eps: float):
+    """(validation MSE, fit) of the Coulomb-viscous backbone with ``terms`` (linear: one solve)."""
+    from friction_ros.core.identification.dynamic_fit import fit_time_domain
+    from friction_ros.core.identification.models import spec_for
+
+    spec = spec_for("coulomb_viscous", eps)
+    spec.load = terms
+    fit = fit_time_domain(spec, train, optimizer="none", local="none")
+    e = np.concatenate([fit.predict(r) - r.torque for r in val])
+    return float(np.mean(e**2)), fit
+
+
+def with_transmitted(records, inertia: float, load: JointLoad):
+    """The records with ``transmitted`` set from ``inertia`` and ``load`` (:func:`transmitted_torque`)."""
+    import dataclasses
+
+    return [dataclasses.replace(r, transmitted=transmitted_torque(r, inertia, load)) for r in records]
+
+
+def select_terms(
+    train,
+    val,
+    *,
+    eps: float = 1e-3,
+    ripple_period: float = 2.0 * math.pi,
+    max_ripple: int = MAX_RIPPLE,
+    min_gain: float = MIN_GAIN,
+    candidates=("gravity", "offset", "spring"),
+    load_friction: bool = True,
+) -> Selection:
+    """Choose the load terms by validation (module docstring); returns a :class:`Selection`.
+
+    ``train``/``val``: lists of JointData. The returned ``joint_load``/``inertia`` are the
+    backbone's, used to estimate the transmitted torque of the load-dependent friction.
+    """
+    terms = LoadTerms(ripple_period=ripple_period, eps=eps)
+    best, fit = backbone_fit(terms, train, val, eps)
+    base = best
+    steps: list[tuple[str, float, float, bool]] = []
+    remaining = list(candidates)
+    while remaining:  # greedy forward selection of the load-torque terms
+        trials = []
+        for c in remaining:
+            t = replace(terms, **{c: True})
+            mse, f = backbone_fit(t, train, val, eps)
+            trials.append((mse, c, t, f))
+        mse, c, t, f = min(trials, key=lambda x: x[0])
+        keep = mse < (1.0 - min_gain) * best
+        for m2, c2, _, _ in trials:
+            steps.append((f"+{c2}", m2, best, keep and c2 == c))
+        if not keep:
+            break
+        terms, best, fit = t, mse, f
+        remaining.remove(c)
+
+    def joint_load_of(f, t):
+        return t.joint_load(dict(zip(f.spec.linear_all, f.beta.tolist())))
+
+    inertia = float(fit.coefficients.get("J", 0.0))
+    jl = joint_load_of(fit, terms)
+    if load_friction:
+        tr_train = with_transmitted(train, inertia, jl)
+        tr_val = with_transmitted(val, inertia, jl)
+        t = replace(terms, load_friction=True)
+        mse, f = backbone_fit(t, tr_train, tr_val, eps)
+        keep = mse < (1.0 - min_gain) * best
+        steps.append(("+load_friction", mse, best, keep))
+        if keep:
+            terms, best, fit = t, mse, f
+            train, val = tr_train, tr_val
+    if max_ripple > 0:
+        by_h = {0: (best, fit)}
+        for h in range(1, max_ripple + 1):
+            by_h[h] = backbone_fit(replace(terms, ripple=h), train, val, eps)
+        lowest = min(m for m, _ in by_h.values())
+        h = min(h for h, (m, _) in by_h.items() if m <= lowest * 1.01)
+        if h and by_h[h][0] < (1.0 - min_gain) * best:
+            for k in range(1, max_ripple + 1):
+                steps.append((f"+ripple={k}", by_h[k][0], best, k == h))
+            terms, (best, fit) = replace(terms, ripple=h), by_h[h]
+        else:
+            hb = min(by_h, key=lambda k: by_h[k][0])
+            steps.append((f"+ripple (best {hb} harmonics)", lowest, best, False))
+    return Selection(terms, steps, base, float(fit.coefficients.get("J", 0.0)), joint_load_of(fit, terms))
