@@ -196,13 +196,13 @@ def trajectory(
     f_max: float = 1.0,
     n_components: int | None = None,
     center: float = 0.0,
-    slow_share: float = 0.6,
+    slow_share: float = 0.45,
 ) -> Trajectory:
     """A smooth ordinary joint trajectory: no plateaus, no events, many velocity reversals.
 
     One slow sinusoid (one period over ``duration``, random phase) carries the angle range, at most
     ``+-amplitude`` rad and at most ``slow_share * max_speed`` of speed (so slow runs cover less
-    angle); faster sinusoids with random phases between 3/duration and ``f_max`` Hz add the
+    angle); faster sinusoids with random phases between min(3/duration, f_max/4) and ``f_max`` Hz add the
     reversals: ``"multisine"`` 4 components at log-uniform random frequencies, ``"bandlimited"``
     24 on the 1/duration grid with a flat velocity spectrum. The fast part is scaled so that
     max |v| on a 5 ms grid is ``max_speed``, and the slow amplitude reduced until max |q - center|
@@ -214,9 +214,9 @@ def trajectory(
         raise ValueError("duration, max_speed and amplitude must be > 0")
     rng = np.random.default_rng(seed)
     w0 = 2.0 * math.pi / duration
-    f_lo = 3.0 / duration
-    if f_max <= f_lo:
-        raise ValueError(f"f_max must be above 3 / duration = {f_lo:g} Hz")
+    if f_max <= 1.0 / duration:
+        raise ValueError(f"f_max must be above 1 / duration = {1.0 / duration:g} Hz")
+    f_lo = min(3.0 / duration, 0.25 * f_max)
     if kind == "multisine":
         n = n_components or 4
         f = np.exp(rng.uniform(math.log(f_lo), math.log(f_max), n))
