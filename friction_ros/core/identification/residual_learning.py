@@ -30,6 +30,7 @@ the choice machine-dependent); the report carries the measured times.
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -113,6 +114,7 @@ def _scale(x) -> np.ndarray:
 
 
 def _fit_mlp(xs, ys, seed, hidden):
+    from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
 
     m = MLPRegressor(
@@ -128,8 +130,12 @@ def _fit_mlp(xs, ys, seed, hidden):
         n_iter_no_change=15,
         random_state=seed,
     )
-    m.fit(xs, ys)
-    return [(w.T.copy(), b.copy()) for w, b in zip(m.coefs_, m.intercepts_)], {"epochs": int(m.n_iter_)}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ConvergenceWarning)
+        m.fit(xs, ys)
+    converged = not any(issubclass(w.category, ConvergenceWarning) for w in caught)
+    layers = [(w.T.copy(), b.copy()) for w, b in zip(m.coefs_, m.intercepts_)]
+    return layers, {"epochs": int(m.n_iter_), "converged": converged}
 
 
 def _fit_rff(xs, ys, seed, components):
