@@ -279,6 +279,8 @@ class CompensatingControllerNode(ParameterNode):
                         t.inertia_feedforward,
                         t.friction_feedforward,
                         t.friction_feedback,
+                        t.load_feedforward,
+                        t.learned_feedforward,
                         t.command_unlimited,
                         t.command,
                     ),

@@ -5,7 +5,14 @@ Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
     e      = theta_d - theta,   e_dot = theta_dot_d - theta_dot_hat      (derivative on measurement)
     u      = feedback(mode) + feedforward_gain theta_dot_d + J_hat theta_ddot_d
              + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat) + load_feedforward
+             + tau_L(theta, theta_dot_d, theta_dot_hat, theta_ddot_d)
     command = clamp(u, u_clamp, rate limit)
+
+``tau_L`` (section ``load``, :mod:`.load_compensation`): the identified joint load
+``tau_load(theta) = gravity sin(theta + gravity_phase) + offset + spring theta`` at the measured
+position (gravity compensation) plus ``g_c s(v) (k_L |tau_load + J_hat theta_ddot_d| + R(theta))``,
+the load-dependent and position-dependent friction with the velocity (and weights) of
+``friction.source``; 0 with the default (all-zero) section.
 
 ``u_clamp_max/min`` default to +-1e6 N*m (:data:`friction_ros.core.input_gate.PLAUSIBLE_EFFORT`,
 the plant simulator's plausibility bound): whatever the gains and inputs, the command stays finite
@@ -37,7 +44,8 @@ Safety (feedback paths only, i.e. sources feedback / blended / observer):
   what was limited ('' when nothing);
 * run-time limit-cycle detector (:mod:`.limit_cycle`, ``limit_cycle_*`` keys): when it fires, friction
   compensation is switched off and latched (``compensation_fallback``, ``fallback_reason``, also in
-  :class:`ControllerTerms`) until the controller is rebuilt or reconfigured.
+  :class:`ControllerTerms`) until the controller is rebuilt or reconfigured. The friction part of
+  ``tau_L`` goes with it; ``tau_load(theta)`` (a load, not friction) stays.
 
 The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`` and ``terms``
 (a :class:`ControllerTerms`, the fields of friction_msgs/ControllerState).
@@ -63,6 +71,7 @@ from friction_ros.core.control.controller_config import (
     default_config,
 )
 from friction_ros.core.control.limit_cycle import LimitCycleDetector
+from friction_ros.core.control.load_compensation import LoadFeedforward, joint_load
 from friction_ros.core.control.pid import Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
 from friction_ros.core.validation import (
@@ -92,6 +101,10 @@ class ControllerTerms:
     inertia_feedforward: float = 0.0
     friction_feedforward: float = 0.0
     friction_feedback: float = 0.0
+    #: tau_L: identified load, gravity, load-dependent and position-dependent friction (section load)
+    load_feedforward: float = 0.0
+    #: learned residual model (section residual), bounded, 0 when it returned a non-finite value
+    learned_feedforward: float = 0.0
     command_unlimited: float = 0.0
     command: float = 0.0
     saturated: bool = False
@@ -228,6 +241,8 @@ class CompensatingController:
             )
         pid = Pid(cfg["pid"], prefix="controller.pid")
         friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
+        load = joint_load(cfg["load"], "controller.load")
+        cfg["load"] = load.to_config()
         scheme = None
         if mode == "dnpf":
             scheme = DNPF(cfg["dnpf"])
@@ -252,6 +267,9 @@ class CompensatingController:
         self.pid = pid
         self.friction = friction
         self.scheme = scheme
+        wff, wfb = friction.weights
+        self.load = LoadFeedforward(load, (friction.gain * wff, friction.gain * wfb), inertia)
+        self._load_on = self.load.active
         self._prev_cmd: float | None = None
         self.terms = ControllerTerms(mode=mode)
         # stability bound of the feedback path against the loop's linear gains (loop_gains)
@@ -265,7 +283,8 @@ class CompensatingController:
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
         # only a feedback path puts the compensation inside the loop: a feedforward term is a function
         # of the reference and cannot make the loop oscillate by itself (so it is not watched)
-        self._watch = friction.model is not None and friction.gain > 0.0 and friction.weights[1] > 0.0
+        # (the load's friction part fed back from the measured velocity is such a path too)
+        self._watch = (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
         self.fallback_reason = ""
 
     def config(self) -> dict[str, Any]:
@@ -331,6 +350,9 @@ class CompensatingController:
             f_ff = f_fb = 0.0
         else:
             f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
+        tau_l = 0.0
+        if self._load_on:
+            tau_l = self.load.torque(pos, r_vel, vel, r_acc, not self.compensation_fallback)
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
             lower = self._prev_cmd - self.rate_limit * dt
@@ -339,6 +361,8 @@ class CompensatingController:
         hi = min(self.u_clamp_max, upper)
         if self.scheme is None:
             offset = ff_inertia + ff_vel + f_ff + f_fb
+            if self._load_on:
+                offset += tau_l
             out = self.pid.update(
                 e,
                 dt,
@@ -364,6 +388,8 @@ class CompensatingController:
                 + f_fb
                 + s.friction_feedback
             )
+            if self._load_on:
+                unlimited += tau_l
             if lo > hi:
                 lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
             cmd = min(max(unlimited, lo), hi)
@@ -394,6 +420,7 @@ class CompensatingController:
             inertia_feedforward=ff_inertia,
             friction_feedforward=f_ff,
             friction_feedback=f_fb + s.friction_feedback,
+            load_feedforward=tau_l,
             command_unlimited=unlimited,
             command=cmd,
             saturated=bool(sat),

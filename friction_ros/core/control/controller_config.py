@@ -17,6 +17,7 @@ from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, COMPEN
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS
 from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
+from friction_ros.core.friction.joint_load import JOINT_LOAD_SCHEMA
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 
 CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
@@ -116,8 +117,11 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     "gain_scheduling": dict(GainScheduling.DEFAULTS),
     "cascade": dict(Cascade.DEFAULTS),
     "sliding_mode": dict(SlidingMode.DEFAULTS),
+    # identified load, gravity and position-dependent friction (core/friction/joint_load.py):
+    # defaults are all zero, i.e. no feedforward (core/control/load_compensation.py)
+    "load": JOINT_LOAD_SCHEMA.defaults(),
 }
-CONFIG_SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
+CONFIG_SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode", "load")
 SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
 
 
@@ -125,7 +129,8 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
     """The compensating_controller's ROS layout of the controller (see :func:`config_from_ros_parameters`).
 
     Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
-    ``friction`` (the library model config: ``model`` + its coefficients) and ``reference`` (the
+    ``friction`` (the library model config: ``model`` + its coefficients), ``load`` (identified
+    load, gravity and position-dependent friction: :data:`JOINT_LOAD_SCHEMA`) and ``reference`` (the
     built-in reference generator). ``friction_model`` / ``reference``: give ``friction.model``
     (``none``) and ``reference.type`` (``constant``) defaults (a parameter file that sets any key of
     the section brings its own).
@@ -136,6 +141,7 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
             PID_SCHEMA if s == "pid" else Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
         )
     items.append(COMPENSATION_SCHEMA)
+    items.append(JOINT_LOAD_SCHEMA)
     items.append(
         Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
     )

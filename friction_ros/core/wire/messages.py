@@ -37,6 +37,8 @@ CONTROLLER_STATE_FLOATS = (
     "inertia_feedforward",
     "friction_feedforward",
     "friction_feedback",
+    "load_feedforward",
+    "learned_feedforward",
     "command_unlimited",
     "command",
 )
@@ -284,7 +286,7 @@ class ControllerStateEncoder:
     """friction_msgs/ControllerState -> CDR bytes with one ``struct.pack`` (published as bytes).
 
     The layout is fixed by the joint name and the mode string: header stamp, empty frame_id,
-    joint_name, mode, 16 float64 in message order (:data:`CONTROLLER_STATE_FLOATS`), saturated.
+    joint_name, mode, the float64 fields in message order (:data:`CONTROLLER_STATE_FLOATS`), saturated.
     """
 
     def __init__(self, joint: str):

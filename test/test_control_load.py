@@ -1,0 +1,199 @@
+"""Issue 17 items 2 and 4: the controller's feedforward of the identified joint load (section load)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from friction_ros.core.control.controller import CompensatingController, controller_from_ros_parameters
+from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.harness import run_closed_loop
+from friction_ros.core.presets import load_preset
+from friction_ros.core.validation import ParameterError
+
+PD = {"p": 200.0, "d": 0.15}
+CV = {"model": "coulomb_viscous", "fc": 0.8, "fv": 0.01}
+LOAD = {
+    "gravity": 1.5,
+    "gravity_phase": 0.4,
+    "offset": 0.2,
+    "spring": 0.7,
+    "load_friction": 0.05,
+    "ripple_period": 0.5,
+    "ripple_cos": [0.03, 0.01],
+    "ripple_sin": [-0.02, 0.005],
+    "eps": 0.01,
+}
+SINE = {"type": "sinusoid", "amplitude": 0.2, "frequency": 0.5}
+
+
+def _ctrl(load=None, source="feedforward", gain=1.0, **extra):
+    cfg = {"mode": "pid", "pid": PD, "inertia": 0.0012, **extra}
+    cfg["friction"] = {"model": CV, "source": source, "gain": gain}
+    if load is not None:
+        cfg["load"] = load
+    return CompensatingController(cfg)
+
+
+def _tau_load(q):
+    return LOAD["gravity"] * math.sin(q + LOAD["gravity_phase"]) + LOAD["offset"] + LOAD["spring"] * q
+
+
+def _load_and_position(res):
+    """(load_feedforward[k], the measured position it was computed from) for k >= 1: the harness
+    records the measurement after each period's step, which the next period's command uses."""
+    return res.terms["load_feedforward"][1:], res.position[:-1]
+
+
+def test_load_term_is_joint_load_torque_at_the_compensation_velocity():
+    """feedforward: tau_L = JointLoad.torque_scalar(q_measured, v_ref, a_ref, J_hat); feedback: the
+    measured velocity; blended: both with the blend weights; the gain scales the friction part only."""
+    jl = JointLoad(**LOAD)
+    q, vm, (rp, rv, ra) = 0.31, -0.004, (0.3, 0.02, 1.5)
+    c = _ctrl(LOAD)
+    t = c.compute(0.0, (rp, rv, ra), (q, vm), 1e-3)
+    assert t.load_feedforward == pytest.approx(jl.torque_scalar(q, rv, ra, 0.0012), rel=1e-14)
+    tl = _tau_load(q)
+    fr = 0.05 * abs(tl + 0.0012 * ra) + sum(
+        c_ * math.cos((k + 1) * 4 * math.pi * q) + s_ * math.sin((k + 1) * 4 * math.pi * q)
+        for k, (c_, s_) in enumerate(zip(LOAD["ripple_cos"], LOAD["ripple_sin"]))
+    )
+    assert t.load_feedforward == pytest.approx(tl + 1.0 * fr, rel=1e-12)  # v_ref / eps = 2: sgn = 1
+    fb = _ctrl(LOAD, source="feedback").compute(0.0, (rp, rv, ra), (q, vm), 1e-3)
+    assert fb.load_feedforward == pytest.approx(tl - 0.4 * fr, rel=1e-12)  # v_meas / eps = -0.4
+    bl = _ctrl(LOAD, source="blended", gain=0.5).compute(0.0, (rp, rv, ra), (q, vm), 1e-3)
+    assert bl.load_feedforward == pytest.approx(tl + 0.5 * (0.5 * 1.0 + 0.5 * -0.4) * fr, rel=1e-12)
+    half = _ctrl(LOAD, gain=0.5).compute(0.0, (rp, rv, ra), (q, vm), 1e-3)
+    assert half.load_feedforward == pytest.approx(tl + 0.5 * fr, rel=1e-12)
+    for off in (_ctrl(LOAD, source="none"), _ctrl(LOAD, gain=0.0)):
+        assert off.compute(0.0, (rp, rv, ra), (q, vm), 1e-3).load_feedforward == pytest.approx(tl, rel=1e-14)
+    # the command carries it: the same controller without the load section differs by tau_L exactly
+    base = _ctrl().compute(0.0, (rp, rv, ra), (q, vm), 1e-3)
+    assert t.command - base.command == pytest.approx(t.load_feedforward, rel=1e-12)
+
+
+def test_zero_load_section_gives_bitwise_the_same_commands():
+    """Defaults = no effect: an explicit all-zero section, or none, gives the same command sequence
+    bit for bit, in every mode (PID, cascade, DNPF, sliding mode; feedback and blended sources)."""
+    zero = {k: (0.0 if not isinstance(v, list) else []) for k, v in LOAD.items()}
+    zero.update(ripple_period=2 * math.pi, eps=1e-3)
+    for mode, source in (
+        ("pid", "feedforward"),
+        ("pid", "feedback"),
+        ("cascade", "blended"),
+        ("dnpf", "feedforward"),
+        ("sliding_mode", "none"),
+    ):
+        cfgs = [
+            {"mode": mode, "pid": PD, "load_feedforward": 0.1, "friction": {"model": CV, "source": source}},
+        ]
+        cfgs.append({**cfgs[0], "load": zero})
+        cfgs.append({**cfgs[0], "load": {"ripple_cos": [0.0], "ripple_sin": [0.0], "eps": 0.5}})
+        runs = [run_closed_loop("abb_m19s", c, SINE, 0.5, 1e-3, record_terms=True) for c in cfgs]
+        for r in runs[1:]:
+            assert np.array_equal(r.torque, runs[0].torque), mode
+            assert not np.any(r.terms["load_feedforward"])
+
+
+def test_gravity_feedforward_holds_a_pendulum_against_gravity():
+    """A pendulum J qdd = u - m g l sin(q + phi) - fc sgn(v) - b v under PD: without the load term the
+    joint sags by ~ m g l sin(q + phi) / Kp; with it the error is the friction's dead band only."""
+    J, mgl, phi, fc, b = 0.05, 3.0, 0.3, 0.05, 0.02
+    load = {"gravity": mgl, "gravity_phase": phi}
+
+    def run(load_section, ref):
+        pd = {"p": 60.0, "d": 1.0}
+        c = CompensatingController(
+            {"mode": "pid", "pid": pd, "inertia": J, "feedforward_gain": b, "load": load_section}
+        )
+        q, v, dt, errs = 0.0, 0.0, 1e-3, []
+        for k in range(4000):
+            t = k * dt
+            r = ref(t)
+            u = c.update(t, r, (q, v), dt)
+            for _ in range(10):  # semi-implicit Euler, 0.1 ms
+                tau = u - mgl * math.sin(q + phi) - b * v
+                if abs(v) < 1e-6 and abs(tau) <= fc:
+                    v = 0.0
+                else:
+                    v += 1e-4 * (tau - fc * math.copysign(1.0, v if v else tau)) / J
+                q += 1e-4 * v
+            errs.append(r[0] - q)
+        return np.asarray(errs)
+
+    def hold(t):
+        return (0.8, 0.0, 0.0)
+
+    def sine(t):
+        w = 2 * math.pi * 0.5
+        return (0.8 * math.sin(w * t), 0.8 * w * math.cos(w * t), -0.8 * w * w * math.sin(w * t))
+
+    e0, e1 = run(None, hold), run(load, hold)
+    # without: the static sag mgl sin(1.1) / Kp = 44.6 mrad (minus what Coulomb friction holds)
+    assert abs(e0[-1]) > 0.04
+    assert abs(e1[-1]) < 1e-3 and abs(e1[-1]) < abs(e0[-1]) / 40
+    s0, s1 = run(None, sine), run(load, sine)
+    rms0, rms1 = (math.sqrt(np.mean(e[1000:] ** 2)) for e in (s0, s1))
+    # measured: 24.0 -> 1.08 mrad RMS (what is left: Coulomb friction, uncompensated here)
+    assert rms0 > 0.02 and rms1 < rms0 / 10, (rms0, rms1)
+
+
+def test_gravity_and_spring_feedforward_on_the_servo_plant():
+    """abb_m19s with a constant gravity load (plant.gravity_force, towards -q) and a spring
+    (plant.load_stiffness): the offset + spring feedforward removes most of the tracking error."""
+    preset = load_preset("abb_m19s").override({"plant": {"gravity_force": 2.0, "load_stiffness": 3.0}})
+    base = {"mode": "pid", "pid": PD, "inertia": 0.0012, "friction": {"model": CV, "source": "feedforward"}}
+    without = run_closed_loop(preset, base, SINE, 3.0, 1e-3, record_terms=True)
+    with_load = run_closed_loop(
+        preset, {**base, "load": {"offset": 2.0, "spring": 3.0}}, SINE, 3.0, 1e-3, record_terms=True
+    )
+    e0, e1 = without.metrics["rms_error"], with_load.metrics["rms_error"]
+    assert e0 > 5e-3  # ~ (2 + 3 q) / 200
+    assert e1 < e0 / 5, (e0, e1)  # measured 10.8 -> 1.19 mrad RMS
+    tau_l, q = _load_and_position(with_load)
+    assert np.allclose(tau_l, 2.0 + 3.0 * q, rtol=0, atol=1e-12)
+
+
+def test_fallback_keeps_the_load_and_drops_its_friction_part():
+    """The limit-cycle fallback switches the friction part of tau_L off with the friction
+    compensation; tau_load(q) (a load) stays."""
+    bad = {"model": "stribeck", "fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0}
+    cfg = {"mode": "pid", "pid": PD, "inertia": 0.0012, "friction": {"model": bad, "source": "feedback"}}
+    cfg["load"] = LOAD
+    ctrl = CompensatingController(cfg)
+    ref = {"type": "band_limited_random", "amplitude": 0.05, "cutoff": 1.0, "duration": 3.0, "seed": 1}
+    res = run_closed_loop("abb_m19s", ctrl, ref, 3.0, 1e-3, record_terms=True)
+    assert ctrl.compensation_fallback
+    k = int(round(ctrl.limit_cycle.fired_at / 1e-3)) + 1
+    tau_l, q = _load_and_position(res)
+    assert np.allclose(tau_l[k:], np.vectorize(_tau_load)(q[k:]), rtol=0, atol=1e-12)
+    assert np.all(res.terms["friction_feedback"][k + 1 :] == 0.0)
+    friction_part = tau_l[:k] - np.vectorize(_tau_load)(q[:k])
+    assert np.max(np.abs(friction_part)) > 0.01  # on before the fallback
+
+
+def test_bad_load_values_are_refused_naming_the_key():
+    for section, key in (
+        ({"gravity_phase": 4.0}, "controller.load.gravity_phase = 4"),
+        ({"load_friction": -0.1}, "controller.load.load_friction = -0.1"),
+        ({"eps": 0.0}, "controller.load.eps = 0"),
+        ({"gravity": math.nan}, "controller.load.gravity = nan"),
+        ({"ripple_cos": [0.1], "ripple_sin": []}, "controller.load.ripple_sin has 0 values"),
+        ({"gravitty": 1.0}, "gravitty"),
+    ):
+        with pytest.raises(ParameterError) as exc:
+            _ctrl(section)
+        text = str(exc.value)
+        assert key in text and "\n" not in text, text
+    # the ROS layout names it as the parameter file does
+    with pytest.raises(ParameterError, match=r"^load\.gravity_phase = 4 "):
+        controller_from_ros_parameters({"pid": PD, "load": {"gravity_phase": 4.0}})
+    # a refused reconfiguration changes nothing
+    c = _ctrl(LOAD)
+    with pytest.raises(ParameterError):
+        c.reconfigure({"load": {"eps": -1.0}})
+    assert c.config()["load"]["eps"] == 0.01
+    c.reconfigure({"load": {"gravity": 0.0}})
+    assert c.config()["load"] == {**JointLoad(**LOAD).to_config(), "gravity": 0.0}
