@@ -1,9 +1,9 @@
-"""MCAP bag I/O (rosbag2-compatible), CDR and message definitions. Pure Python + numpy: no rclpy.
+"""MCAP bag I/O (rosbag2-compatible; SQLite3 bags are read through rosbags), CDR and message definitions. Pure Python + numpy: no rclpy.
 
 Reading (offline fitting)::
 
     from friction_ros.core.bag import read_bag
-    bag = read_bag("bags/run_1")                    # directory or .mcap file
+    bag = read_bag("bags/run_1")                    # directory, .mcap or .db3 file (sqlite3 via rosbags)
     js = bag.topic("/joint_states", "sensor_msgs/msg/JointState")
     j = js.joint("joint1")                          # JointSeries: time, stamp, position, velocity, effort
     u = bag["/controller_state"]["command"]         # numpy column per field ("header.stamp.sec" ...)
@@ -29,7 +29,7 @@ from .errors import (
 )
 from .msgdef import MsgDef, find_msg_file, load_installed, parse_msg, parse_schema, schema_text, type_hash
 from .qos import dump_qos, make_qos, parse_qos
-from .reader import bag_files, bag_info, iter_messages, read_bag, read_joint_states
+from .reader import bag_files, bag_info, iter_messages, read_bag, read_joint_states, storage_of
 from .writer import RUN_METADATA_NAME, BagWriter, package_version, run_metadata
 
 __all__ = [
@@ -67,5 +67,6 @@ __all__ = [
     "read_joint_states",
     "run_metadata",
     "schema_text",
+    "storage_of",
     "type_hash",
 ]

@@ -97,7 +97,7 @@ def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
     if not files:
         files = sorted(p.glob("*.mcap"), key=lambda f: (len(f.name), f.name))
     if not files:
-        raise NotMcapError(f"{p}: directory contains no .mcap or .db3 file")
+        raise NotMcapError(f"{p}: directory contains no .mcap file (and no .db3 file)")
     return p, files
 
 
