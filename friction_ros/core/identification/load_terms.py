@@ -19,8 +19,9 @@ with ``a sin q + b cos q = gravity sin(q + gravity_phase)``, ``gravity = hypot(a
 the torque the gear transmits, estimated from a first fit without the load-dependent term
 (:func:`transmitted_torque`).
 
-Which terms a log needs is decided by validation (:func:`select_terms`): forward selection on the
-Coulomb-viscous backbone (linear, so every candidate costs one least-squares solve), a term kept
+Which terms a log needs is decided by validation (:func:`select_terms`): forward selection on a
+linear backbone (inertia, viscous, Coulomb and a bank of Stribeck bumps: every candidate costs one
+least-squares solve, :func:`backbone_fit`), a term kept
 only when it lowers the validation MSE by at least ``min_gain`` (2 %); the number of ripple
 harmonics H the same way (the smallest H within 1 % of the best).
 """
@@ -183,15 +184,52 @@ class Selection:
         return rows
 
 
-def backbone_fit(terms: LoadTerms, train, val, eps: float):
-    """(validation MSE, fit) of the Coulomb-viscous backbone with ``terms`` (linear: one solve)."""
-    from friction_ros.core.identification.dynamic_fit import fit_time_domain
-    from friction_ros.core.identification.models import spec_for
+#: Stribeck velocities [rad/s] of the backbone's bumps sgn(v) exp(-(v/vs_i)^2)
+BACKBONE_STRIBECK = (0.003, 0.01, 0.03, 0.1, 0.3)
 
-    spec = spec_for("coulomb_viscous", eps)
-    spec.load = terms
-    fit = fit_time_domain(spec, train, optimizer="none", local="none")
-    e = np.concatenate([fit.predict(r) - r.torque for r in val])
+
+@dataclass
+class BackboneFit:
+    """The selection backbone's linear fit: coefficients per column name."""
+
+    terms: LoadTerms
+    coefficients: dict
+
+    @property
+    def inertia(self) -> float:
+        return float(self.coefficients["J"])
+
+    @property
+    def load_coefficients(self) -> dict:
+        return {n: self.coefficients[n] for n in self.terms.names}
+
+    def predict(self, r) -> np.ndarray:
+        return _backbone_columns(self.terms, r) @ np.array(list(self.coefficients.values()))
+
+
+def _backbone_columns(terms: LoadTerms, r) -> np.ndarray:
+    sg = np.clip(r.velocity / terms.eps, -1.0, 1.0)
+    av = np.abs(r.velocity)
+    cols = [r.acceleration, r.velocity, sg] + [sg * np.exp(-((av / vs) ** 2)) for vs in BACKBONE_STRIBECK]
+    return np.column_stack([*cols, terms.columns(r.position, r.velocity, r.transmitted)])
+
+
+def backbone_fit(terms: LoadTerms, train, val, eps: float | None = None):
+    """(validation MSE, :class:`BackboneFit`) of the selection backbone with ``terms``.
+
+    The backbone is linear, so every candidate costs one least-squares solve: inertia, viscous,
+    Coulomb and a bank of Stribeck bumps (:data:`BACKBONE_STRIBECK`, any sign) for the friction
+    map, plus the load columns. It only ranks the load terms; the models are fitted afterwards.
+    """
+    names = ["J", "fv", "fc", *[f"stribeck{vs:g}" for vs in BACKBONE_STRIBECK], *terms.names]
+    # samples whose direction the velocity estimate cannot tell (|v| < eps, eps >= 3 sigma of its
+    # noise) carry a sign error of up to 2 fs: left out, they would hide every smaller term
+    X = np.vstack([_backbone_columns(terms, r)[np.abs(r.velocity) >= terms.eps] for r in train])
+    y = np.concatenate([r.torque[np.abs(r.velocity) >= terms.eps] for r in train])
+    scale = np.sqrt(np.maximum(np.sum(X**2, axis=0), 1e-300))
+    coef, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    fit = BackboneFit(terms, dict(zip(names, (coef / scale).tolist())))
+    e = np.concatenate([(fit.predict(r) - r.torque)[np.abs(r.velocity) >= terms.eps] for r in val])
     return float(np.mean(e**2)), fit
 
 
@@ -210,60 +248,37 @@ def select_terms(
     ripple_period: float = 2.0 * math.pi,
     max_ripple: int = MAX_RIPPLE,
     min_gain: float = MIN_GAIN,
-    candidates=("gravity", "offset", "spring"),
-    load_friction: bool = True,
+    candidates=("gravity", "offset", "spring", "load_friction", "ripple"),
 ) -> Selection:
     """Choose the load terms by validation (module docstring); returns a :class:`Selection`.
 
-    ``train``/``val``: lists of JointData. The returned ``joint_load``/``inertia`` are the
-    backbone's, used to estimate the transmitted torque of the load-dependent friction.
+    Greedy forward selection over ``candidates``: at each step every unused candidate is tried
+    (``ripple`` adds one harmonic, up to ``max_ripple``), the one with the lowest validation MSE is
+    kept if it lowers it by ``min_gain``. ``load_friction`` uses the transmitted torque of the
+    current backbone (its inertia and load terms). ``train``/``val``: lists of JointData. The
+    returned ``joint_load``/``inertia`` are the backbone's, for the transmitted torque.
     """
     terms = LoadTerms(ripple_period=ripple_period, eps=eps)
-    best, fit = backbone_fit(terms, train, val, eps)
+    best, fit = backbone_fit(terms, train, val)
     base = best
     steps: list[tuple[str, float, float, bool]] = []
     remaining = list(candidates)
-    while remaining:  # greedy forward selection of the load-torque terms
+    while remaining:
+        jl = terms.joint_load(fit.load_coefficients)
+        tr_train = with_transmitted(train, max(fit.inertia, 0.0), jl)
+        tr_val = with_transmitted(val, max(fit.inertia, 0.0), jl)
         trials = []
         for c in remaining:
-            t = replace(terms, **{c: True})
-            mse, f = backbone_fit(t, train, val, eps)
-            trials.append((mse, c, t, f))
-        mse, c, t, f = min(trials, key=lambda x: x[0])
+            t = replace(terms, ripple=terms.ripple + 1) if c == "ripple" else replace(terms, **{c: True})
+            mse, f = backbone_fit(t, tr_train, tr_val)
+            label = f"+ripple={t.ripple}" if c == "ripple" else f"+{c}"
+            trials.append((mse, c, t, f, label))
+        mse, c, t, f, label = min(trials, key=lambda x: x[0])
         keep = mse < (1.0 - min_gain) * best
-        for m2, c2, _, _ in trials:
-            steps.append((f"+{c2}", m2, best, keep and c2 == c))
+        steps += [(lb, m2, best, keep and c2 == c) for m2, c2, _, _, lb in trials]
         if not keep:
             break
         terms, best, fit = t, mse, f
-        remaining.remove(c)
-
-    def joint_load_of(f, t):
-        return t.joint_load(dict(zip(f.spec.linear_all, f.beta.tolist())))
-
-    inertia = float(fit.coefficients.get("J", 0.0))
-    jl = joint_load_of(fit, terms)
-    if load_friction:
-        tr_train = with_transmitted(train, inertia, jl)
-        tr_val = with_transmitted(val, inertia, jl)
-        t = replace(terms, load_friction=True)
-        mse, f = backbone_fit(t, tr_train, tr_val, eps)
-        keep = mse < (1.0 - min_gain) * best
-        steps.append(("+load_friction", mse, best, keep))
-        if keep:
-            terms, best, fit = t, mse, f
-            train, val = tr_train, tr_val
-    if max_ripple > 0:
-        by_h = {0: (best, fit)}
-        for h in range(1, max_ripple + 1):
-            by_h[h] = backbone_fit(replace(terms, ripple=h), train, val, eps)
-        lowest = min(m for m, _ in by_h.values())
-        h = min(h for h, (m, _) in by_h.items() if m <= lowest * 1.01)
-        if h and by_h[h][0] < (1.0 - min_gain) * best:
-            for k in range(1, max_ripple + 1):
-                steps.append((f"+ripple={k}", by_h[k][0], best, k == h))
-            terms, (best, fit) = replace(terms, ripple=h), by_h[h]
-        else:
-            hb = min(by_h, key=lambda k: by_h[k][0])
-            steps.append((f"+ripple (best {hb} harmonics)", lowest, best, False))
-    return Selection(terms, steps, base, float(fit.coefficients.get("J", 0.0)), joint_load_of(fit, terms))
+        if c != "ripple" or terms.ripple >= max_ripple:
+            remaining.remove(c)
+    return Selection(terms, steps, base, max(fit.inertia, 0.0), terms.joint_load(fit.load_coefficients))

@@ -57,7 +57,12 @@ from friction_ros.core.identification.plateau_detection import (
     find_plateaus,
     load_offset,
 )
-from friction_ros.core.identification.records import ExcitationError, JointData, concat_records
+from friction_ros.core.identification.records import (
+    ExcitationError,
+    JointData,
+    concat_records,
+    quantization_velocity_noise,
+)
 from friction_ros.core.identification.training_split import split, training_segments, training_window
 from friction_ros.core.identification.velocity_regimes import (
     high_velocity_mask,
@@ -101,6 +106,7 @@ def fit_records(
     ripple_period: float = 2.0 * math.pi,
     load_eps: float | None = None,
     validation_records: list[JointData] | None = None,
+    residual: str = "auto",
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -119,6 +125,10 @@ def fit_records(
     ``load_eps`` [rad/s]: the linear zone of sgn(v) in those terms (default: ``eps``, at least
     three times the velocity noise). ``validation_records``: validate on these whole records and
     train on the whole of ``records`` (cross-validation over runs, :func:`cross_validate_runs`).
+    ``residual``: a learned residual on top of the best physics model
+    (:mod:`~friction_ros.core.identification.residual_learning`; ``auto``: on for records without
+    plateaus, ``none``, ``mlp`` or ``rff``); the combined model ``<physics>+residual`` competes in
+    the recommendation like any other (its parameter count includes the network's).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
     t_start = time.perf_counter()
@@ -320,6 +330,16 @@ def fit_records(
             progress(name, 1.0)
     candidates = {n: r for n, r in results.items() if r.config is not None}
     recommendation = metrics.recommend_with_rule({n: r.metrics for n, r in candidates.items()})
+    check_choice("residual", residual, ["auto", "none", "mlp", "rff"])
+    if residual == "auto":
+        residual = "none" if len(plateaus) >= 3 else "auto"
+    if residual != "none" and recommendation["model"] is not None:
+        combined = _with_residual(
+            results[recommendation["model"]], train, val, vall, residual, seed, hm, lm, scored, warnings
+        )
+        if combined is not None:
+            results[combined.name] = candidates[combined.name] = combined
+            recommendation = metrics.recommend_with_rule({n: r.metrics for n, r in candidates.items()})
     nmse = [r.metrics.get("nmse_percent", math.nan) for r in candidates.values()]
     if len(plateaus) >= 3 and nmse and all(not (x < metrics.NO_SIGNAL_NMSE) for x in nmse):
         recommendation = metrics.recommend_by_plateaus(
@@ -366,11 +386,11 @@ def fit_records(
 def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
     """(LoadTerms, Selection | None) for the ``load`` option of :func:`fit_records`."""
     if load_eps is None:  # sgn(v) must not flip on velocity noise: at least 3 sigma of it
-        r = concat_records(train)
+        r = train[0]
         noise = (
             float(np.median(np.abs(np.diff(r.velocity, 2)))) / (0.6745 * math.sqrt(6.0)) if r.n > 3 else 0.0
         )
-        load_eps = max(eps, 3.0 * noise)
+        load_eps = max(eps, 3.0 * noise, 3.0 * quantization_velocity_noise(r))
     terms = load
     if isinstance(load, str):
         if load == "auto" and len(plateaus) >= 3:
@@ -383,9 +403,10 @@ def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
         raise ParameterError(f"load = {load!r} is not allowed: must be auto, none, a term list or LoadTerms")
     if terms.load_friction:  # the transmitted torque needs a first fit of the other terms
         base = dataclasses.replace(terms, load_friction=False)
-        _, fit = backbone_fit(base, train, val, terms.eps)
-        jl = base.joint_load(fit.load_coefficients)
-        return terms, Selection(terms, [], math.nan, float(fit.coefficients.get("J", 0.0)), jl)
+        _, fit = backbone_fit(base, train, val)
+        return terms, Selection(
+            terms, [], math.nan, max(fit.inertia, 0.0), base.joint_load(fit.load_coefficients)
+        )
     return terms, None
 
 
@@ -415,6 +436,75 @@ def _verdict(results, rec, val, vall, terms, eps) -> dict:
         )
     )
     return {"explains_little": True, "text": text, "suggestions": tips, "nmse_percent": nm}
+
+
+def _with_residual(
+    base: ModelResult, train, val, vall, kind, seed, hm, lm, scored, warnings
+) -> ModelResult | None:
+    """``<base>+residual``: a learned map of what ``base`` leaves (fit_residual), or None."""
+    from friction_ros.core.identification.residual_learning import fit_residual
+
+    t0 = time.perf_counter()
+    dt = float(train[0].dt)
+    rt = [r.torque - base.predict(r) for r in train]
+    yv = np.asarray(base.extra["validation_prediction"])
+    rv, i = [], 0
+    for r in val:
+        rv.append(r.torque - yv[i : i + r.n])
+        i += r.n
+    try:
+        model, rep = fit_residual(
+            [r.position for r in train],
+            [r.velocity for r in train],
+            None,
+            rt,
+            dt,
+            kind=kind,
+            seed=seed,
+            validation=([r.position for r in val], [r.velocity for r in val], None, rv),
+        )
+    except ParameterError as exc:
+        warnings.append(f"learned residual not fitted: {exc}")
+        return None
+    if model is None:
+        warnings.append(
+            f"learned residual: no candidate beat the {base.name} residual on validation; not used"
+        )
+        return None
+    extra = np.concatenate([model.predict_batch(r.position, r.velocity) for r in val])
+    yhat = yv + extra
+    chosen = rep.get("chosen")
+    k = int(base.metrics.get("n_params", 1)) + int(rep["candidates"][chosen].get("n_params", 0))
+    res = ModelResult(
+        f"{base.name}+residual",
+        f"{base.method} + learned residual ({chosen})",
+        dict(base.coefficients),
+        base.config,
+        metrics.compare(yhat, vall.torque, hm, k, low_mask=lm, scored=scored),
+        {},
+        time.perf_counter() - t0,
+        base.steady_state,
+        lambda r, b=base.predict, m=model: b(r) + m.predict_batch(r.position, r.velocity),
+        notes=[
+            f"learned residual ({chosen}, {rep['candidates'][chosen].get('n_params', 0)} parameters, "
+            f"step {rep['candidates'][chosen].get('step_us', float('nan')):.1f} us) on the {base.name} residual; "
+            f"features: {', '.join(rep['features'])}"
+        ],
+    )
+    res.extra.update(
+        {
+            k: v
+            for k, v in base.extra.items()
+            if k in ("load", "load_coefficients", "load_part", "per_direction")
+        }
+    )
+    res.extra["residual"] = model.to_config()
+    res.extra["residual_report"] = {
+        c: {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
+        for c, info in rep["candidates"].items()
+    }
+    res.extra["validation_prediction"] = yhat
+    return res
 
 
 def _load_part(fit) -> Callable[[JointData], np.ndarray]:
