@@ -7,7 +7,11 @@ joint of a bag as a record), ``velocity_regimes``, ``plateau_detection``, ``brea
 ``dynamic_fit`` (output error with DE/GA + Nelder-Mead, inertia jointly), ``learned`` (ANFIS,
 nu-SVR per direction), ``identifiability`` (collinearity flags, confidence intervals), ``metrics``
 (seed 003 eq. 4 NMSE, AIC/BIC, recommendation), ``report`` (Markdown, PNG, JSON, YAML),
-``seed001`` (seed 001's unity-feedback position output error), ``synthetic`` (known-truth runs).
+``seed001`` (seed 001's unity-feedback position output error), ``synthetic`` (known-truth runs),
+``load_terms`` (gravity, offset, spring, load- and position-dependent friction regressors, chosen by
+validation), ``diagnosis`` (what a poor fit's residual follows), ``residual_learning`` (learned
+residual on a physics backbone), ``csv_loading``/``log_loading`` (CSV logs, any bag),
+``realistic_joint`` (a realistic synthetic robot joint with known truth).
 
 Entry points: :func:`fit_bag` and :func:`fit_records` (``pipeline``, which compares the models;
 ``model_fits`` turns each family's fit into a ``ModelResult`` of ``fit_results``).
@@ -15,7 +19,12 @@ Entry points: :func:`fit_bag` and :func:`fit_records` (``pipeline``, which compa
 
 from friction_ros.core.identification.bag_loading import load_bag
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
-from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_bag, fit_records
+from friction_ros.core.identification.pipeline import (
+    DEFAULT_MODELS,
+    cross_validate_runs,
+    fit_bag,
+    fit_records,
+)
 from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 __all__ = [
@@ -24,6 +33,7 @@ __all__ = [
     "FitResult",
     "JointData",
     "ModelResult",
+    "cross_validate_runs",
     "fit_bag",
     "fit_records",
     "load_bag",

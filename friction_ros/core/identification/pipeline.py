@@ -598,3 +598,33 @@ def fit_bag(
         joint=joint,
     )
     return res
+
+
+def cross_validate_runs(records: list[JointData], models=DEFAULT_MODELS, **options) -> dict:
+    """Cross-validation over runs: for each record, train on all the others and validate on it.
+
+    What a user deploying a model needs to know: how it does on a run it has not seen. Returns
+    ``{"folds": [{"validation": source, "recommended": name, "nmse_percent": {model: NMSE}}, ...],
+    "mean_nmse_percent": {model: mean over folds}}``; needs at least two records. ``options`` are
+    :func:`fit_records`'s.
+    """
+    records = [records] if isinstance(records, JointData) else list(records)
+    if len(records) < 2:
+        raise ParameterError(f"cross-validation over runs needs >= 2 runs: got {len(records)}")
+    options = {**options, "identifiability_check": False}
+    folds = []
+    for k, held in enumerate(records):
+        rest = records[:k] + records[k + 1 :]
+        res = fit_records(rest, models, validation_records=[held], **options)
+        folds.append(
+            {
+                "validation": held.meta.get("source", f"run {k}"),
+                "recommended": res.recommended,
+                "nmse_percent": {
+                    n: float(m.metrics.get("nmse_percent", math.nan)) for n, m in res.models.items()
+                },
+            }
+        )
+    names = sorted({n for f in folds for n in f["nmse_percent"]})
+    mean = {n: float(np.mean([f["nmse_percent"].get(n, math.nan) for f in folds])) for n in names}
+    return {"folds": folds, "mean_nmse_percent": mean}
