@@ -20,6 +20,7 @@ option, output collision), 1 unexpected error.
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 
 
@@ -147,6 +148,30 @@ def build_parser() -> argparse.ArgumentParser:
         type=float,
         default=None,
         help="high/low velocity split [rad/s] (default automatic)",
+    )
+    p.add_argument(
+        "--load",
+        default="auto",
+        help="load, gravity and position terms fitted with every model: auto (chosen by validation when the "
+        "log has no plateaus), none, or a list of gravity,offset,spring,load_friction,ripple=<harmonics>",
+    )
+    p.add_argument(
+        "--ripple-period",
+        type=float,
+        default=2.0 * math.pi,
+        help="period of the position-dependent friction [rad] (2*pi/N for the motor angle of an N:1 gear; "
+        "default 2*pi)",
+    )
+    p.add_argument(
+        "--residual",
+        choices=["auto", "none", "mlp", "rff"],
+        default="auto",
+        help="learned residual on top of the best physics model (auto: for logs without plateaus)",
+    )
+    p.add_argument(
+        "--cross-validate",
+        action="store_true",
+        help="with several runs: also train on all but one run and validate on it, for each run",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -287,6 +312,10 @@ def main(argv: list[str] | None = None) -> int:
                 progress=on_progress,
                 columns=columns,
                 time_scale=args.time_scale,
+                load=args.load,
+                ripple_period=args.ripple_period,
+                residual=args.residual,
+                cross_validate=args.cross_validate,
             )
         finally:
             if progress is not None:
@@ -312,6 +341,14 @@ def main(argv: list[str] | None = None) -> int:
     rec = getattr(res, "recommendation", None) or {}
     if rec.get("rule"):
         print(f"recommended by: {rec['rule']}" + (f" ({rec['reason']})" if rec.get("reason") else ""))
+    if res.options.get("load_terms", "none") != "none":
+        print(f"load terms: {res.options['load_terms']}")
+    cv = res.options.get("cross_validation")
+    if cv:
+        print("cross-validation over runs (validation NMSE %, trained on the other runs):")
+        for f in cv["folds"]:
+            row = ", ".join(f"{n} {x:.4g}" for n, x in f["nmse_percent"].items())
+            print(f"  {f['validation']}: {row}")
     for mode, v in (res.gate or {}).items():
         print(f"compensation {mode:<12} {v.reason}")
     for w in res.warnings:

@@ -549,6 +549,7 @@ def fit_bag(
     gate: dict | None = None,
     columns: dict | None = None,
     time_scale: float = 1.0,
+    cross_validate: bool = False,
     **options,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
@@ -560,6 +561,7 @@ def fit_bag(
     residuals). ``gate``: keyword arguments of
     :func:`friction_ros.core.identification.gating.gate_fit`; the compensation modes of the
     parameter file are then checked in closed loop first (refused ones written disabled).
+    ``cross_validate``: with several logs, also :func:`cross_validate_runs` (``options["cross_validation"]``).
     """
     from friction_ros.core.identification import report
 
@@ -583,6 +585,12 @@ def fit_bag(
         for p in bag_paths
     ]
     res = fit_records(recs, models, label=", ".join(str(p) for p in bag_paths), **options)
+    if cross_validate:
+        if len(recs) < 2:
+            res.warnings.append("--cross-validate needs two or more runs: skipped")
+        else:
+            cv_opts = {k: v for k, v in options.items() if k not in ("progress", "identifiability_check")}
+            res.options["cross_validation"] = cross_validate_runs(recs, models, **cv_opts)
     res.options["plant_preset"] = plant_preset
     if gate is not None:  # the safety gate before the parameter file enables a mode
         from friction_ros.core.identification.gating import gate_fit

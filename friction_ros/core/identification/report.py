@@ -77,6 +77,8 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
                     "fit_seconds": m.seconds,
                     "notes": m.notes,
                     "steady_state": m.extra.get("steady_state_grid"),
+                    "load": m.extra.get("load"),
+                    "residual": m.extra.get("residual_report"),
                 }
                 for n, m in res.models.items()
             },
@@ -178,8 +180,9 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         + (f"; {res.recommendation['reason']}" if (res.recommendation or {}).get("reason") else "")
         + ").",
         "",
-        "## Coefficients",
     ]
+    L += _load_section(res) + _verdict_section(res) + _cross_validation_section(res)
+    L += ["## Coefficients"]
     for n, m in res.models.items():
         L += ["", f"### {n}", ""]
         ci = m.identifiability.get("ci95", {}) if m.identifiability else {}
@@ -245,6 +248,72 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         for title, rel in plots.items():
             L += [f"### {title}", "", f"![{title}]({rel})", ""]
     return "\n".join(L) + "\n"
+
+
+def _load_section(res) -> list[str]:
+    """Load, gravity and position terms: what the selection tried and the recommended model's values."""
+    terms = res.options.get("load_terms", "none")
+    if terms == "none" and not res.options.get("load_selection"):
+        return []
+    L = ["## Load, gravity and position terms", "", f"Identified jointly with every model: **{terms}**.", ""]
+    steps = res.options.get("load_selection") or []
+    if steps:
+        L += (
+            [
+                "Chosen by validation (forward selection on a linear backbone; a term is kept when it lowers the "
+                "validation MSE by >= 2 %):",
+                "",
+            ]
+            + [f"- {s}" for s in steps]
+            + [""]
+        )
+    m = res.models.get(res.recommended) if res.recommended else None
+    load = (m.extra.get("load") if m else None) or {}
+    if load:
+        L += [
+            f"Values of {res.recommended} (the `load` section of the parameter file, used as feedforward):",
+            "",
+        ]
+        L += ["| term | value |", "|---|---|"]
+        for k, v in load.items():
+            L.append(f"| {k} | {json.dumps(_clean(v)) if isinstance(v, list) else _fmt(v, 5)} |")
+        L += [
+            "",
+            "A constant `offset` cannot be told apart from an offset of the torque measurement: zero the sensor "
+            "if it is one, before compensating with it.",
+            "",
+        ]
+    return L
+
+
+def _verdict_section(res) -> list[str]:
+    v = res.options.get("verdict") or {}
+    if not v.get("explains_little"):
+        return []
+    return ["## Verdict: the model explains little", "", v["text"], ""]
+
+
+def _cross_validation_section(res) -> list[str]:
+    cv = res.options.get("cross_validation")
+    if not cv:
+        return []
+    names = list(cv["mean_nmse_percent"])
+    L = [
+        "## Cross-validation over runs",
+        "",
+        "Each run validated by models trained on all the other runs (what a deployed model meets).",
+        "",
+        "| validation run | recommended | " + " | ".join(f"{n} NMSE [%]" for n in names) + " |",
+        "|---|---|" + "---|" * len(names),
+    ]
+    for f in cv["folds"]:
+        L.append(
+            f"| {f['validation']} | {f['recommended']} | "
+            + " | ".join(_fmt(f["nmse_percent"].get(n), 4) for n in names)
+            + " |"
+        )
+    L.append("| mean | | " + " | ".join(_fmt(cv["mean_nmse_percent"][n], 4) for n in names) + " |")
+    return L + [""]
 
 
 def make_plots(res, out: Path) -> dict:
