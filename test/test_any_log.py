@@ -27,6 +27,8 @@ from friction_ros.core.identification.records import ExcitationError
 PENDULUM = Path(__file__).parent / "data" / "dfki_pendulum" / "control_method_pd_system_identification.csv"
 EPOCH_NS = 1_700_000_000_000_000_000
 MODELS = ["coulomb_viscous", "stribeck"]
+#: physics models only: the learned residual (fit_records residual="auto") is another test's subject
+NO_RESIDUAL = ["--residual", "none"]
 
 
 # ------------------------------------------------------------------------------------------ writers
@@ -173,9 +175,10 @@ def test_db3_events_match_mcap(logs):
 
 
 def test_same_fit_from_every_storage(logs):
-    res = {k: fit_records(load_log(p, events_topic=None), MODELS) for k, p in logs.items()}
+    res = {k: fit_records(load_log(p, events_topic=None), MODELS, residual="none") for k, p in logs.items()}
     assert set(res["mcap"].models) == set(MODELS)
-    assert res["mcap"].models["coulomb_viscous"].coefficients["fc"] > 0
+    for m in MODELS:  # a real fit, not two empty results compared
+        assert any(v != 0 for v in _coefficients(res["mcap"])[m].values()), m
     _same_fit(res["mcap"], res["db3"])
     _same_fit(res["mcap"], res["csv"])
 
@@ -218,7 +221,7 @@ def test_bag_ignores_csv_options_with_a_warning(logs):
 def test_cli_fits_a_db3_bag(logs, tmp_path, capsys):
     out = tmp_path / "fit_db3"
     argv = [str(logs["db3"]), "--models", "coulomb_viscous", "--out", str(out), "--no-gate", "--no-plots"]
-    rc = main([*argv, "--quiet"])
+    rc = main([*argv, "--quiet", *NO_RESIDUAL])
     text = capsys.readouterr()
     assert rc == 0, text.err
     params = out / "friction_params.yaml"
@@ -235,7 +238,7 @@ def test_cli_fits_a_csv_with_named_columns_and_time_scale(run, tmp_path, capsys)
     out = tmp_path / "fit_csv"
     argv = [str(csv), "--columns", "time=clock_ns,position=angle,velocity=rate,effort=drive_torque"]
     argv += ["--time-scale", "1e-9", "--models", "coulomb_viscous", "--out", str(out)]
-    rc = main([*argv, "--no-gate", "--no-plots", "--quiet"])
+    rc = main([*argv, "--no-gate", "--no-plots", "--quiet", *NO_RESIDUAL])
     text = capsys.readouterr()
     assert rc == 0, text.err
     assert (out / "friction_params.yaml").read_text().startswith("# friction-fit:")
@@ -283,7 +286,7 @@ def test_cli_two_joints(two_joints, tmp_path, capsys):
     _expect_error([str(two), "--out", str(tmp_path / "a"), "--quiet"], capsys, str(two), "j1, j2", "--joint")
     rc = main(
         [str(two), "--joint", "j2", "--models", "coulomb_viscous", "--out", str(tmp_path / "b")]
-        + ["--no-gate", "--no-plots", "--quiet"]
+        + ["--no-gate", "--no-plots", "--quiet", *NO_RESIDUAL]
     )
     assert rc == 0, capsys.readouterr().err
     assert (tmp_path / "b" / "friction_params.yaml").exists() and two.read_bytes() == before
@@ -304,12 +307,15 @@ def test_csv_motor_current_gives_the_same_fit(run, tmp_path, capsys):
     b = load_csv(cur, torque_constant=kt, gear_ratio=ratio)
     assert b.meta["columns"] == {"time": "t", "position": "q", "velocity": "dq", "current": "iq"}
     assert np.array_equal(a.torque, b.torque)
-    _same_fit(fit_records(a, ["coulomb_viscous"]), fit_records(b, ["coulomb_viscous"]))
+    _same_fit(
+        fit_records(a, ["coulomb_viscous"], residual="none"),
+        fit_records(b, ["coulomb_viscous"], residual="none"),
+    )
     with pytest.raises(ExcitationError, match="--torque-constant"):
         load_csv(cur)
     rc = main(
         [str(cur), "--torque-constant", "0.5", "--gear-ratio", "4", "--models", "coulomb_viscous"]
-        + ["--out", str(tmp_path / "fit"), "--no-gate", "--no-plots", "--quiet"]
+        + ["--out", str(tmp_path / "fit"), "--no-gate", "--no-plots", "--quiet", *NO_RESIDUAL]
     )
     assert rc == 0, capsys.readouterr().err
 
@@ -328,7 +334,7 @@ def test_csv_jittered_stamps_recover_known_friction(tmp_path):
     d = load_csv(csv)
     assert abs(d.dt - 2e-3) < 2e-5 and np.allclose(np.diff(d.t), d.dt)
     assert d.meta["columns"]["time"] == "timestamp"
-    c = fit_records(d, ["coulomb_viscous"]).models["coulomb_viscous"].coefficients
+    c = fit_records(d, ["coulomb_viscous"], residual="none").models["coulomb_viscous"].coefficients
     assert abs(c["fc"] - fc) < 0.03 * fc and abs(c["fv"] - fv) < 0.05 * fv, c
 
 
