@@ -106,7 +106,7 @@ def fit_records(
     ripple_period: float = 2.0 * math.pi,
     load_eps: float | None = None,
     validation_records: list[JointData] | None = None,
-    residual: str = "auto",
+    residual: str = "none",
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -126,8 +126,9 @@ def fit_records(
     three times the velocity noise). ``validation_records``: validate on these whole records and
     train on the whole of ``records`` (cross-validation over runs, :func:`cross_validate_runs`).
     ``residual``: a learned residual on top of the best physics model
-    (:mod:`~friction_ros.core.identification.residual_learning`; ``auto``: on for records without
-    plateaus, ``none``, ``mlp`` or ``rff``); the combined model ``<physics>+residual`` competes in
+    (:mod:`~friction_ros.core.identification.residual_learning`; ``none`` (default here; friction-fit
+    defaults to ``auto``), ``auto`` (for records without plateaus: mlp or rff by validation), ``mlp``
+    or ``rff``); the combined model ``<physics>+residual`` competes in
     the recommendation like any other (its parameter count includes the network's).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
@@ -425,10 +426,10 @@ def _verdict(results, rec, val, vall, terms, eps) -> dict:
         used.add("position-dependent friction")
     resid = vall.torque - np.asarray(results[rec].extra["validation_prediction"])
     tips = diagnosis.suggestions(val, resid, used, max(eps, terms.eps))
-    what = "explains nothing" if nm >= metrics.NO_SIGNAL_NMSE else "explains little"
+    what = " (no better than a constant: it explains nothing)" if nm >= metrics.NO_SIGNAL_NMSE else ""
     text = (
-        f"the recommended model {rec} {what} of the measured torque (validation NMSE {nm:.1f} % > "
-        f"{EXPLAINS_LITTLE_NMSE:g} %): do not compensate with it before checking; "
+        f"the recommended model {rec} explains little of the measured torque (validation NMSE {nm:.1f} % > "
+        f"{EXPLAINS_LITTLE_NMSE:g} %){what}: do not compensate with it before checking; "
         + (
             "; ".join(tips)
             if tips
