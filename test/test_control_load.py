@@ -1,4 +1,5 @@
-"""Issue 17 items 2 and 4: the controller's feedforward of the identified joint load (section load)."""
+"""Issue 17 items 2 and 4: the controller's feedforward of the identified joint load (section load)
+and of the learned residual (section residual)."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 
 from friction_ros.core.control.controller import CompensatingController, controller_from_ros_parameters
 from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.friction.learned_residual import LearnedResidual, feature_names, feature_settings
 from friction_ros.core.harness import run_closed_loop
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
@@ -197,3 +199,106 @@ def test_bad_load_values_are_refused_naming_the_key():
     assert c.config()["load"]["eps"] == 0.01
     c.reconfigure({"load": {"gravity": 0.0}})
     assert c.config()["load"] == {**JointLoad(**LOAD).to_config(), "gravity": 0.0}
+
+
+# ------------------------------------------------------------------------------ learned residual
+def tiny_residual(seed: int = 3, clip: float = 0.3, use_command: bool = True) -> dict:
+    """A residual section with random weights: an MLP [n, 4, 1] over the default features (and the
+    command), clipped to +-clip N*m; training range +-5 per feature."""
+    rng = np.random.default_rng(seed)
+    s = feature_settings({"use_command": use_command})
+    n = len(feature_names(s))
+    return {
+        "kind": "mlp",
+        **s,
+        "feature_mean": [0.0] * n,
+        "feature_scale": [1.0] * n,
+        "feature_low": [-5.0] * n,
+        "feature_high": [5.0] * n,
+        "layer_sizes": [n, 4, 1],
+        "weights": rng.normal(0.0, 0.5, 4 * n + 4).tolist(),
+        "biases": rng.normal(0.0, 0.1, 5).tolist(),
+        "output_scale": 0.2,
+        "clip_low": -clip,
+        "clip_high": clip,
+    }
+
+
+def test_residual_section_adds_exactly_the_residual_step():
+    """u gains residual.step(q_measured, v_measured, previous command), step by step: a twin
+    LearnedResidual fed the same inputs gives learned_feedforward bit for bit."""
+    section = tiny_residual()
+    twin = LearnedResidual.from_config(section)
+    base_cfg = {"mode": "pid", "pid": PD, "inertia": 0.0012, "friction": {"model": CV}}
+    ctrl = CompensatingController({**base_cfg, "residual": section})
+    base = CompensatingController(base_cfg)
+    prev, nonzero = 0.0, 0
+    for k in range(400):
+        t = k * 1e-3
+        ref = (0.2 * math.sin(3 * t), 0.6 * math.cos(3 * t), -1.8 * math.sin(3 * t))
+        meas = (ref[0] - 0.01 * math.sin(17 * t), ref[1] + 0.05 * math.cos(11 * t))
+        tm = ctrl.compute(t, ref, meas, 1e-3)
+        tb = base.compute(t, ref, meas, 1e-3)
+        r = twin.step(meas[0], meas[1], prev)
+        assert tm.learned_feedforward == r
+        assert tm.command_unlimited - tb.command_unlimited == pytest.approx(r, abs=1e-12)
+        assert abs(r) <= 0.3
+        nonzero += r != 0.0
+        prev = tm.command
+    assert nonzero == 400
+    assert ctrl.config()["residual"]["kind"] == "mlp"
+    # after reset the history restarts: the same first value as a fresh map
+    ctrl.reset()
+    first = ctrl.compute(0.0, (0.0, 0.0, 0.0), (0.0, 0.0), 1e-3).learned_feedforward
+    assert first == LearnedResidual.from_config(section).step(0.0, 0.0, 0.0)
+
+
+def test_residual_follows_the_gain_the_source_and_the_fallback():
+    section = tiny_residual()
+    r0 = LearnedResidual.from_config(section).step(0.05, 0.1, 0.0)
+    assert r0 != 0.0
+
+    def first(source="feedforward", gain=1.0):
+        cfg = {"mode": "pid", "pid": PD, "friction": {"model": CV, "source": source, "gain": gain}}
+        c = CompensatingController({**cfg, "residual": section})
+        return c, c.compute(0.0, (0.0, 0.0, 0.0), (0.05, 0.1), 1e-3).learned_feedforward
+
+    assert first()[1] == r0
+    assert first(gain=0.5)[1] == 0.5 * r0
+    assert first(source="none")[1] == 0.0 and first(gain=0.0)[1] == 0.0
+    c, _ = first()
+    assert c._watch  # the residual is inside the loop: the limit-cycle detector watches it
+    c.compensation_fallback = True
+    assert c.compute(1e-3, (0.0, 0.0, 0.0), (0.05, 0.1), 1e-3).learned_feedforward == 0.0
+
+
+def test_nonfinite_residual_gives_zero_and_is_counted_once():
+    section = tiny_residual()
+    ctrl = CompensatingController({"mode": "pid", "pid": PD, "residual": section})
+    calls = iter([0.1, math.nan, math.inf, 0.2])
+    ctrl.residual.residual.step = lambda q, v, u: next(calls)
+    out = [ctrl.compute(k * 1e-3, (0.0, 0.0, 0.0), (0.0, 0.0), 1e-3) for k in range(4)]
+    assert [t.learned_feedforward for t in out] == [0.1, 0.0, 0.0, 0.2]
+    assert all(math.isfinite(t.command) for t in out)
+    assert ctrl.residual_nonfinite == 2
+    assert ctrl.residual_note.startswith("learned residual returned nan at t = 0.001 s")
+
+
+def test_residual_kind_none_is_bitwise_the_old_controller_and_bad_values_are_named():
+    cfg = {"mode": "pid", "pid": PD, "friction": {"model": CV, "source": "feedback", "gain": 0.95}}
+    a = run_closed_loop("abb_m19s", cfg, SINE, 0.5, 1e-3)
+    b = run_closed_loop("abb_m19s", {**cfg, "residual": {"kind": "none", "fade": 0.5}}, SINE, 0.5, 1e-3)
+    assert np.array_equal(a.torque, b.torque)
+    assert CompensatingController(cfg).residual is None
+    bad = tiny_residual()
+    for change, key in (
+        ({"fade": -1.0}, "controller.residual.fade = -1"),
+        ({"layer_sizes": [3, 4, 1]}, "controller.residual.layer_sizes = [3, 4, 1]"),
+        ({"weights": [0.1]}, "controller.residual.weights has 1 values"),
+        ({"kind": "gpt"}, "controller.residual.kind = 'gpt'"),
+    ):
+        with pytest.raises(ParameterError) as exc:
+            CompensatingController({**cfg, "residual": {**bad, **change}})
+        assert key in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
+    with pytest.raises(ParameterError, match=r"^residual\.fade = -1 "):
+        controller_from_ros_parameters({"pid": PD, "residual": {**bad, "fade": -1.0}})

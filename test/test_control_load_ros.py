@@ -1,4 +1,4 @@
-"""Issue 17: compensating_controller with a ``load`` section over DDS holds a joint against gravity."""
+"""Issue 17: compensating_controller with load and residual sections, over DDS and in process."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ LOAD = {"offset": 2.0, "spring": 3.0}  # what the fitter identifies: tau_load(q)
 REFERENCE = {"type": "step", "amplitude": 0.3, "rise_time": 0.3}  # move to 0.3 rad, then hold
 PD = {"p": 200.0, "d": 0.15}
 CV = {"model": "coulomb_viscous", "fc": 0.8, "fv": 0.01}
+REF_SINE = {"type": "sinusoid", "amplitude": 0.2, "frequency": 0.5}
 
 
 def test_load_section_is_fed_forward_and_holds_against_gravity(tmp_path):
@@ -99,3 +100,92 @@ def test_load_section_is_fed_forward_and_holds_against_gravity(tmp_path):
     # with the load term 1.28 mrad (what is left sits in the static-friction band fs / Kp = 4.75 mrad)
     assert rms["off"] > 0.01
     assert rms["node"] < rms["off"] / 8, rms
+
+
+def test_residual_section_over_dds_adds_the_residual_step(tmp_path):
+    """A residual section in the parameter file (int and float lists as ROS parameters): the node
+    publishes the learned term the core controller computes, residual.step(q, v, previous command)."""
+    from friction_msgs.msg import ControllerState
+    from test_control_load import tiny_residual
+
+    from friction_ros.core.friction.learned_residual import LearnedResidual
+
+    section = tiny_residual()
+    params = write_params(
+        tmp_path / "ctrl.yaml",
+        {
+            "compensating_controller": {
+                "ros__parameters": {
+                    "mode": "pid",
+                    "pid": PD,
+                    "friction": CV,
+                    "residual": section,
+                    "reference": REF_SINE,
+                }
+            }
+        },
+    )
+    sim_end = 0.5
+    with Listener() as lis:
+        states = lis.subscribe(ControllerState, "controller_state", RECORDED_QOS)
+        ctrl = [NodeSpec("compensating_controller", "", [params], {"use_sim_time": True})]
+        with Graph(ctrl) as g:
+            assert lis.wait_for(lambda: lis.matched("controller_state"), 60, g), "listener not matched"
+            plant = [NodeSpec("plant_simulator", "", [], {"preset": "abb_m19s", "mode": "lockstep"})]
+            with Graph(plant) as gp:
+                ok = lis.wait_for(lambda: states and stamp_s(states[-1]) >= sim_end, 120, gp)
+                g.assert_alive()
+                assert ok, "graph did not run"
+            assert "learned residual mlp" in g.output("compensating_controller")
+    by_k = {round(stamp_s(m) * 1000): m for m in states}
+    n = int(sim_end * 1000)
+    ks = np.array([k for k in range(n) if k in by_k])
+    assert len(ks) >= 0.9 * n, f"received only {len(ks)} of {n} controller states"
+    got = np.array([by_k[k].learned_feedforward for k in ks])
+    # the lockstep graph is the harness (test_nodes_ros), whose controller adds exactly
+    # residual.step(q, v, previous command) (test_control_load): the same numbers here
+    cfg = {"mode": "pid", "pid": PD, "friction": {"model": CV}, "residual": section}
+    res = run_closed_loop("abb_m19s", cfg, REF_SINE, n / 1000.0, 1e-3, record_terms=True)
+    want = res.terms["learned_feedforward"][ks]
+    assert np.max(np.abs(got - want)) < 1e-9
+    assert np.count_nonzero(got) == len(ks) and np.max(np.abs(got)) <= 0.3
+    # and the first period, from the map's fresh history, by the map itself
+    if 0 in by_k:
+        m = by_k[0]
+        assert m.learned_feedforward == LearnedResidual.from_config(section).step(m.position, m.velocity, 0.0)
+
+
+def test_load_and_residual_parameters_change_at_run_time(tmp_path):
+    """In-process node: the load.* parameters (empty ripple lists declared by type) change at run time,
+    a bad value is refused with its name, and a learned residual's kind is read-only."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from friction_ros.nodes.compensating_controller import CompensatingControllerNode
+
+    params = write_params(
+        tmp_path / "ctrl.yaml",
+        {"compensating_controller": {"ros__parameters": {"pid": PD, "load": {"gravity": 1.0}}}},
+    )
+    rclpy.init(args=["--ros-args", "--params-file", params])
+    try:
+        node = CompensatingControllerNode()
+        try:
+            assert node.controller.load.gravity == 1.0 and node.controller.residual is None
+            ok = node.set_parameters([Parameter("load.spring", value=2.5)])[0]
+            assert ok.successful, ok.reason
+            assert (node.controller.load.gravity, node.controller.load.spring) == (1.0, 2.5)
+            bad = node.set_parameters([Parameter("load.ripple_cos", value=[0.1])])[0]
+            assert not bad.successful
+            assert bad.reason.startswith("load.ripple_sin has 0 values: must have as many as load.ripple_cos")
+            both = node.set_parameters_atomically(
+                [Parameter("load.ripple_cos", value=[0.1]), Parameter("load.ripple_sin", value=[0.0])]
+            )
+            assert both.successful, both.reason
+            assert node.controller.load.ripple == ((1.0, 0.1, 0.0),)
+            kind = node.set_parameters([Parameter("residual.kind", value="mlp")])[0]
+            assert not kind.successful and "read-only" in kind.reason
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()

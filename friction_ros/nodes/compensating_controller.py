@@ -135,6 +135,7 @@ class CompensatingControllerNode(ParameterNode):
         self._last_state_wall = time.monotonic()
         self._timed_out = False
         self._fallback_logged = False
+        self._residual_logged = False
         self.counts = {
             "cycles": 0,
             "duplicates": 0,
@@ -145,9 +146,11 @@ class CompensatingControllerNode(ParameterNode):
         }
         self._compute_times: list[float] = []
         apply_scheduling(self, self.values)
+        c = self.controller
         self.get_logger().info(
-            f"mode {self.controller.mode}, friction model "
-            f"{self.controller.friction.model.name if self.controller.friction.model else 'none'}, "
+            f"mode {c.mode}, friction model {c.friction.model.name if c.friction.model else 'none'}, "
+            f"load feedforward {'on' if c.load.active else 'off'}, "
+            f"learned residual {c.residual.residual.kind if c.residual is not None else 'off'}, "
             f"reference {self.reference.config().get('type', '?')}"
         )
         if self.controller.feedback_bound_note:
@@ -175,6 +178,7 @@ class CompensatingControllerNode(ParameterNode):
             self._fallback_logged = False
         note_changed = new_ctrl.feedback_bound_note != self.controller.feedback_bound_note
         self.controller, self.reference, self.values = new_ctrl, new_ref, values
+        self._residual_logged = False
         self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))}")
         if note_changed and new_ctrl.feedback_bound_note:
             self.get_logger().warning(new_ctrl.feedback_bound_note)
@@ -341,6 +345,12 @@ class CompensatingControllerNode(ParameterNode):
             level, text = WARN, "no joint state: commanding zero torque"
         if self.controller.compensation_fallback:
             level, text = ERROR, self.controller.fallback_reason
+        values["residual_nonfinite"] = self.controller.residual_nonfinite
+        if self.controller.residual_note and not self._residual_logged:
+            self._residual_logged = True  # once per controller (a parameter change builds a new one)
+            self.get_logger().error(self.controller.residual_note)
+        if self.controller.residual_nonfinite and level == OK:
+            level, text = WARN, self.controller.residual_note
         values["compensation_fallback"] = int(self.controller.compensation_fallback)
         values["feedback_bound_limited"] = int(bool(self.controller.feedback_bound_note))
         if self.controller.feedback_bound_note:

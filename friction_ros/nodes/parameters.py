@@ -242,7 +242,8 @@ def _add_runtime_validation(node: ParameterNode, apply: Callable[[dict[str, Any]
 
 def current_values(node: ParameterNode, changes: dict[str, Any] | None = None) -> dict[str, Any]:
     """Every declared parameter's current value with ``changes`` applied, nested like the schemas."""
-    flat = {name: _plain(node.get_parameter(name).value) for name in node.parameter_fields}
+    # _value: an empty array declared by its type (a list field defaulting to []) is "uninitialized"
+    flat = {name: _value(node, name, spec) for name, spec in node.parameter_fields.items()}
     flat.update(changes or {})
     return unflatten(flat)
 

@@ -5,14 +5,16 @@ Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
     e      = theta_d - theta,   e_dot = theta_dot_d - theta_dot_hat      (derivative on measurement)
     u      = feedback(mode) + feedforward_gain theta_dot_d + J_hat theta_ddot_d
              + tau_f_ff(theta_dot_d) + tau_f_fb(theta_dot_hat) + load_feedforward
-             + tau_L(theta, theta_dot_d, theta_dot_hat, theta_ddot_d)
+             + tau_L(theta, theta_dot_d, theta_dot_hat, theta_ddot_d) + tau_r(theta, theta_dot_hat, u_{k-1})
     command = clamp(u, u_clamp, rate limit)
 
 ``tau_L`` (section ``load``, :mod:`.load_compensation`): the identified joint load
 ``tau_load(theta) = gravity sin(theta + gravity_phase) + offset + spring theta`` at the measured
 position (gravity compensation) plus ``g_c s(v) (k_L |tau_load + J_hat theta_ddot_d| + R(theta))``,
 the load-dependent and position-dependent friction with the velocity (and weights) of
-``friction.source``; 0 with the default (all-zero) section.
+``friction.source``; 0 with the default (all-zero) section. ``tau_r`` (section ``residual``): the
+learned residual map's ``g_c r`` from the measured motion and the previous command, bounded, 0
+for a non-finite output (counted: ``residual_nonfinite``, ``residual_note``); 0 for kind none.
 
 ``u_clamp_max/min`` default to +-1e6 N*m (:data:`friction_ros.core.input_gate.PLAUSIBLE_EFFORT`,
 the plant simulator's plausibility bound): whatever the gains and inputs, the command stays finite
@@ -45,7 +47,7 @@ Safety (feedback paths only, i.e. sources feedback / blended / observer):
 * run-time limit-cycle detector (:mod:`.limit_cycle`, ``limit_cycle_*`` keys): when it fires, friction
   compensation is switched off and latched (``compensation_fallback``, ``fallback_reason``, also in
   :class:`ControllerTerms`) until the controller is rebuilt or reconfigured. The friction part of
-  ``tau_L`` goes with it; ``tau_load(theta)`` (a load, not friction) stays.
+  ``tau_L`` and ``tau_r`` go with it; ``tau_load(theta)`` (a load, not friction) stays.
 
 The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`` and ``terms``
 (a :class:`ControllerTerms`, the fields of friction_msgs/ControllerState).
@@ -71,7 +73,12 @@ from friction_ros.core.control.controller_config import (
     default_config,
 )
 from friction_ros.core.control.limit_cycle import LimitCycleDetector
-from friction_ros.core.control.load_compensation import LoadFeedforward, joint_load
+from friction_ros.core.control.load_compensation import (
+    LearnedFeedforward,
+    LoadFeedforward,
+    joint_load,
+    learned_residual,
+)
 from friction_ros.core.control.pid import Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
 from friction_ros.core.validation import (
@@ -243,6 +250,7 @@ class CompensatingController:
         friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
         load = joint_load(cfg["load"], "controller.load")
         cfg["load"] = load.to_config()
+        residual = learned_residual(cfg["residual"], "controller.residual")
         scheme = None
         if mode == "dnpf":
             scheme = DNPF(cfg["dnpf"])
@@ -270,6 +278,12 @@ class CompensatingController:
         wff, wfb = friction.weights
         self.load = LoadFeedforward(load, (friction.gain * wff, friction.gain * wfb), inertia)
         self._load_on = self.load.active
+        # the residual is friction: off with source none (and after a fallback, see compute)
+        self.residual = (
+            LearnedFeedforward(residual, friction.gain)
+            if residual is not None and friction.source != "none" and friction.gain > 0.0
+            else None
+        )
         self._prev_cmd: float | None = None
         self.terms = ControllerTerms(mode=mode)
         # stability bound of the feedback path against the loop's linear gains (loop_gains)
@@ -283,9 +297,22 @@ class CompensatingController:
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
         # only a feedback path puts the compensation inside the loop: a feedforward term is a function
         # of the reference and cannot make the loop oscillate by itself (so it is not watched)
-        # (the load's friction part fed back from the measured velocity is such a path too)
-        self._watch = (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
+        # (the load's friction part fed back from the measured velocity and the learned residual,
+        # a function of the measured motion, are such paths too)
+        self._watch = (
+            (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
+        ) or self.residual is not None
         self.fallback_reason = ""
+
+    @property
+    def residual_nonfinite(self) -> int:
+        """Periods whose learned residual was not finite (its term was set to 0)."""
+        return 0 if self.residual is None else self.residual.nonfinite
+
+    @property
+    def residual_note(self) -> str:
+        """What the first non-finite learned residual was ('' when none)."""
+        return "" if self.residual is None else self.residual.note
 
     def config(self) -> dict[str, Any]:
         """The effective configuration (nested dict; round-trips through the constructor)."""
@@ -331,6 +358,8 @@ class CompensatingController:
         self.velocity.reset()
         if self.scheme is not None:
             self.scheme.reset()
+        if self.residual is not None:
+            self.residual.reset()
         self._prev_cmd = None
 
     # -- the control law ---------------------------------------------------------------------------
@@ -350,9 +379,13 @@ class CompensatingController:
             f_ff = f_fb = 0.0
         else:
             f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
-        tau_l = 0.0
+        tau_l = tau_r = 0.0
         if self._load_on:
             tau_l = self.load.torque(pos, r_vel, vel, r_acc, not self.compensation_fallback)
+        learned = self.residual is not None and not self.compensation_fallback
+        if learned:
+            prev = 0.0 if self._prev_cmd is None else self._prev_cmd
+            tau_r = self.residual.torque(pos, vel, prev, t)
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
             lower = self._prev_cmd - self.rate_limit * dt
@@ -363,6 +396,8 @@ class CompensatingController:
             offset = ff_inertia + ff_vel + f_ff + f_fb
             if self._load_on:
                 offset += tau_l
+            if learned:
+                offset += tau_r
             out = self.pid.update(
                 e,
                 dt,
@@ -390,6 +425,8 @@ class CompensatingController:
             )
             if self._load_on:
                 unlimited += tau_l
+            if learned:
+                unlimited += tau_r
             if lo > hi:
                 lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
             cmd = min(max(unlimited, lo), hi)
@@ -421,6 +458,7 @@ class CompensatingController:
             friction_feedforward=f_ff,
             friction_feedback=f_fb + s.friction_feedback,
             load_feedforward=tau_l,
+            learned_feedforward=tau_r,
             command_unlimited=unlimited,
             command=cmd,
             saturated=bool(sat),

@@ -18,6 +18,7 @@ from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS
 from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
 from friction_ros.core.friction.joint_load import JOINT_LOAD_SCHEMA
+from friction_ros.core.friction.learned_residual import LEARNED_RESIDUAL_SCHEMA
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 
 CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
@@ -120,8 +121,19 @@ CONTROLLER_DEFAULTS: dict[str, Any] = {
     # identified load, gravity and position-dependent friction (core/friction/joint_load.py):
     # defaults are all zero, i.e. no feedforward (core/control/load_compensation.py)
     "load": JOINT_LOAD_SCHEMA.defaults(),
+    # learned residual map (core/friction/learned_residual.py): kind none = no residual
+    "residual": LEARNED_RESIDUAL_SCHEMA.defaults(),
 }
-CONFIG_SECTIONS = ("pid", "friction", "dnpf", "gain_scheduling", "cascade", "sliding_mode", "load")
+CONFIG_SECTIONS = (
+    "pid",
+    "friction",
+    "dnpf",
+    "gain_scheduling",
+    "cascade",
+    "sliding_mode",
+    "load",
+    "residual",
+)
 SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
 
 
@@ -130,8 +142,9 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
 
     Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
     ``friction`` (the library model config: ``model`` + its coefficients), ``load`` (identified
-    load, gravity and position-dependent friction: :data:`JOINT_LOAD_SCHEMA`) and ``reference`` (the
-    built-in reference generator). ``friction_model`` / ``reference``: give ``friction.model``
+    load, gravity and position-dependent friction: :data:`JOINT_LOAD_SCHEMA`), ``residual`` (the
+    learned residual map: :data:`LEARNED_RESIDUAL_SCHEMA`) and ``reference`` (the built-in
+    reference generator). ``friction_model`` / ``reference``: give ``friction.model``
     (``none``) and ``reference.type`` (``constant``) defaults (a parameter file that sets any key of
     the section brings its own).
     """
@@ -142,6 +155,7 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
         )
     items.append(COMPENSATION_SCHEMA)
     items.append(JOINT_LOAD_SCHEMA)
+    items.append(LEARNED_RESIDUAL_SCHEMA)
     items.append(
         Schema.from_defaults("friction", {"model": "none"} if friction_model else {}, "friction model")
     )

@@ -1,4 +1,5 @@
-"""Feedforward of the identified joint load (:mod:`friction_ros.core.friction.joint_load`).
+"""Feedforward of the identified joint load (:mod:`friction_ros.core.friction.joint_load`) and of
+the learned residual (:mod:`friction_ros.core.friction.learned_residual`).
 
 Per period, with ``q`` the measured position, ``a_d`` the reference acceleration and ``J_hat`` the
 controller's ``inertia`` (REP-103 signs, SI)::
@@ -19,6 +20,13 @@ controller's ``inertia`` (REP-103 signs, SI)::
   :meth:`JointLoad.torque_scalar(q, theta_dot_d, a_d, J_hat) <friction_ros.core.friction.joint_load.JointLoad.torque_scalar>`.
 
 Math only per period (one ``sin``, plus a ``cos``/``sin`` pair per ripple harmonic): ~1 us.
+
+The learned residual (section ``residual``, :class:`LearnedFeedforward`) adds
+``tau_r = g_c r(theta, theta_dot_hat, u_{k-1})``: the map's ``step`` with the measured position and
+velocity and the previous command (causal), bounded by the map's own clip to its training residual
+range. It is friction: gain ``g_c``, off for source ``none`` and after a fallback. A non-finite
+output gives 0 (never NaN on the command) and is counted (``nonfinite``); the first one leaves a
+``note`` for the node to log once.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ from __future__ import annotations
 import math
 
 from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.friction.learned_residual import LearnedResidual
 from friction_ros.core.validation import ParameterError
 
 
@@ -77,3 +86,34 @@ class LoadFeedforward:
             a = k * q
             fr += c * math.cos(a) + sn * math.sin(a)
         return tl + s * fr
+
+
+def learned_residual(config, prefix: str = "controller.residual") -> LearnedResidual | None:
+    """Validated :class:`LearnedResidual` from a ``residual`` section (None for kind none)."""
+    return LearnedResidual.from_config(config, prefix)
+
+
+class LearnedFeedforward:
+    """``tau_r`` of the module docstring: ``gain`` times the residual map, non-finite outputs -> 0."""
+
+    def __init__(self, residual: LearnedResidual, gain: float):
+        self.residual = residual
+        self.gain = float(gain)
+        self.nonfinite = 0
+        self.note = ""
+
+    def reset(self) -> None:
+        self.residual.reset()
+
+    def torque(self, q: float, v: float, previous_command: float, t: float = 0.0) -> float:
+        """``tau_r`` [N*m] for this period (advances the map's history)."""
+        r = self.residual.step(q, v, previous_command)
+        if r - r == 0.0:  # finite (nan - nan and inf - inf are nan)
+            return self.gain * r
+        self.nonfinite += 1
+        if self.nonfinite == 1:
+            self.note = (
+                f"learned residual returned {r!r} at t = {t:.3f} s (q = {q:.6g} rad, v = {v:.6g} rad/s): "
+                "its term is set to 0 for every such sample (count in diagnostics residual_nonfinite)"
+            )
+        return 0.0
