@@ -196,3 +196,23 @@ def test_cli_load_option(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "wind" in err[0] and "gravity" in err[0]
     assert src.read_bytes() == before
+
+
+def test_csv_load_column_is_the_transmitted_torque(tmp_path):
+    """A CSV ``load`` column (the torque the gear transmits, known to the user) is what the
+    load-dependent friction uses: the record keeps it through the selection."""
+    from friction_ros.core.identification.load_terms import with_transmitted
+
+    run = realistic_runs(duration=8.0, speeds=(0.3,), seed=2)[0]
+    path = tmp_path / "log.csv"
+    tr = run.true_load + JointTruth().J * run.true_acceleration
+    rows = ["time,position,velocity,effort,load"] + [
+        f"{a!r},{b!r},{c!r},{d!r},{e!r}"
+        for a, b, c, d, e in zip(run.t, run.position, run.velocity, run.effort, tr)
+    ]
+    path.write_text("\n".join(rows) + "\n")
+    rec = load_csv(path)
+    assert rec.meta["transmitted_source"] == "column 'load'"
+    assert np.allclose(rec.transmitted, np.interp(rec.t + rec.t0, run.t, tr), atol=1e-9)
+    kept = with_transmitted([rec.slice(0, 100)], 5.0, JointLoad(gravity=100.0))[0]
+    assert np.array_equal(kept.transmitted, rec.transmitted[:100])

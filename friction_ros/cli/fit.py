@@ -179,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 FITTED_HEADER = "# friction-fit:"
-CSV_ROLES = ("time", "position", "velocity", "effort", "current")
+CSV_ROLES = ("time", "position", "velocity", "effort", "current", "load")
 
 
 def parse_columns(text: str | None) -> dict[str, str] | None:

@@ -16,7 +16,12 @@ position   position, pos, q
 velocity   velocity, vel, qd, dq
 effort     effort, torque, tau
 current    current, iq
+load       load, load_torque, transmitted
 =========  ==================================
+
+``load`` [N*m]: the torque the gear transmits to the link, where the user knows it (a load cell, an
+arm's inverse dynamics); the load-dependent friction then uses it instead of the fit's estimate
+(:mod:`~friction_ros.core.identification.load_terms`).
 
 Several joints in one file: ``position_<joint>``, ``<joint>_position`` or ``<joint>/position`` (any
 alias); ``joint`` chooses one, columns without a joint (a shared ``time``) serve every joint.
@@ -42,6 +47,9 @@ ROLES: dict[str, tuple[str, ...]] = {
     "velocity": ("velocity", "vel", "qd", "dq"),
     "effort": ("effort", "torque", "tau"),
     "current": ("current", "iq"),
+    # the torque the gear transmits to the link (a load cell, an arm's inverse dynamics ...) [N*m],
+    # used by the load-dependent friction instead of the fit's own estimate
+    "load": ("load", "load_torque", "transmitted"),
 }
 #: SI unit suffixes dropped from a header before matching (``position_rad``, ``torque_Nm``)
 _UNIT_SUFFIXES = ("rad_s", "rad/s", "rads", "rad", "s", "sec", "nm", "n_m", "n*m", "a", "amp", "amps")
@@ -305,6 +313,11 @@ def load_csv(
         )
     except ParameterError as exc:
         raise ExcitationError(f"csv {path}: {exc}") from None
+    if col.get("load") is not None:
+        ok = np.isfinite(col["load"]) & np.isfinite(t)
+        order = np.argsort(t[ok], kind="stable")
+        data.transmitted = np.interp(data.t + data.t0, t[ok][order], col["load"][ok][order])
+        data.meta["transmitted_source"] = f"column {headers[roles['load']]!r}"
     data.meta["warnings"] = notes + data.meta.get("warnings", [])
     data.meta["joint"] = name
     data.meta["columns"] = {r: headers[j] for r, j in roles.items()}

@@ -234,10 +234,17 @@ def backbone_fit(terms: LoadTerms, train, val, eps: float | None = None):
 
 
 def with_transmitted(records, inertia: float, load: JointLoad):
-    """The records with ``transmitted`` set from ``inertia`` and ``load`` (:func:`transmitted_torque`)."""
+    """The records with ``transmitted`` set from ``inertia`` and ``load`` (:func:`transmitted_torque`);
+    a record that carries a measured transmitted torque (``meta["transmitted_source"]``: a CSV
+    ``load`` column) keeps it."""
     import dataclasses
 
-    return [dataclasses.replace(r, transmitted=transmitted_torque(r, inertia, load)) for r in records]
+    return [
+        r
+        if r.meta.get("transmitted_source")
+        else dataclasses.replace(r, transmitted=transmitted_torque(r, inertia, load))
+        for r in records
+    ]
 
 
 def select_terms(
