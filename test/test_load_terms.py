@@ -207,8 +207,8 @@ def test_csv_load_column_is_the_transmitted_torque(tmp_path):
     path = tmp_path / "log.csv"
     tr = run.true_load + JointTruth().J * run.true_acceleration
     rows = ["time,position,velocity,effort,load"] + [
-        f"{a!r},{b!r},{c!r},{d!r},{e!r}"
-        for a, b, c, d, e in zip(run.t, run.position, run.velocity, run.effort, tr)
+        ",".join(repr(float(x)) for x in row)
+        for row in zip(run.t, run.position, run.velocity, run.effort, tr)
     ]
     path.write_text("\n".join(rows) + "\n")
     rec = load_csv(path)
