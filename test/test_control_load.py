@@ -302,3 +302,22 @@ def test_residual_kind_none_is_bitwise_the_old_controller_and_bad_values_are_nam
         assert key in str(exc.value) and "\n" not in str(exc.value), str(exc.value)
     with pytest.raises(ParameterError, match=r"^residual\.fade = -1 "):
         controller_from_ros_parameters({"pid": PD, "residual": {**bad, "fade": -1.0}})
+
+
+def test_fitted_parameter_document_feeds_the_controller():
+    """friction-fit's document (export.parameter_document with load and residual, through YAML)
+    builds the node's controller with both terms: the interface between fitter and controller."""
+    import yaml
+
+    from friction_ros.core.identification.export import parameter_document
+
+    load = JointLoad(**LOAD).to_config()
+    residual = LearnedResidual.from_config(tiny_residual()).to_config()
+    doc = parameter_document(CV, 0.0012, load=load, residual=residual)
+    values = yaml.safe_load(yaml.safe_dump(doc))["compensating_controller"]["ros__parameters"]
+    ctrl, _ = controller_from_ros_parameters(values)
+    t = ctrl.compute(0.0, (0.3, 0.02, 1.5), (0.31, -0.004), 1e-3)
+    assert t.load_feedforward == pytest.approx(
+        JointLoad(**LOAD).torque_scalar(0.31, 0.02, 1.5, 0.0012), rel=1e-14
+    )
+    assert t.learned_feedforward == LearnedResidual.from_config(tiny_residual()).step(0.31, -0.004, 0.0)
