@@ -261,7 +261,7 @@ def _load_section(res) -> list[str]:
         L += (
             [
                 "Chosen by validation (forward selection on a linear backbone; a term is kept when it lowers the "
-                "validation MSE by >= 2 %):",
+                "validation MSE by >= 5 %):",
                 "",
             ]
             + [f"- {s}" for s in steps]
