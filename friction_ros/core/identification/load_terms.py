@@ -19,12 +19,12 @@ with ``a sin q + b cos q = gravity sin(q + gravity_phase)``, ``gravity = hypot(a
 the torque the gear transmits, estimated from a first fit without the load-dependent term
 (:func:`transmitted_torque`).
 
-Which terms a log needs is decided by validation (:func:`select_terms`): forward selection on a
-linear backbone (inertia, viscous, Coulomb and a bank of Stribeck bumps: every candidate costs one
-least-squares solve, :func:`backbone_fit`), a term kept
-only when it lowers the validation MSE by at least ``min_gain`` (5 %: on the simulator's GMS joint a
-spurious first ripple harmonic gained 2.8 % on the linear backbone); the number of ripple
-harmonics H the same way (the smallest H within 1 % of the best).
+Which terms a log needs is decided by validation (:func:`select_terms`): greedy forward selection
+on a linear backbone (inertia, viscous, Coulomb and a bank of Stribeck bumps: every candidate costs
+one least-squares solve, :func:`backbone_fit`; samples slower than the sign's linear zone left out),
+a term kept only when it lowers the validation MSE by at least ``min_gain`` (5 %: on the
+simulator's GMS joint a spurious first ripple harmonic gained 2.8 % on the linear backbone); the
+ripple grows one harmonic at a time the same way, up to :data:`MAX_RIPPLE`.
 """
 
 from __future__ import annotations
