@@ -321,3 +321,34 @@ def test_fitted_parameter_document_feeds_the_controller():
         JointLoad(**LOAD).torque_scalar(0.31, 0.02, 1.5, 0.0012), rel=1e-14
     )
     assert t.learned_feedforward == LearnedResidual.from_config(tiny_residual()).step(0.31, -0.004, 0.0)
+
+
+def test_learned_residual_follows_the_control_period():
+    """A map trained on a 2 ms log keeps its filters' time constants in seconds in a 1 ms loop."""
+    from friction_ros.core.control.load_compensation import LearnedFeedforward
+    from friction_ros.core.friction.learned_residual import LearnedResidual
+
+    cfg = {
+        "kind": "mlp",
+        "dt": 0.002,
+        "position_input": "none",
+        "velocity_time_constants": [0.05],
+        "displacement_scales": [],
+        "feature_mean": [0.0, 0.0, 0.0],
+        "feature_scale": [1.0, 1.0, 1.0],
+        "feature_low": [-10.0, -10.0, -10.0],
+        "feature_high": [10.0, 10.0, 10.0],
+        "layer_sizes": [3, 1, 1],
+        "weights": [0.0, 1.0, 0.0, 1.0],  # output = tanh(the filtered velocity)
+        "biases": [0.0, 0.0],
+        "clip_low": -10.0,
+        "clip_high": 10.0,
+    }
+    ff = LearnedFeedforward(LearnedResidual.from_config(cfg), 1.0)
+    vel = [math.sin(0.05 * k) for k in range(200)]
+    at_1ms = [ff.torque(0.0, v, 0.0, 0.001 * k, 0.001) for k, v in enumerate(vel)]
+    ref = LearnedResidual.from_config({**cfg, "dt": 0.001})
+    unmatched = LearnedResidual.from_config(cfg)
+    assert ff.period == 0.001
+    assert at_1ms == [ref.step(0.0, v, 0.0) for v in vel]
+    assert max(abs(a - unmatched.step(0.0, v, 0.0)) for a, v in zip(at_1ms, vel)) > 0.05

@@ -385,7 +385,7 @@ class CompensatingController:
         learned = self.residual is not None and not self.compensation_fallback
         if learned:
             prev = 0.0 if self._prev_cmd is None else self._prev_cmd
-            tau_r = self.residual.torque(pos, vel, prev, t)
+            tau_r = self.residual.torque(pos, vel, prev, t, dt)
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
             lower = self._prev_cmd - self.rate_limit * dt

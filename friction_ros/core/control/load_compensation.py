@@ -101,12 +101,23 @@ class LearnedFeedforward:
         self.gain = float(gain)
         self.nonfinite = 0
         self.note = ""
+        self.period = float(residual.to_config()["dt"])
+
+    def match_period(self, dt: float) -> None:
+        """The map's velocity filters assume its ``dt`` (the training log's sample period): a
+        controller running at another period rebuilds the map with its own (history restarts), so
+        the filters keep their time constants in seconds."""
+        if dt > 0.0 and abs(dt - self.period) > 1e-6 * self.period:
+            self.residual = LearnedResidual.from_config({**self.residual.to_config(), "dt": float(dt)})
+            self.period = float(dt)
 
     def reset(self) -> None:
         self.residual.reset()
 
-    def torque(self, q: float, v: float, previous_command: float, t: float = 0.0) -> float:
-        """``tau_r`` [N*m] for this period (advances the map's history)."""
+    def torque(self, q: float, v: float, previous_command: float, t: float = 0.0, dt: float = 0.0) -> float:
+        """``tau_r`` [N*m] for this period of ``dt`` [s] (advances the map's history)."""
+        if dt and dt != self.period:
+            self.match_period(dt)
         r = self.residual.step(q, v, previous_command)
         if r - r == 0.0:  # finite (nan - nan and inf - inf are nan)
             return self.gain * r
