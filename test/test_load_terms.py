@@ -216,3 +216,21 @@ def test_csv_load_column_is_the_transmitted_torque(tmp_path):
     assert np.allclose(rec.transmitted, np.interp(rec.t + rec.t0, run.t, tr), atol=1e-9)
     kept = with_transmitted([rec.slice(0, 100)], 5.0, JointLoad(gravity=100.0))[0]
     assert np.array_equal(kept.transmitted, rec.transmitted[:100])
+
+
+def test_auto_load_terms_that_do_not_help_the_model_are_dropped():
+    """The real pendulum's swing-up run (torque: a PD command, mostly noise): the linear backbone
+    keeps gravity and spring, the recommended model validates worse with them, so the fit is
+    repeated without load terms and says why."""
+    rec = load_csv(DATA / "control_method_pd_system_identification.csv")
+    res = fit_records([rec], ["coulomb_viscous"], identifiability_check=False, train_seconds=1.5)
+    assert res.options["load_terms"] == "none"
+    assert any("did not lower the validation NMSE" in w for w in res.warnings), res.warnings
+    bare = fit_records(
+        [rec], ["coulomb_viscous"], identifiability_check=False, train_seconds=1.5, load="none"
+    )
+    assert (
+        res.models["coulomb_viscous"].metrics["nmse_percent"]
+        == bare.models["coulomb_viscous"].metrics["nmse_percent"]
+    )
+    assert res.options["verdict"]["explains_little"]

@@ -125,6 +125,9 @@ def fit_records(
     ``load_eps`` [rad/s]: the linear zone of sgn(v) in those terms (default: ``eps``, at least
     three times the velocity noise). ``validation_records``: validate on these whole records and
     train on the whole of ``records`` (cross-validation over runs, :func:`cross_validate_runs`).
+    Load terms chosen automatically must also lower the recommended model's validation NMSE (one
+    more fit of that model without them); otherwise the whole fit is repeated without load terms
+    and a warning says so.
     ``residual``: a learned residual on top of the best physics model
     (:mod:`~friction_ros.core.identification.residual_learning`; ``none`` (default here; friction-fit
     defaults to ``auto``), ``auto`` (for records without plateaus: mlp or rff by validation), ``mlp``
@@ -132,6 +135,7 @@ def fit_records(
     the recommendation like any other (its parameter count includes the network's).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
+    call = dict(locals())  # the arguments as given: the load-term check below refits with them
     t_start = time.perf_counter()
     records = [records] if isinstance(records, JointData) else list(records)
     names = check_model_names(models)
@@ -331,6 +335,23 @@ def fit_records(
             progress(name, 1.0)
     candidates = {n: r for n, r in results.items() if r.config is not None}
     recommendation = metrics.recommend_with_rule({n: r.metrics for n, r in candidates.items()})
+    rec0 = recommendation["model"]
+    if load == "auto" and selection is not None and not terms.empty and rec0 is not None:
+        # the terms were ranked on a linear backbone: they must also help the recommended model
+        alt = fit_records(
+            **{**call, "models": [rec0], "load": "none", "residual": "none", "progress": None},
+        )
+        without = float(alt.models[rec0].metrics.get("nmse_percent", math.inf))
+        with_terms = float(results[rec0].metrics.get("nmse_percent", math.nan))
+        if without <= with_terms:
+            res = fit_records(**{**call, "load": "none"})
+            res.warnings.insert(
+                0,
+                f"the load terms chosen on the linear backbone ({terms.describe()}) did not lower the validation "
+                f"NMSE of {rec0} ({with_terms:.4g} % with them, {without:.4g} % without): fitted without load terms",
+            )
+            res.options["load_selection"] = selection.table() + ["rejected: no gain on the recommended model"]
+            return res
     check_choice("residual", residual, ["auto", "none", "mlp", "rff"])
     if residual == "auto":
         residual = "none" if len(plateaus) >= 3 else "auto"
@@ -347,7 +368,7 @@ def fit_records(
             {n: (r.steady_state, r.metrics.get("n_params", 1)) for n, r in candidates.items()}, plateaus
         )
     rec = recommendation["model"]
-    verdict = _verdict(results, rec, val, vall, terms, eps)
+    verdict = _verdict(results, rec, val, vall, terms, eps, tried=selection is not None and load == "auto")
     if verdict["explains_little"]:
         warnings.append(verdict["text"])
     for r in results.values():
@@ -411,8 +432,9 @@ def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
     return terms, None
 
 
-def _verdict(results, rec, val, vall, terms, eps) -> dict:
-    """Does the recommended model explain the torque? If not, what the residual follows (diagnosis)."""
+def _verdict(results, rec, val, vall, terms, eps, tried: bool = False) -> dict:
+    """Does the recommended model explain the torque? If not, what the residual follows (diagnosis;
+    ``tried``: the automatic load-term selection ran, so its terms are not suggested again)."""
     from friction_ros.core.identification import diagnosis
 
     out = {"explains_little": False, "text": "", "suggestions": []}
@@ -424,12 +446,14 @@ def _verdict(results, rec, val, vall, terms, eps) -> dict:
     used = {"load-dependent friction" if t == "load_friction" else t for t in terms.describe().split(", ")}
     if terms.ripple:
         used.add("position-dependent friction")
+    if tried:  # the automatic selection tried every load term on these data: not suggested again
+        used |= {"gravity", "offset", "spring", "load-dependent friction", "position-dependent friction"}
     resid = vall.torque - np.asarray(results[rec].extra["validation_prediction"])
     tips = diagnosis.suggestions(val, resid, used, max(eps, terms.eps))
-    what = " (no better than a constant: it explains nothing)" if nm >= metrics.NO_SIGNAL_NMSE else ""
+    what = ", no better than a constant: it explains nothing" if nm >= metrics.NO_SIGNAL_NMSE else ""
     text = (
         f"the recommended model {rec} explains little of the measured torque (validation NMSE {nm:.1f} % > "
-        f"{EXPLAINS_LITTLE_NMSE:g} %){what}: do not compensate with it before checking; "
+        f"{EXPLAINS_LITTLE_NMSE:g} %{what}): do not compensate with it before checking; "
         + (
             "; ".join(tips)
             if tips
