@@ -12,7 +12,19 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-ORDER = ["demo", "robustness", "models", "compensation", "fitting", "loop", "can", "drive_soak", "bags"]
+ORDER = [
+    "demo",
+    "robustness",
+    "real_data",
+    "learned_residual",
+    "models",
+    "compensation",
+    "fitting",
+    "loop",
+    "can",
+    "drive_soak",
+    "bags",
+]
 TITLES = {
     "demo": "Main job: identify and compensate the simulated ABB M19-S joint (issue 9)",
     "robustness": "Main job on every preset x 3 experiment seeds (issue 14)",
@@ -23,6 +35,8 @@ TITLES = {
     "can": "CAN codec and drive node (issue 6)",
     "drive_soak": "Drive node under load: stale telemetry and a killed drive (issue 15)",
     "bags": "MCAP recording and reading (issue 7)",
+    "real_data": "Identification on a realistic synthetic joint and a real pendulum (issue 17)",
+    "learned_residual": "Learned residual on a physics backbone: candidates (issue 17)",
 }
 BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"
 
