@@ -31,7 +31,6 @@ output gives 0 (never NaN on the command) and is counted (``nonfinite``); the fi
 
 from __future__ import annotations
 
-import math
 
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.friction.learned_residual import LearnedResidual
@@ -55,22 +54,14 @@ class LoadFeedforward:
     def __init__(self, load: JointLoad, weights: tuple[float, float], inertia: float):
         self.load = load
         self.active = load.active
-        self.gravity, self.phase = float(load.gravity), float(load.gravity_phase)
-        self.offset, self.spring = float(load.offset), float(load.spring)
-        self.k_load, self.eps = float(load.load_friction), float(load.eps)
-        w = 2.0 * math.pi / float(load.ripple_period)
-        self.ripple = tuple(
-            ((i + 1) * w, float(c), float(s))
-            for i, (c, s) in enumerate(zip(load.ripple_cos, load.ripple_sin))
-            if c or s
-        )
-        self.has_friction = bool(self.k_load or self.ripple)
+        self.eps = float(load.eps)
+        self.has_friction = bool(load.load_friction or any(load.ripple_cos) or any(load.ripple_sin))
         self.w_ff, self.w_fb = (float(x) for x in weights)
         self.inertia = float(inertia)
 
     def torque(self, q: float, v_ref: float, v_meas: float, a_ref: float, friction_on: bool) -> float:
         """``tau_L`` [N*m]; ``friction_on`` False drops the friction part (fallback)."""
-        tl = self.gravity * math.sin(q + self.phase) + self.offset + self.spring * q
+        tl, level = self.load.scalar_parts(q, a_ref, self.inertia)
         if not (friction_on and self.has_friction):
             return tl
         eps = self.eps
@@ -79,13 +70,7 @@ class LoadFeedforward:
             s += self.w_ff * min(max(v_ref / eps, -1.0), 1.0)
         if self.w_fb:
             s += self.w_fb * min(max(v_meas / eps, -1.0), 1.0)
-        if not s:
-            return tl
-        fr = self.k_load * abs(tl + self.inertia * a_ref)
-        for k, c, sn in self.ripple:
-            a = k * q
-            fr += c * math.cos(a) + sn * math.sin(a)
-        return tl + s * fr
+        return tl + s * level
 
 
 def learned_residual(config, prefix: str = "controller.residual") -> LearnedResidual | None:
