@@ -31,7 +31,6 @@ output gives 0 (never NaN on the command) and is counted (``nonfinite``); the fi
 
 from __future__ import annotations
 
-
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.friction.learned_residual import LearnedResidual
 from friction_ros.core.validation import ParameterError
