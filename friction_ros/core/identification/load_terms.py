@@ -19,6 +19,12 @@ with ``a sin q + b cos q = gravity sin(q + gravity_phase)``, ``gravity = hypot(a
 the torque the gear transmits, estimated from a first fit without the load-dependent term
 (:func:`transmitted_torque`).
 
+A direction-dependent load friction (a gear's forward and backward efficiencies differ:
+``k_L (1 + a_L d) abs(tau_tr)`` with ``d = sgn(tau_tr v)``) adds ``k_L a_L tau_tr abs(sgn_eps(v))``, which
+while the joint moves is ``k_L a_L tau_tr``: a scaling of the load torque and of J a, absorbed by the
+gravity, offset, spring and inertia coefficients. Tried on the realistic joint with a_L = 0.4 it
+lowered the validation MSE by 0.7 % at best and was never kept, so it is not a term here.
+
 Which terms a log needs is decided by validation (:func:`select_terms`): greedy forward selection
 on a linear backbone (inertia, viscous, Coulomb and a bank of Stribeck bumps: every candidate costs
 one least-squares solve, :func:`backbone_fit`; samples slower than the sign's linear zone left out),
