@@ -224,11 +224,6 @@ def fit_records(
             (r, keep)
             for r, keep in zip(with_transmitted([f for f, _ in val_from], *tr), [k for _, k in val_from])
         ]
-    if not terms.empty:
-        warnings_pre.append(
-            f"load terms identified with every model: {terms.describe()}"
-            + (" (chosen by validation)" if selection is not None and load == "auto" else "")
-        )
     vall = concat_records(val)
     mv = moving_mask(vall.velocity, vall.resolution, vall.dt)
     hm, thr = high_velocity_mask(vall.velocity, vall.dt, high_threshold, moving=mv)
