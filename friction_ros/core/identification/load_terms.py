@@ -184,10 +184,26 @@ class Selection:
     joint_load: JointLoad
 
     def table(self) -> list[str]:
+        """One line per selection step: the best candidate (kept or not) and the others tried."""
         rows = [f"no load terms: validation MSE {self.baseline_mse:.4g} N^2*m^2"]
-        for name, mse, before, kept in self.steps:
-            change = 100.0 * (mse / before - 1.0) if before > 0 else 0.0
-            rows.append(f"{name}: {mse:.4g} ({change:+.1f} % vs before it){', kept' if kept else ''}")
+        groups: list[list[tuple[str, float, float, bool]]] = []
+        for row in self.steps:  # the candidates of one step share the MSE before it
+            if groups and groups[-1][0][2] == row[2]:
+                groups[-1].append(row)
+            else:
+                groups.append([row])
+
+        def change(mse, before):
+            return f"{100.0 * (mse / before - 1.0):+.1f} %" if before > 0 else "n/a"
+
+        for k, g in enumerate(groups, 1):
+            best = min(g, key=lambda r: r[1])
+            others = ", ".join(f"{n} {change(m, b)}" for n, m, b, _ in g if n != best[0])
+            verdict = "kept" if best[3] else "not kept (gain below min_gain): selection ends"
+            rows.append(
+                f"step {k}: {best[0]} -> {best[1]:.4g} ({change(best[1], best[2])}), {verdict}"
+                + (f"; also tried: {others}" if others else "")
+            )
         return rows
 
 
