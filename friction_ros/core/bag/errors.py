@@ -36,3 +36,14 @@ class SchemaError(BagError):
 
 class CdrError(BagError):
     """A CDR payload does not match its message definition."""
+
+
+def check_wanted(path, want, skipped: dict, info: dict) -> None:
+    """Every topic asked for (``want``, None = all) was found and decodes, else the error naming it."""
+    for t in want or ():
+        if t in skipped:
+            raise SchemaError(f"{path}: topic {t} cannot be decoded: {skipped[t]}")
+        if t not in info:
+            raise TopicNotFoundError(
+                f"{path}: topic {t} not found: topics are {', '.join(sorted(info)) or '(none)'}"
+            )

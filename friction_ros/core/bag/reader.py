@@ -28,7 +28,14 @@ import yaml
 
 from .cdr import decode_batch
 from .contents import Bag, JointSeries, RawMessage, TopicData, TopicInfo
-from .errors import BagError, CdrError, NotMcapError, SchemaError, TopicNotFoundError, UnsupportedBagError
+from .errors import (
+    BagError,
+    CdrError,
+    NotMcapError,
+    SchemaError,
+    UnsupportedBagError,
+    check_wanted,
+)
 from .mcap_scan import McapScan
 from .msgdef import MsgDef, load_installed, normalize_type, parse_schema
 from .qos import parse_qos
@@ -185,14 +192,7 @@ class _Loaded:
                     self.warnings.append(
                         f"{f}: found {got} messages, the summary statistics say {scan.stats_count}"
                     )
-        if want is not None:
-            for t in want:
-                if t in self.skipped:
-                    raise SchemaError(f"{self.path}: topic {t} cannot be decoded: {self.skipped[t]}")
-                if t not in self.info:
-                    raise TopicNotFoundError(
-                        f"{self.path}: topic {t} not found: topics are {', '.join(sorted(self.info)) or '(none)'}"
-                    )
+        check_wanted(self.path, want, self.skipped, self.info)
 
     def records(self, topic: str):
         """(big, log_time, publish_time, data_start, data_len) sorted by log time, per file part."""

@@ -25,7 +25,7 @@ import numpy as np
 
 from .cdr import decode_batch
 from .contents import Bag, RawMessage, TopicData, TopicInfo
-from .errors import BagError, CdrError, SchemaError, TopicNotFoundError, UnsupportedBagError
+from .errors import BagError, CdrError, SchemaError, UnsupportedBagError, check_wanted
 from .msgdef import MsgDef, find_msg_file, load_installed, normalize_type, parse_schema
 
 SQLITE_MAGIC = b"SQLite format 3\0"
@@ -166,14 +166,7 @@ class _Sqlite:
                 raise BagError(f"{src}: cannot read the sqlite3 bag: {_one_line(exc)}") from None
             except Exception as exc:  # rosbags ReaderError, apsw errors on a damaged database ...
                 raise BagError(f"{src}: cannot read the sqlite3 bag: {_one_line(exc)}") from None
-        if want is not None:
-            for t in want:
-                if t in self.skipped:
-                    raise SchemaError(f"{self.path}: topic {t} cannot be decoded: {self.skipped[t]}")
-                if t not in self.info:
-                    raise TopicNotFoundError(
-                        f"{self.path}: topic {t} not found: topics are {', '.join(sorted(self.info)) or '(none)'}"
-                    )
+        check_wanted(self.path, want, self.skipped, self.info)
 
     def columns(self, topic: str) -> tuple[np.ndarray, dict[str, np.ndarray]]:
         """(log times [ns] sorted, decoded columns) of ``topic``."""
