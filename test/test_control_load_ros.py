@@ -171,10 +171,10 @@ def test_load_and_residual_parameters_change_at_run_time(tmp_path):
     try:
         node = CompensatingControllerNode()
         try:
-            assert node.controller.load.gravity == 1.0 and node.controller.residual is None
+            assert node.controller.load.load.gravity == 1.0 and node.controller.residual is None
             ok = node.set_parameters([Parameter("load.spring", value=2.5)])[0]
             assert ok.successful, ok.reason
-            assert (node.controller.load.gravity, node.controller.load.spring) == (1.0, 2.5)
+            assert (node.controller.load.load.gravity, node.controller.load.load.spring) == (1.0, 2.5)
             bad = node.set_parameters([Parameter("load.ripple_cos", value=[0.1])])[0]
             assert not bad.successful
             assert bad.reason.startswith("load.ripple_sin has 0 values: must have as many as load.ripple_cos")
@@ -182,7 +182,8 @@ def test_load_and_residual_parameters_change_at_run_time(tmp_path):
                 [Parameter("load.ripple_cos", value=[0.1]), Parameter("load.ripple_sin", value=[0.0])]
             )
             assert both.successful, both.reason
-            assert node.controller.load.ripple == ((1.0, 0.1, 0.0),)
+            jl = node.controller.load.load
+            assert (jl.ripple_cos, jl.ripple_sin, jl.ripple_period) == ([0.1], [0.0], 2.0 * math.pi)
             kind = node.set_parameters([Parameter("residual.kind", value="mlp")])[0]
             assert not kind.successful and "read-only" in kind.reason
         finally:
