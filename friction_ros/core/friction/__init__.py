@@ -4,71 +4,65 @@ Contract (docs/architecture.md): ``make_model(name, **coefficients)`` / ``model_
 return a :class:`FrictionModel`; ``model.to_config()`` round-trips; static models have vectorised
 ``torque(v)``; dynamic models have ``reset/state/step/simulate/simulate_batch``. Friction opposes
 motion: ``steady_state(v) * v >= 0``; the plant applies ``-friction``.
+
+The names below are loaded on first use (PEP 562): importing a light module of the package
+(``joint_load``, ``learned_residual``: the controller's schemas) does not load the models and their
+compiled kernels.
 """
 
-from .asymmetric import Asymmetric
-from .base import DynamicModel, FrictionModel, StaticModel
-from .dahl import Dahl
-from .gms import GMS
-from .lugre import LuGre
-from .registry import (
-    DYNAMIC_MODEL_NAMES,
-    MODEL_CLASSES,
-    MODEL_NAMES,
-    STATIC_MODEL_NAMES,
-    make_model,
-    model_from_config,
-)
-from .static import (
-    Coulomb,
-    CoulombViscous,
-    GADupont,
-    GAExponential,
-    GANonLinear,
-    GASevenParameter,
-    GATustin,
-    Gaussian,
-    LoadDependent,
-    Lorentzian,
-    Polynomial,
-    Stribeck,
-    StribeckEps,
-    Tustin,
-    Viscous,
-    ZeroFriction,
-)
-from .stiction import GKF, Karnopp
+from importlib import import_module
 
-__all__ = [
-    "Asymmetric",
-    "Coulomb",
-    "CoulombViscous",
-    "Dahl",
-    "DynamicModel",
-    "DYNAMIC_MODEL_NAMES",
-    "FrictionModel",
-    "GADupont",
-    "GAExponential",
-    "GANonLinear",
-    "GASevenParameter",
-    "GATustin",
-    "Gaussian",
-    "GKF",
-    "GMS",
-    "Karnopp",
-    "LoadDependent",
-    "Lorentzian",
-    "LuGre",
-    "MODEL_CLASSES",
-    "MODEL_NAMES",
-    "Polynomial",
-    "STATIC_MODEL_NAMES",
-    "StaticModel",
-    "Stribeck",
-    "StribeckEps",
-    "Tustin",
-    "Viscous",
-    "ZeroFriction",
-    "make_model",
-    "model_from_config",
-]
+#: exported name -> the module that defines it
+_EXPORTS = {
+    "Asymmetric": "asymmetric",
+    "DynamicModel": "base",
+    "FrictionModel": "base",
+    "StaticModel": "base",
+    "Dahl": "dahl",
+    "GMS": "gms",
+    "LuGre": "lugre",
+    "DYNAMIC_MODEL_NAMES": "registry",
+    "MODEL_CLASSES": "registry",
+    "MODEL_NAMES": "registry",
+    "STATIC_MODEL_NAMES": "registry",
+    "make_model": "registry",
+    "model_from_config": "registry",
+    "Coulomb": "static",
+    "CoulombViscous": "static",
+    "GADupont": "static",
+    "GAExponential": "static",
+    "GANonLinear": "static",
+    "GASevenParameter": "static",
+    "GATustin": "static",
+    "Gaussian": "static",
+    "LoadDependent": "static",
+    "Lorentzian": "static",
+    "Polynomial": "static",
+    "Stribeck": "static",
+    "StribeckEps": "static",
+    "Tustin": "static",
+    "Viscous": "static",
+    "ZeroFriction": "static",
+    "GKF": "stiction",
+    "Karnopp": "stiction",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    module = _EXPORTS.get(name)
+    if module is None:
+        try:  # a submodule reached as an attribute (friction_ros.core.friction.static)
+            return import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"{__name__}.{name}":
+                raise  # a submodule that exists but cannot import: say so
+            raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_EXPORTS))
