@@ -68,6 +68,9 @@ class ParameterNode(Node):
         self.given_parameters: dict[str, rclpy.parameter.Parameter] = {}
         #: every field declared by :func:`declare_config` (dotted name -> field)
         self.parameter_fields: dict[str, Field] = {}
+        #: joints of a multi-joint node: ``<section>.<joint>.<key>`` names are per-joint values, not
+        #: keys of the open section (``friction_ros.nodes.joint_parameters``)
+        self.joint_prefixes: set[str] = set()
         for name in self.list_parameters([], 0).names:  # depth 0: every name
             if name == "use_sim_time" or self.describe_parameter(name).read_only:
                 continue  # rclpy's own (time source, start_type_description_service)
@@ -76,7 +79,14 @@ class ParameterNode(Node):
 
     def given_section(self, prefix: str) -> dict[str, Any]:
         """Values given for ``<prefix>.*`` in the parameter files / command line (dotted names)."""
-        return {k: v.value for k, v in self.given_parameters.items() if k.startswith(prefix + ".")}
+        out = {}
+        for k, v in self.given_parameters.items():
+            if k.startswith(prefix + "."):
+                parts = k.split(".")
+                if len(parts) >= 3 and parts[1] in self.joint_prefixes:
+                    continue  # a per-joint value (friction.j3.fc), not a key of the section
+                out[k] = v.value
+        return out
 
 
 def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
