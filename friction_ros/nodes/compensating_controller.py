@@ -1,16 +1,43 @@
-"""compensating_controller: friction_ros.core.control.CompensatingController as a ROS 2 node.
+"""compensating_controller: friction_ros.core.control.CompensatingController as a ROS 2 node, for
+one joint or a whole arm.
 
-Event-driven: every ``joint_states`` message is one control period. The command answers the state
-it was computed from (its header stamp is the state's stamp), which is what makes the lockstep
-graph deterministic and lets the plant/drive measure state-to-command latency.
+Event-driven: every ``joint_states`` message is one control period of every joint it carries. The
+command answers the state it was computed from (its header stamp is the state's stamp), which is
+what makes the lockstep graph deterministic and lets the plant/drive measure state-to-command
+latency.
 
-Topics (all relative, so one namespace per joint works):
+Joints: ``joint_name`` (one joint, the simple case) or ``joints: [j1, j2, ...]``: one core
+controller, input gate and reference per joint, one ``joint_states`` message in, one
+``joint_commands`` message (all joints, in ``joints`` order) out. Per-joint values in the layout
+of ros2_controllers (:mod:`friction_ros.core.joint_config`): ``gains.<joint>.p`` (PID keys and the
+plain keys: ``gains.<joint>.inertia``, ``.u_clamp_max``, ``.mode`` ...), ``<section>.<joint>.<key>``
+(``friction.j3.model``, ``compensation.j3.gain``, ``load.j3.gravity``, ``reference.j3.type``),
+on top of the node-level values. A joint missing from a message (or rejected by its gate) holds
+its last command; after ``state_timeout`` with no valid state it gets zero torque, the others stay
+controlled.
+
+Add-on (``mode: compensation_only`` for every joint): the output is only the friction and load
+compensation, for an arm that already has a controller. Its desired motion comes from
+``reference`` (the JointTrajectory sent to the arm's trajectory controller), ``desired_joint_states``
+(the newest desired position/velocity per joint) or ``reference.*`` parameters; until one of them
+is there the output is 0. It is published as ``compensation_command`` (std_msgs/Float64MultiArray
+in ``joints`` order: ros2_controllers' forward_command_controller / effort controllers) and as
+``joint_commands`` (JointState effort: topic_based_ros2_control); with ``sum_base_command`` the
+arm controller's own command (``base_command``, JointState effort) is added and the sum is
+``joint_commands``. ``~/set_feedforward_control`` (std_srvs/SetBool, as ros2_controllers'
+pid_controller) switches the compensation on/off; ``compensation_scale`` (global, or per joint
+``gains.<joint>.compensation_scale``) scales it. The limit-cycle detector watches every joint.
+
+Topics (all relative, so one namespace per joint or arm works):
 
 * in  ``joint_states`` (sensor_msgs/JointState), ``reference`` (trajectory_msgs/JointTrajectory,
-  optional: replaces the built-in reference generator), ``friction_estimate``
-  (friction_msgs/FrictionEstimate, adopted when ``adopt_estimator_coefficients`` is true)
+  optional: replaces the built-in reference generator for the joints it names),
+  ``desired_joint_states`` (sensor_msgs/JointState), ``friction_estimate``
+  (friction_msgs/FrictionEstimate per joint, adopted when ``adopt_estimator_coefficients`` is
+  true), ``base_command`` (add-on with ``sum_base_command``)
 * out ``joint_commands`` (sensor_msgs/JointState effort = joint torque N*m, keep-last 1),
-  ``controller_state`` (friction_msgs/ControllerState), ``diagnostics``
+  ``compensation_command`` (add-on), ``controller_state`` (friction_msgs/ControllerState, one per
+  joint per period: every term, for plotting), ``diagnostics`` (one status per joint)
 
 Parameters: the node's own (below) plus the sections of the core controller, one ROS parameter per
 leaf (``pid.p``, ``compensation.source``, ``friction.model`` + that model's coefficients,
@@ -25,12 +52,18 @@ import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 
 from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.control.controller import ControllerTerms, controller_from_ros_parameters
-from friction_ros.core.control.controller_config import controller_parameter_schema
+from friction_ros.core.control.controller import (
+    CompensatingController,
+    ControllerTerms,
+    controller_from_ros_parameters,
+)
+from friction_ros.core.control.controller_config import CONTROLLER_FIELDS, controller_parameter_schema
 from friction_ros.core.control_period import control_period_field
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.experiment.trajectory import TrajectoryReference
@@ -40,18 +73,28 @@ from friction_ros.core.input_gate import (
     RESYNC,
     JointInputGate,
 )
+from friction_ros.core.joint_config import GAINS, name_joint_error
 from friction_ros.core.validation import ParameterError
-from friction_ros.core.wire import CONTROLLER_STATE_FLOATS, ControllerStateEncoder, JointStateDecoder
-from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
+from friction_ros.core.wire import (
+    CONTROLLER_STATE_FLOATS,
+    ControllerStateEncoder,
+    JointStateDecoder,
+    JointStateEncoder,
+)
+from friction_ros.nodes.commands import stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.joint_parameters import (
+    current_joint_values,
+    declare_joint_config,
+    declare_joints,
+    values_of_joint,
+)
 from friction_ros.nodes.parameters import (
     SCHEDULING,
     ParameterNode,
-    current_values,
-    declare_config,
     input_gate_schema,
 )
-from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_FIELDS = [
@@ -67,7 +110,18 @@ NODE_FIELDS = [
         unit="s",
     ),
     Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
+    Field(
+        "sum_base_command",
+        False,
+        "add-on (mode compensation_only): add the arm controller's command (base_command) and "
+        "publish the sum as joint_commands",
+        read_only=True,
+    ),
 ]
+
+#: keys ``gains.<joint>.<key>`` accepts besides the PID keys (ros2_controllers puts
+#: feedforward_gain and u_clamp_max there too)
+PER_JOINT_PLAIN_KEYS = tuple(f.name for f in CONTROLLER_FIELDS) + ("adopt_estimator_coefficients",)
 
 
 def parameter_schema(given_section=lambda prefix: {}) -> Schema:
@@ -100,42 +154,113 @@ assert CONTROLLER_STATE_FLOATS == tuple(
 ), "friction_msgs/ControllerState and the wire encoder disagree"
 
 
+class JointChannel:
+    """One joint of the node: its controller, reference, plausibility gate and health."""
+
+    def __init__(self, node: CompensatingControllerNode, joint: str, values: dict, overrides: dict):
+        self.joint = joint
+        self.values = values
+        self.overrides = overrides
+        self.controller, ref_cfg = node.build_controller(joint, values, overrides)
+        self.reference = reference_from_config(ref_cfg)
+        # add-on: the built-in generator counts only when a reference section was given
+        self.has_reference = bool(node.given_section("reference")) or any(
+            k.startswith("reference.") for k in overrides
+        )
+        self.trajectory: TrajectoryReference | None = None
+        self.desired: tuple[float, float, float] | None = None  # from desired_joint_states
+        # plausibility gate of the joint states (stamps, jumps, magnitudes): bad samples never
+        # reach the controller's state (integrator, filters, observers, limit-cycle detector)
+        self.gate = JointInputGate(joint, node.values.get("input_gate"), period=node.dt)
+        self.state_encoder = ControllerStateEncoder(joint)
+        self.diag = DiagnosticsPublisher(node, "compensating_controller", joint)
+        self.command = 0.0
+        self.compensation = 0.0
+        self.last_state_wall = time.monotonic()
+        self.timed_out = False
+        self.fallback_logged = False
+        self.residual_logged = False
+        self.diag_rejected = 0
+        self.waiting_logged = False
+
+    def replace(self, controller, reference, values, overrides) -> None:
+        controller.compensation_enabled = self.controller.compensation_enabled
+        self.controller, self.reference, self.values, self.overrides = (
+            controller,
+            reference,
+            values,
+            overrides,
+        )
+        self.residual_logged = False
+
+
 class CompensatingControllerNode(ParameterNode):
-    """Thin adapter over CompensatingController; see the module docstring."""
+    """Thin adapter over one CompensatingController per joint; see the module docstring."""
 
     def __init__(self):
         super().__init__("compensating_controller")
-        self.values = declare_config(self, parameter_schema(self.given_section), self._apply)
-        self.controller, ref_cfg = controller_from_ros_parameters(self.values)  # ParameterError -> refuses
-        self.reference = reference_from_config(ref_cfg)
-        self.trajectory: TrajectoryReference | None = None
-
-        self.joint = self.values["joint_name"]
+        schema = parameter_schema(self.given_section)
+        joints = declare_joints(self, {name.split(".")[0] for name, _ in schema.fields()} | {GAINS})
+        self.values, self.layout, overrides = declare_joint_config(
+            self,
+            schema,
+            joints or ["_"],
+            self._apply,
+            gains_section="pid",
+            plain_keys=PER_JOINT_PLAIN_KEYS,
+        )
+        self.single = not joints
+        self.joints = joints or [self.values["joint_name"]]
         self.dt = self.values["control_period"]
-        # plausibility gate of the joint states (stamps, jumps, magnitudes): bad samples never
-        # reach the controller's state (integrator, filters, observers, limit-cycle detector)
-        self.gate = JointInputGate(self.joint, self.values.get("input_gate"), period=self.dt)
+        if self.single:
+            overrides = {self.joints[0]: {}}
+        self.channels = [
+            JointChannel(self, j, values_of_joint(self.values, overrides[j], j, self.single), overrides[j])
+            for j in self.joints
+        ]
+        modes = {ch.joint: ch.controller.mode == "compensation_only" for ch in self.channels}
+        self.addon = any(modes.values())
+        if self.addon and not all(modes.values()):
+            raise ParameterError(
+                "mode: compensation_only must be the mode of every joint or of none (joints "
+                f"{', '.join(j for j, a in modes.items() if a)} are add-on, the others are not)"
+            )
+        self.joint = self.joints[0]
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
-        self.commands = CommandPublisher(self, self.joint)
+        self._cmd_encoder = JointStateEncoder(self.joints, ("effort",))
+        self.commands = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
+        self.last_command: bytes | None = None
         self.state_pub = self.create_publisher(ControllerState, "controller_state", RECORDED_QOS)
-        self._state_encoder = ControllerStateEncoder(self.joint)
         self._decoder = JointStateDecoder()
+        self._by_joint = {ch.joint: ch for ch in self.channels}
         # raw: joint states decoded by the wire module's JointStateDecoder (no message object per period)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
+        self.create_subscription(JointState, "desired_joint_states", self._on_desired, STATE_QOS)
         self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS)
-        self.diag = DiagnosticsPublisher(self, "compensating_controller", self.joint)
+        self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
+        self.sum_base = bool(self.values["sum_base_command"])
+        if self.sum_base and not self.addon:
+            raise ParameterError("sum_base_command = true needs mode compensation_only (an add-on)")
+        self.compensation_pub = None
+        self._base: dict[str, float] = {}
+        self._pending_base_ns: int | None = None
+        if self.addon:
+            self.compensation_pub = self.create_publisher(
+                Float64MultiArray, "compensation_command", COMMAND_QOS
+            )
+            self._compensation_msg = Float64MultiArray()
+            self._compensation_msg.layout.dim = [
+                MultiArrayDimension(label="joints", size=len(self.joints), stride=len(self.joints))
+            ]
+            if self.sum_base:
+                self.create_subscription(JointState, "base_command", self._on_base_command, COMMAND_QOS)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
 
         self._t0_ns: int | None = None
         self._last_ns: int | None = None
         self._last_t = 0.0
-        self._diag_rejected = 0
-        self._last_state_wall = time.monotonic()
-        self._timed_out = False
-        self._fallback_logged = False
-        self._residual_logged = False
         self.counts = {
             "cycles": 0,
             "duplicates": 0,
@@ -146,75 +271,144 @@ class CompensatingControllerNode(ParameterNode):
         }
         self._compute_times: list[float] = []
         apply_scheduling(self, self.values)
-        c = self.controller
-        self.get_logger().info(
-            f"mode {c.mode}, friction model {c.friction.model.name if c.friction.model else 'none'}, "
-            f"load feedforward {'on' if c.load.active else 'off'}, "
-            f"learned residual {c.residual.residual.kind if c.residual is not None else 'off'}, "
-            f"reference {self.reference.config().get('type', '?')}"
-        )
-        if self.controller.feedback_bound_note:
-            self.get_logger().warning(self.controller.feedback_bound_note)
+        for ch in self.channels:
+            c = ch.controller
+            self.get_logger().info(
+                f"{'' if self.single else ch.joint + ': '}mode {c.mode}, friction model "
+                f"{c.friction.model.name if c.friction.model else 'none'}, "
+                f"load feedforward {'on' if c.load.active else 'off'}, "
+                f"learned residual {c.residual.residual.kind if c.residual is not None else 'off'}, "
+                f"reference {ch.reference.config().get('type', '?') if ch.has_reference or not self.addon else 'topic'}"
+            )
+            if c.feedback_bound_note:
+                self.get_logger().warning(self._label(ch) + c.feedback_bound_note)
+
+    @property
+    def controller(self) -> CompensatingController:
+        """The (first) joint's controller: single-joint code and tools read this one."""
+        return self.channels[0].controller
+
+    def _label(self, ch: JointChannel) -> str:
+        return "" if self.single else f"{ch.joint}: "
 
     # -- parameters -------------------------------------------------------------------------------
+    def build_controller(self, joint: str, values: dict, overrides: dict):
+        """(controller, reference config) of one joint; errors name the joint's parameter."""
+        try:
+            return controller_from_ros_parameters(values)
+        except ParameterError as exc:
+            if self.single:
+                raise
+            raise ParameterError(name_joint_error(str(exc), self.layout, joint, overrides)) from None
+
     def _apply(self, changes: dict) -> None:
-        """Validate a run-time change by building the new controller first; commit only if valid."""
-        values = current_values(self, changes)
-        new_ctrl, ref_cfg = controller_from_ros_parameters(values)  # ParameterError -> change rejected
-        new_ref = reference_from_config(ref_cfg)
-        if all(k.startswith("pid.") for k in changes) and not self.controller.compensation_fallback:
-            # gains only: change them in the running controller (its integrator and states stay)
-            note = self.controller.feedback_bound_note
-            self.controller.set_pid_gains(**{k[4:]: v for k, v in changes.items()})
-            self.values = values
-            self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))} (states kept)")
-            if self.controller.feedback_bound_note != note and self.controller.feedback_bound_note:
-                self.get_logger().warning(self.controller.feedback_bound_note)
-            return
-        if self.controller.compensation_fallback:
-            self.get_logger().info(
-                "compensation fallback cleared by a parameter change: compensation active again"
-            )
-            self._fallback_logged = False
-        note_changed = new_ctrl.feedback_bound_note != self.controller.feedback_bound_note
-        self.controller, self.reference, self.values = new_ctrl, new_ref, values
-        self._residual_logged = False
-        self.get_logger().info(f"parameters changed: {', '.join(sorted(changes))}")
-        if note_changed and new_ctrl.feedback_bound_note:
-            self.get_logger().warning(new_ctrl.feedback_bound_note)
+        """Validate a run-time change by building the new controllers first; commit only if all are valid."""
+        values, overrides = current_joint_values(self, self.layout, changes)
+        touched = {ch.joint for ch in self.channels}
+        node_level = [k for k in changes if self.layout.split(k) is None]
+        if not node_level:
+            touched = {self.layout.split(k)[0] for k in changes}
+        plan = []
+        for ch in self.channels:
+            if ch.joint not in touched:
+                continue
+            ov = {} if self.single else overrides[ch.joint]
+            jv = values_of_joint(values, ov, ch.joint, self.single)
+            keys = [self.layout.split(k)[1] if self.layout.split(k) else k for k in changes]
+            if all(k.startswith("pid.") for k in keys) and not ch.controller.compensation_fallback:
+                gains = {k[4:]: jv["pid"][k[4:]] for k in keys}
+                plan.append((ch, None, None, jv, ov, gains))
+                continue
+            new_ctrl, ref_cfg = self.build_controller(ch.joint, jv, ov)  # ParameterError -> rejected
+            plan.append((ch, new_ctrl, reference_from_config(ref_cfg), jv, ov, None))
+        self.values = values
+        for ch, new_ctrl, new_ref, jv, ov, gains in plan:
+            label = self._label(ch)
+            if gains is not None:  # gains only: change them in the running controller (states stay)
+                note = ch.controller.feedback_bound_note
+                ch.controller.set_pid_gains(**gains)
+                ch.values, ch.overrides = jv, ov
+                self.get_logger().info(
+                    f"{label}parameters changed: {', '.join(sorted(changes))} (states kept)"
+                )
+                if ch.controller.feedback_bound_note != note and ch.controller.feedback_bound_note:
+                    self.get_logger().warning(label + ch.controller.feedback_bound_note)
+                continue
+            if ch.controller.compensation_fallback:
+                self.get_logger().info(
+                    f"{label}compensation fallback cleared by a parameter change: compensation active again"
+                )
+                ch.fallback_logged = False
+            note_changed = new_ctrl.feedback_bound_note != ch.controller.feedback_bound_note
+            ch.replace(new_ctrl, new_ref, jv, ov)
+            self.get_logger().info(f"{label}parameters changed: {', '.join(sorted(changes))}")
+            if note_changed and new_ctrl.feedback_bound_note:
+                self.get_logger().warning(label + new_ctrl.feedback_bound_note)
+
+    def _on_set_feedforward(self, request, response):
+        """``~/set_feedforward_control`` (std_srvs/SetBool): compensation on/off for every joint."""
+        for ch in self.channels:
+            ch.controller.compensation_enabled = bool(request.data)
+        response.success = True
+        response.message = f"friction/load compensation {'on' if request.data else 'off'}"
+        self.get_logger().info(response.message)
+        return response
 
     # -- inputs -----------------------------------------------------------------------------------
     def _on_trajectory(self, msg: JointTrajectory) -> None:
+        names = list(msg.joint_names)
+        mine = [ch for ch in self.channels if ch.joint in names]
         try:
-            if self.joint not in msg.joint_names:
-                raise ParameterError(f"joint {self.joint} is not in joint_names {list(msg.joint_names)}")
-            j = list(msg.joint_names).index(self.joint)
+            if not mine:
+                raise ParameterError(f"none of the joints {', '.join(self.joints)} is in joint_names {names}")
             times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
-            pos = [p.positions[j] if j < len(p.positions) else math.nan for p in msg.points]
-            vel = (
-                [p.velocities[j] for p in msg.points]
-                if all(len(p.velocities) > j for p in msg.points)
-                else None
-            )
             stamp = stamp_to_ns(msg.header.stamp)
             if stamp == 0 or self._t0_ns is None:
                 start = (self._last_ns - self._t0_ns) * 1e-9 if self._last_ns is not None else 0.0
             else:
                 start = (stamp - self._t0_ns) * 1e-9
-            self.trajectory = TrajectoryReference(times, pos, vel, start_time=start)
+            built = []
+            for ch in mine:
+                j = names.index(ch.joint)
+                pos = [p.positions[j] if j < len(p.positions) else math.nan for p in msg.points]
+                vel = (
+                    [p.velocities[j] for p in msg.points]
+                    if all(len(p.velocities) > j for p in msg.points)
+                    else None
+                )
+                built.append((ch, TrajectoryReference(times, pos, vel, start_time=start)))
         except ParameterError as exc:
             self.counts["rejected_references"] += 1
             self.get_logger().error(f"rejected reference trajectory: {exc}; keeping the previous reference")
+            return
+        for ch, traj in built:
+            ch.trajectory, ch.desired = traj, None
+
+    def _on_desired(self, msg: JointState) -> None:
+        """The arm's desired state per joint (position, velocity; acceleration from the effort
+        field is not assumed): the newest one is the reference of the next period."""
+        names = list(msg.name)
+        for ch in self.channels:
+            if ch.joint in names:
+                i = names.index(ch.joint)
+                if i < len(msg.position) and math.isfinite(msg.position[i]):
+                    vel = msg.velocity[i] if i < len(msg.velocity) and math.isfinite(msg.velocity[i]) else 0.0
+                    ch.desired, ch.trajectory = (float(msg.position[i]), float(vel), 0.0), None
 
     def _on_estimate(self, msg: FrictionEstimate) -> None:
-        if not (self.values.get("adopt_estimator_coefficients") and msg.converged):
+        if not msg.converged:
+            return
+        ch = self._by_joint.get(msg.joint_name) if msg.joint_name else self.channels[0]
+        if ch is None or not ch.values.get("adopt_estimator_coefficients"):
             return
         try:
-            self.controller.set_coefficients(from_fields(msg.model, msg.coefficient_names, msg.coefficients))
+            ch.controller.set_coefficients(from_fields(msg.model, msg.coefficient_names, msg.coefficients))
             self.counts["adopted"] += 1
         except (ParameterError, ValueError) as exc:
             self.counts["rejected_estimates"] += 1
-            self.get_logger().warning(f"estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0)
+            self.get_logger().warning(
+                f"{self._label(ch)}estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0
+            )
 
     def _now_ns(self) -> int:
         if self._sim_clock:
@@ -223,144 +417,237 @@ class CompensatingControllerNode(ParameterNode):
 
     def _on_state(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
-        gate = self.gate
-        status = gate.admit(msg, self._now_ns())
-        if status >= DUPLICATE:
-            if status == REJECTED:
-                if gate.log_line:
-                    self.get_logger().warning(f"{gate.log_line}; sample ignored, holding the last command")
-                return
-            if status == DUPLICATE:
-                if self.commands.last is not None:
-                    self.counts["duplicates"] += 1
-                    self.commands.republish()  # lockstep re-send: same answer, no recompute
-                return
-            if status == RESYNC:
-                self._resync()
-        elif gate.log_line:
-            self.get_logger().info(gate.log_line)
-        pos, vel = gate.position, gate.velocity
-        t_ns = gate.stamp_ns
+        now = self._now_ns()
+        admitted = []
+        duplicates = 0
+        for ch in self.channels:
+            gate = ch.gate
+            status = gate.admit(msg, now)
+            if status >= DUPLICATE:
+                if status == REJECTED:
+                    if gate.log_line:
+                        self.get_logger().warning(
+                            f"{gate.log_line}; sample ignored, holding the last command"
+                        )
+                    continue
+                if status == DUPLICATE:
+                    duplicates += 1
+                    continue
+                if status == RESYNC:
+                    self._resync(ch)
+            elif gate.log_line:
+                self.get_logger().info(gate.log_line)
+            admitted.append(ch)
+        if not admitted:
+            if duplicates and self.last_command is not None:
+                self.counts["duplicates"] += 1
+                self.commands.publish(self.last_command)  # lockstep re-send: same answer, no recompute
+            return
+        t_ns = admitted[0].gate.stamp_ns
         if self._t0_ns is None:
             self._t0_ns = t_ns
         t = (t_ns - self._t0_ns) * 1e-9
-        self._last_state_wall = time.monotonic()
-        if self._timed_out:
-            self._timed_out = False
-            self.get_logger().info("joint states valid again: controlling")
-        ref = self.trajectory.sample(t) if self.trajectory is not None else self.reference.sample(t)
+        wall = time.monotonic()
         c0 = time.perf_counter()
-        terms = self.controller.compute(t, ref, (pos, vel), self.dt)
+        listening = self.state_pub.get_subscription_count()  # 0.6 us; nobody listening: nothing to send
+        for ch in admitted:
+            ch.last_state_wall = wall
+            if ch.timed_out:
+                ch.timed_out = False
+                self.get_logger().info(f"{self._label(ch)}joint states valid again: controlling")
+            pos, vel = ch.gate.position, ch.gate.velocity
+            if ch.desired is not None:
+                ref = ch.desired
+            elif ch.trajectory is not None:
+                ref = ch.trajectory.sample(t)
+            elif self.addon and not ch.has_reference:
+                if not ch.waiting_logged:
+                    ch.waiting_logged = True
+                    self.get_logger().warning(
+                        f"{self._label(ch)}no desired trajectory yet (reference, desired_joint_states or "
+                        "reference.* parameters): compensation output 0"
+                    )
+                ch.command = ch.compensation = 0.0
+                continue
+            else:
+                ref = ch.reference.sample(t)
+            terms = ch.controller.compute(t, ref, (pos, vel), self.dt)
+            ch.command = ch.compensation = terms.command
+            self.counts["saturated"] += int(terms.saturated)
+            if ch.controller.compensation_fallback and not ch.fallback_logged:
+                ch.fallback_logged = True
+                self.get_logger().error(self._label(ch) + ch.controller.fallback_reason)
+                self._publish_diagnostics()
+            if listening:
+                self._publish_terms(ch, msg.sec, msg.nanosec, terms)
         self._compute_times.append(time.perf_counter() - c0)
         self._last_ns = t_ns
         self._last_t = t
-        self.commands.publish_stamp(msg.sec, msg.nanosec, terms.command)
-        if self.controller.compensation_fallback and not self._fallback_logged:
-            self._fallback_logged = True
-            self.get_logger().error(self.controller.fallback_reason)
-            self._publish_diagnostics()
         self.counts["cycles"] += 1
-        self.counts["saturated"] += int(terms.saturated)
-        if self.state_pub.get_subscription_count():  # 0.6 us; nobody listening: nothing to send
-            t = terms
-            self.state_pub.publish(
-                self._state_encoder.pack(
-                    msg.sec,
-                    msg.nanosec,
-                    t.mode,
-                    (
-                        t.reference_position,
-                        t.reference_velocity,
-                        t.reference_acceleration,
-                        t.position,
-                        t.velocity,
-                        t.error,
-                        t.error_dot,
-                        t.p_term,
-                        t.i_term,
-                        t.d_term,
-                        t.velocity_feedforward,
-                        t.inertia_feedforward,
-                        t.friction_feedforward,
-                        t.friction_feedback,
-                        t.load_feedforward,
-                        t.learned_feedforward,
-                        t.command_unlimited,
-                        t.command,
-                    ),
-                    t.saturated,
-                )
+        self._publish_commands(msg.sec, msg.nanosec, t_ns)
+
+    def _publish_commands(self, sec: int, nanosec: int, t_ns: int) -> None:
+        if self.addon:
+            self._compensation_msg.data = [ch.compensation for ch in self.channels]
+            self.compensation_pub.publish(self._compensation_msg)
+            if self.sum_base:
+                if self._pending_base_ns == t_ns:  # the base command of this state came first
+                    self._pending_base_ns = None
+                    self._publish_sum(sec, nanosec)
+                return
+        self.last_command = self._cmd_encoder.pack(sec, nanosec, *(ch.command for ch in self.channels))
+        self.commands.publish(self.last_command)
+
+    def _on_base_command(self, msg: JointState) -> None:
+        """The arm controller's command (JointState effort by name): sent on with the compensation
+        added. In lockstep (sim time) a base command stamped for a state not yet computed waits for it."""
+        names = list(msg.name)
+        if len(msg.effort) != len(names):
+            self.get_logger().warning(
+                f"base_command ignored: {len(msg.effort)} efforts for {len(names)} names",
+                throttle_duration_sec=5.0,
             )
+            return
+        for n, e in zip(names, msg.effort):
+            if n in self._by_joint and math.isfinite(e):
+                self._base[n] = float(e)
+        stamp = stamp_to_ns(msg.header.stamp)
+        if self._sim_clock and (self._last_ns is None or stamp > self._last_ns):
+            self._pending_base_ns = stamp
+            return
+        self._publish_sum(msg.header.stamp.sec, msg.header.stamp.nanosec)
 
-    def _resync(self) -> None:
+    def _publish_sum(self, sec: int, nanosec: int) -> None:
+        base = self._base
+        self.last_command = self._cmd_encoder.pack(
+            sec, nanosec, *(base.get(ch.joint, 0.0) + ch.compensation for ch in self.channels)
+        )
+        self.commands.publish(self.last_command)
+
+    def _publish_terms(self, ch: JointChannel, sec: int, nanosec: int, t: ControllerTerms) -> None:
+        self.state_pub.publish(
+            ch.state_encoder.pack(
+                sec,
+                nanosec,
+                t.mode,
+                (
+                    t.reference_position,
+                    t.reference_velocity,
+                    t.reference_acceleration,
+                    t.position,
+                    t.velocity,
+                    t.error,
+                    t.error_dot,
+                    t.p_term,
+                    t.i_term,
+                    t.d_term,
+                    t.velocity_feedforward,
+                    t.inertia_feedforward,
+                    t.friction_feedforward,
+                    t.friction_feedback,
+                    t.load_feedforward,
+                    t.learned_feedforward,
+                    t.command_unlimited,
+                    t.command,
+                ),
+                t.saturated,
+            )
+        )
+
+    def _resync(self, ch: JointChannel) -> None:
         """The gate adopted a new reference after a run of consistent rejected samples."""
-        self.get_logger().warning(self.gate.log_line or "joint state reference re-synchronised")
-        if self.gate.resync_reason != "jump" and self._t0_ns is not None:
+        self.get_logger().warning(
+            self._label(ch) + (ch.gate.log_line or "joint state reference re-synchronised")
+        )
+        if ch.gate.resync_reason != "jump" and self._t0_ns is not None and ch is self.channels[0]:
             # a new time base: the controller's time continues one period after the last accepted
-            self._t0_ns = self.gate.stamp_ns - int(round((self._last_t + self.dt) * 1e9))
-        self.controller.velocity.reset()  # no difference across the discontinuity
-
-    def _publish_command(self, stamp, torque: float) -> None:
-        self.commands.publish(stamp, torque)
+            self._t0_ns = ch.gate.stamp_ns - int(round((self._last_t + self.dt) * 1e9))
+        ch.controller.velocity.reset()  # no difference across the discontinuity
 
     # -- safety and health --------------------------------------------------------------------------
     def _check_state_timeout(self) -> None:
-        if self._last_ns is None or self._timed_out:
+        if self._last_ns is None:
             return
-        if self.get_parameter("use_sim_time").value:
+        if self._sim_clock:
             return  # lockstep: time only moves with the plant; nothing to time out
-        if time.monotonic() - self._last_state_wall > self.values["state_timeout"]:
-            self._timed_out = True
-            log = self.gate.log
+        now = time.monotonic()
+        limit = self.values["state_timeout"]
+        newly = [ch for ch in self.channels if not ch.timed_out and now - ch.last_state_wall > limit]
+        if not newly:
+            return
+        for ch in newly:
+            ch.timed_out = True
+            ch.command = ch.compensation = 0.0
+            log = ch.gate.log
             why = (
                 f" ({log.total} rejected so far, last reason {log.last_reason}: see the rejection lines)"
                 if log.total
                 else ""
             )
             self.get_logger().warning(
-                f"no valid joint state for {self.values['state_timeout']:g} s{why}: commanding zero torque"
+                f"{self._label(ch)}no valid joint state for {limit:g} s{why}: commanding zero torque"
             )
-            self._publish_command(self.get_clock().now().to_msg(), 0.0)
+        stamp = self.get_clock().now().to_msg()
+        if self.sum_base:
+            self._publish_sum(stamp.sec, stamp.nanosec)
+        else:
+            self._publish_commands(stamp.sec, stamp.nanosec, -1)
 
     def _publish_diagnostics(self) -> None:
         ct = sorted(self._compute_times[-5000:])
         self._compute_times = self._compute_times[-5000:]
+        for ch in self.channels:
+            self._publish_joint_diagnostics(ch, ct)
+
+    def _publish_joint_diagnostics(self, ch: JointChannel, ct: list[float]) -> None:
         values = dict(self.counts)
-        gate = self.gate
+        gate, ctrl = ch.gate, ch.controller
         values["rejected_states"] = gate.log.total
         values.update(gate.log.values())
         values.update(unstamped_states=gate.counts["unstamped"], resyncs=gate.counts["resyncs"])
-        new_rejections = gate.log.total - self._diag_rejected
-        self._diag_rejected = gate.log.total
+        new_rejections = gate.log.total - ch.diag_rejected
+        ch.diag_rejected = gate.log.total
         if ct:
             values["compute_p50_s"] = ct[len(ct) // 2]
             values["compute_p99_s"] = ct[min(len(ct) - 1, int(len(ct) * 0.99))]
-        level, text = OK, f"{self.controller.mode} running"
+        level, text = OK, f"{ctrl.mode} running"
+        if not ctrl.compensation_enabled:
+            text = f"{ctrl.mode} running, compensation switched off (~/set_feedforward_control)"
+        if self.addon and not (ch.has_reference or ch.trajectory or ch.desired):
+            level, text = WARN, "waiting for a desired trajectory: compensation output 0"
         if new_rejections:
             level = WARN
             text = (
                 f"{new_rejections} joint states rejected since the last status (last: {gate.log.last_reason})"
             )
-        if self._timed_out:
+        if ch.timed_out:
             level, text = WARN, "no joint state: commanding zero torque"
-        if self.controller.compensation_fallback:
-            level, text = ERROR, self.controller.fallback_reason
-        values["residual_nonfinite"] = self.controller.residual_nonfinite
-        if self.controller.residual_note and not self._residual_logged:
-            self._residual_logged = True  # once per controller (a parameter change builds a new one)
-            self.get_logger().error(self.controller.residual_note)
-        if self.controller.residual_nonfinite and level == OK:
-            level, text = WARN, self.controller.residual_note
-        values["compensation_fallback"] = int(self.controller.compensation_fallback)
-        values["feedback_bound_limited"] = int(bool(self.controller.feedback_bound_note))
-        if self.controller.feedback_bound_note:
-            values["feedback_bound"] = self.controller.feedback_bound_note
-        self.diag.publish(level, text, values)
+        if ctrl.compensation_fallback:
+            level, text = ERROR, ctrl.fallback_reason
+        values["residual_nonfinite"] = ctrl.residual_nonfinite
+        if ctrl.residual_note and not ch.residual_logged:
+            ch.residual_logged = True  # once per controller (a parameter change builds a new one)
+            self.get_logger().error(self._label(ch) + ctrl.residual_note)
+        if ctrl.residual_nonfinite and level == OK:
+            level, text = WARN, ctrl.residual_note
+        values["compensation_fallback"] = int(ctrl.compensation_fallback)
+        values["compensation_enabled"] = int(ctrl.compensation_enabled)
+        values["feedback_bound_limited"] = int(bool(ctrl.feedback_bound_note))
+        if ctrl.feedback_bound_note:
+            values["feedback_bound"] = ctrl.feedback_bound_note
+        ch.diag.publish(level, text, values)
 
     def on_shutdown(self) -> None:
-        """Leave the joint safe: the last command is zero torque."""
+        """Leave the joints safe: the last command is zero torque (the add-on: the base command
+        alone when it sums, else zero compensation)."""
+        for ch in self.channels:
+            ch.command = ch.compensation = 0.0
         for _ in range(3):
-            self._publish_command(self.get_clock().now().to_msg(), 0.0)
+            stamp = self.get_clock().now().to_msg()
+            if self.sum_base:
+                self._publish_sum(stamp.sec, stamp.nanosec)
+            else:
+                self._publish_commands(stamp.sec, stamp.nanosec, -1)
             time.sleep(0.01)
 
 

@@ -20,7 +20,13 @@ from rclpy.parameter import Parameter
 from friction_ros.core.config import Field, Schema, flatten, unflatten
 from friction_ros.core.joint_config import JointLayout, check_joint_list, joint_values
 from friction_ros.core.validation import ParameterError
-from friction_ros.nodes.parameters import ParameterNode, _declare_one, _value, declare_config
+from friction_ros.nodes.parameters import (
+    ParameterNode,
+    _add_runtime_validation,
+    _declare_one,
+    _value,
+    declare_config,
+)
 
 
 def declare_joints(node: ParameterNode, reserved: set[str]) -> list[str]:
@@ -76,7 +82,7 @@ def declare_joint_config(
     """
     layout = layout_for(schema, joints, gains_section, plain_keys)
     per_joint_given = {k: p for k, p in node.given_parameters.items() if layout.split(k) is not None}
-    values = declare_config(node, schema, apply, check_unknown=False)  # open sections skip joint keys
+    values = declare_config(node, schema, None, check_unknown=False)  # open sections skip joint keys
     by_name = dict(schema.fields())
     open_sections = {p for p, s in schema.sections() if s.open}
     overrides: dict[str, dict[str, Any]] = {j: {} for j in joints}
@@ -108,6 +114,8 @@ def declare_joint_config(
             f"per-joint values are gains.<joint>.<key> or <section>.<joint>.<key> for joints "
             f"{', '.join(joints)}; see the node's parameter list (ros2 param list)"
         )
+    if apply is not None:  # after every declaration: declaring runs the set-parameter callbacks
+        _add_runtime_validation(node, apply)
     return values, layout, overrides
 
 

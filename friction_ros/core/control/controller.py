@@ -36,6 +36,16 @@ Modes (``mode``):
 ``dnpf``            seed 003 DNPF (section ``dnpf``).
 ``gain_scheduling`` seed 003 gain scheduling (section ``gain_scheduling``).
 ``sliding_mode``    seed 000 sliding mode / relay (section ``sliding_mode``).
+``compensation_only`` an add-on to an existing arm controller (a trajectory, impedance or vendor
+                    controller): ``u = compensation_scale (tau_f_ff + tau_f_fb + load_feedforward
+                    + tau_L + tau_r)``, no feedback of its own. The feedback-path stability bound
+                    uses ``pid.p`` / ``pid.d`` as the arm controller's stiffness and damping (set
+                    them to its gains; the default 0 limits every presliding feedback term).
+
+``compensation_enabled`` (run-time switch, the node's ``~/set_feedforward_control`` service): when
+False every compensation term (friction, load, learned residual, the constant load feedforward in
+compensation_only) is 0; the friction and residual states keep running, so switching on again
+is bumpless.
 
 Friction compensation (section ``friction``, :mod:`.compensation`) is added in every mode.
 Safety (feedback paths only, i.e. sources feedback / blended / observer):
@@ -233,6 +243,7 @@ class CompensatingController:
         top = {f.name: f.check(cfg[f.name], f"controller.{f.name}") for f in CONTROLLER_FIELDS}
         mode, ffg, inertia = top["mode"], top["feedforward_gain"], top["inertia"]
         self.load_feedforward = top["load_feedforward"]
+        self.compensation_scale = top["compensation_scale"]
         umax = top["u_clamp_max"]
         umin = check_real("controller.u_clamp_min", top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
         if umin >= umax:
@@ -285,6 +296,9 @@ class CompensatingController:
             else None
         )
         self._prev_cmd: float | None = None
+        self._addon = mode == "compensation_only"
+        if not hasattr(self, "compensation_enabled"):
+            self.compensation_enabled = True  # kept across a rebuild (a parameter change)
         self.terms = ControllerTerms(mode=mode)
         # stability bound of the feedback path against the loop's linear gains (loop_gains)
         self.loop_stiffness, self.loop_damping = loop_gains(mode, pid, scheme)
@@ -373,26 +387,40 @@ class CompensatingController:
         pos, vel = self.velocity.update(m_pos, m_vel, dt)
         e = r_pos - pos
         edot = r_vel - vel
-        ff_inertia = self.inertia * r_acc
-        ff_vel = self.feedforward_gain * r_vel + self.load_feedforward
+        addon, on = self._addon, self.compensation_enabled
+        ff_inertia = 0.0 if addon else self.inertia * r_acc
+        ff_vel = (0.0 if addon else self.feedforward_gain * r_vel) + (self.load_feedforward if on else 0.0)
         if self.compensation_fallback:
             f_ff = f_fb = 0.0
         else:
             f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
+            if not on:
+                f_ff = f_fb = 0.0
         tau_l = tau_r = 0.0
-        if self._load_on:
+        if self._load_on and on:
             tau_l = self.load.torque(pos, r_vel, vel, r_acc, not self.compensation_fallback)
         learned = self.residual is not None and not self.compensation_fallback
         if learned:
             prev = 0.0 if self._prev_cmd is None else self._prev_cmd
             tau_r = self.residual.torque(pos, vel, prev, t, dt)
+            if not on:
+                tau_r = 0.0
         lower, upper = -math.inf, math.inf
         if self._prev_cmd is not None and math.isfinite(self.rate_limit):
             lower = self._prev_cmd - self.rate_limit * dt
             upper = self._prev_cmd + self.rate_limit * dt
         lo = max(self.u_clamp_min, lower)
         hi = min(self.u_clamp_max, upper)
-        if self.scheme is None:
+        if addon:
+            k = self.compensation_scale
+            f_ff, f_fb, tau_l, tau_r, ff_vel = k * f_ff, k * f_fb, k * tau_l, k * tau_r, k * ff_vel
+            s = SchemeOutput(0.0, 0.0, 0.0, 0.0, 0.0)
+            unlimited = ff_vel + f_ff + f_fb + tau_l + tau_r
+            if lo > hi:
+                lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
+            cmd = min(max(unlimited, lo), hi)
+            sat = cmd != unlimited
+        elif self.scheme is None:
             offset = ff_inertia + ff_vel + f_ff + f_fb
             if self._load_on:
                 offset += tau_l

@@ -21,7 +21,7 @@ from friction_ros.core.friction.joint_load import JOINT_LOAD_SCHEMA
 from friction_ros.core.friction.learned_residual import LEARNED_RESIDUAL_SCHEMA
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 
-CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode")
+CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode", "compensation_only")
 VELOCITY_SOURCES = ("measured", "differentiated")
 
 _INF = math.inf
@@ -30,8 +30,16 @@ CONTROLLER_FIELDS: tuple[Field, ...] = (
     Field(
         "mode",
         "pid",
-        "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode",
+        "controller mode: pid, cascade, dnpf, gain_scheduling, sliding_mode, or compensation_only "
+        "(an add-on to the arm's own controller: only the friction and load compensation)",
         choices=CONTROLLER_MODES,
+    ),
+    Field(
+        "compensation_scale",
+        1.0,
+        "compensation_only: scale of the compensation output (1: as identified, 0: off)",
+        lo=0.0,
+        hi=2.0,
     ),
     Field(
         "feedforward_gain",
