@@ -11,6 +11,12 @@ Examples::
     # several joints side by side, one namespace each (seed 002 Cartesian manipulator)
     friction-bringup --config params/bringup_cartesian_xyz.yaml
 
+    # a 7-joint arm: one plant, a plain PD and the friction add-on (lockstep, composed)
+    friction-bringup --config params/bringup_arm7.yaml --duration 20
+
+``--compose`` runs the nodes in one process with one executor (as composable components on a
+robot): fewer wake-ups per cycle on the plant -> controller -> plant chain.
+
 Ctrl-C (or the end of ``--duration``) stops the controllers first, so the last command every
 actuator receives is zero torque, then the other nodes (SIGTERM; the nodes run in their own process
 group, so a terminal's Ctrl-C reaches only this command and the order holds); a node that does not
@@ -66,25 +72,62 @@ class NodeSpec:
     params: list[str] = field(default_factory=list)
     overrides: dict[str, object] = field(default_factory=dict)
     args: list[str] = field(default_factory=list)  # node options before --ros-args (simulated_drive)
+    name: str = ""  # node name ('' = the executable's own): two controllers in one namespace
+    remaps: dict[str, str] = field(default_factory=dict)  # topic remappings (joint_commands: pd_command)
 
-    def command(self) -> list[str]:
+    def ros_args(self) -> list[str]:
+        """The ``--ros-args`` section: namespace, name, remappings, parameter files, overrides."""
         if self.node not in NODES:
             raise ParameterError(
                 f"node {self.node!r} is not a friction_ros node: must be one of {', '.join(NODES)}"
             )
-        cmd = [sys.executable, "-m", f"friction_ros.nodes.{self.node}", *self.args, "--ros-args"]
+        out = ["--ros-args"]
         if self.namespace:
-            cmd += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
+            out += ["-r", f"__ns:=/{self.namespace.strip('/')}"]
+        if self.name:
+            out += ["-r", f"__node:={self.name}"]
+        for src, dst in self.remaps.items():
+            out += ["-r", f"{src}:={dst}"]
         for p in self.params:
             check_parameter_file(p)  # one line for a missing file or one that is not a parameter YAML
-            cmd += ["--params-file", str(p)]
+            out += ["--params-file", str(p)]
         for key, value in self.overrides.items():
-            cmd += ["-p", f"{key}:={_ros_value(value)}"]
+            out += ["-p", f"{key}:={_ros_value(value)}"]
+        return out
+
+    def command(self) -> list[str]:
+        return [sys.executable, "-m", f"friction_ros.nodes.{self.node}", *self.args, *self.ros_args()]
+
+    @property
+    def label(self) -> str:
+        name = self.name or self.node
+        return f"{self.namespace.strip('/')}/{name}" if self.namespace else name
+
+
+@dataclass
+class ComposedSpec(NodeSpec):
+    """Several nodes in one process (:mod:`friction_ros.nodes.composition`)."""
+
+    members: list[NodeSpec] = field(default_factory=list)
+
+    def command(self) -> list[str]:
+        cmd = [sys.executable, "-m", "friction_ros.nodes.composition"]
+        for m in self.members:
+            if m.args:
+                raise ParameterError(
+                    f"{m.label} takes process options ({' '.join(m.args)}): it cannot be composed"
+                )
+            cmd += ["--node", m.node, *m.ros_args()]
         return cmd
 
     @property
     def label(self) -> str:
-        return f"{self.namespace.strip('/')}/{self.node}" if self.namespace else self.node
+        return "composed[" + ",".join(m.label for m in self.members) + "]"
+
+
+def composed_spec(specs: list[NodeSpec]) -> NodeSpec:
+    """One process for ``specs`` (stopped first: it holds the torque commanders)."""
+    return ComposedSpec("compensating_controller", members=list(specs))
 
 
 def _ros_value(value: object) -> str:
@@ -192,20 +235,38 @@ class Bringup:
 
 
 def specs_from_config(path: str) -> list[NodeSpec]:
-    """Read a bring-up YAML: ``joints: [{namespace, nodes, params, overrides}]``."""
+    """Read a bring-up YAML: ``joints: [{namespace, nodes, params, overrides}]`` (``groups:`` is the
+    same list under another name). A ``nodes`` entry is a node name or a mapping ``{node, name,
+    remap: {topic: topic}}`` (two controllers in one namespace: a PD and an add-on);
+    ``overrides`` are keyed by the node's name. ``compose: true`` at the top runs every node in one
+    process (``--compose``)."""
     data = load_yaml(path, "bring-up file")
-    if not isinstance(data, dict) or not isinstance(data.get("joints"), list):
-        raise ParameterError(f"bring-up file {path}: needs a top-level 'joints:' list")
+    key = "groups" if isinstance(data, dict) and "groups" in data else "joints"
+    if not isinstance(data, dict) or not isinstance(data.get(key), list):
+        raise ParameterError(f"bring-up file {path}: needs a top-level 'joints:' (or 'groups:') list")
     base = Path(path).parent
     specs = []
-    for i, joint in enumerate(data["joints"]):
+    for i, joint in enumerate(data[key]):
         if not isinstance(joint, dict):
-            raise ParameterError(f"bring-up file {path}: joints[{i}] must be a mapping")
+            raise ParameterError(f"bring-up file {path}: {key}[{i}] must be a mapping")
         ns = str(joint.get("namespace", ""))
         params = [str(_resolve(base, p)) for p in joint.get("params", [])]
-        for node in joint.get("nodes", ["plant_simulator", "compensating_controller", "friction_estimator"]):
-            overrides = dict(joint.get("overrides", {}).get(node, {}))
-            specs.append(NodeSpec(node, ns, params, overrides))
+        for entry in joint.get("nodes", ["plant_simulator", "compensating_controller", "friction_estimator"]):
+            if isinstance(entry, dict):
+                node, name = str(entry.get("node", "")), str(entry.get("name", ""))
+                remaps = {str(k): str(v) for k, v in (entry.get("remap") or {}).items()}
+                unknown = set(entry) - {"node", "name", "remap"}
+                if unknown:
+                    raise ParameterError(
+                        f"bring-up file {path}: {key}[{i}].nodes entry has unknown key(s) "
+                        f"{', '.join(sorted(unknown))}: allowed are node, name, remap"
+                    )
+            else:
+                node, name, remaps = str(entry), "", {}
+            overrides = dict(joint.get("overrides", {}).get(name or node, {}))
+            specs.append(NodeSpec(node, ns, params, overrides, name=name, remaps=remaps))
+    if data.get("compose"):
+        specs = [composed_spec(specs)]
     return specs
 
 
@@ -261,6 +322,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--duration", type=float, help="stop after this many seconds (default: until Ctrl-C)")
     parser.add_argument("--quiet", action="store_true", help="do not forward node output")
     parser.add_argument(
+        "--compose",
+        action="store_true",
+        help="run the nodes in one process with one executor (fewer wake-ups per control cycle)",
+    )
+    parser.add_argument(
         "--pin",
         choices=("auto", "on", "off"),
         default="auto",
@@ -295,6 +361,8 @@ def main(argv: list[str] | None = None) -> int:
                     s.overrides["use_sim_time"] = True
             if args.pin == "on" or (args.pin == "auto" and args.mode == "lockstep"):
                 pin_latency_chain(specs)
+        if args.compose and not (len(specs) == 1 and isinstance(specs[0], ComposedSpec)):
+            specs = [composed_spec(specs)]
         for s in specs:
             s.command()  # validate before starting anything
             check_preset(s)

@@ -1,0 +1,121 @@
+"""Several friction_ros nodes in one process with one executor (as composable components on a robot).
+
+    python -m friction_ros.nodes.composition --node plant_simulator --ros-args -p mode:=lockstep \\
+        --node compensating_controller --ros-args --params-file ctrl.yaml -p use_sim_time:=true
+
+Each ``--node NAME`` starts a node section; its ``--ros-args`` (namespace, node name, remappings,
+parameter files, ``-p``) apply to that node only (rclpy ``cli_args`` without global arguments).
+Messages between the nodes still go through the middleware, but one executor serves every
+callback: a plant -> controller -> plant cycle needs no wake-up of another process.
+``friction-bringup --compose`` and ``compose: true`` in a bring-up file use it.
+
+A node that refuses its parameters ends the process with its one line and exit code 2. On
+SIGINT/SIGTERM every node's ``on_shutdown()`` runs, torque commanders first (zero torque), then
+the others.
+"""
+
+from __future__ import annotations
+
+import gc
+import importlib
+import sys
+
+import rclpy
+
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.loops import DeadlineLoop
+from friction_ros.nodes.runtime import make_executor, start_process
+
+#: node module -> its node class
+NODE_CLASSES = {
+    "plant_simulator": "PlantSimulator",
+    "compensating_controller": "CompensatingControllerNode",
+    "friction_estimator": "FrictionEstimatorNode",
+    "drive_interface": "DriveInterface",
+    "bag_recorder": "BagRecorder",
+}
+#: torque commanders stop first
+STOP_FIRST = ("compensating_controller",)
+
+
+def split_sections(argv: list[str]) -> list[tuple[str, list[str]]]:
+    """``--node A --ros-args ... --node B ...`` -> ``[(A, [--ros-args, ...]), (B, [...])]``."""
+    out: list[tuple[str, list[str]]] = []
+    it = iter(argv)
+    for a in it:
+        if a == "--node":
+            name = next(it, None)
+            if name not in NODE_CLASSES:
+                raise ParameterError(
+                    f"--node {name!r}: must be one of {', '.join(NODE_CLASSES)} (nodes that can be composed)"
+                )
+            out.append((name, []))
+        elif not out:
+            raise ParameterError(f"{a!r}: arguments start with --node NAME")
+        else:
+            out[-1][1].append(a)
+    if not out:
+        raise ParameterError("no node given: --node NAME [--ros-args ...] (one or more)")
+    return out
+
+
+def node_class(module: str):
+    mod = importlib.import_module(f"friction_ros.nodes.{module}")
+    cls = getattr(mod, NODE_CLASSES[module], None)
+    if cls is None:
+        raise ParameterError(f"friction_ros.nodes.{module} has no {NODE_CLASSES[module]}")
+    return cls
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        sections = split_sections(argv)
+    except ParameterError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    stop = start_process([sys.argv[0]])  # no global ROS arguments: each node has its own
+    if stop is None:
+        return 2
+    nodes = []
+    try:
+        for module, args in sections:
+            nodes.append((module, node_class(module)(cli_args=args, use_global_arguments=False)))
+    except (ParameterError, ValueError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        for _, n in nodes:
+            n.destroy_node()
+        rclpy.try_shutdown()
+        return 2
+    gc.collect()
+    gc.freeze()
+    executor = make_executor()
+    for _, n in nodes:
+        executor.add_node(n)
+    loops = [n.loop for _, n in nodes if isinstance(getattr(n, "loop", None), DeadlineLoop)]
+    try:
+        if loops:  # a real-time plant paces the executor (one loop per process)
+            while not stop.is_set() and rclpy.ok():
+                loops[0].run_once(executor)
+        while not stop.is_set() and rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+    except rclpy.executors.ExternalShutdownException:
+        pass
+    finally:
+        order = sorted(nodes, key=lambda mn: mn[0] not in STOP_FIRST)
+        for _module, n in order:
+            shutdown = getattr(n, "on_shutdown", None)
+            if shutdown is not None:
+                try:
+                    shutdown()
+                except Exception as exc:  # last line of defence: report, still tear down
+                    print(f"error during shutdown of {n.get_name()}: {exc}", file=sys.stderr)
+        for _, n in nodes:
+            executor.remove_node(n)
+            n.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
