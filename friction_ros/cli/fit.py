@@ -4,6 +4,7 @@ Example::
 
     friction-fit bags/run_1 --joint joint1 --models coulomb stribeck lugre gms4 --out fit_run_1
     friction-fit log.csv --columns time=t,position=q,velocity=dq,effort=tau --time-scale 1e-9
+    friction-fit bags/arm_run --joint all --jobs 2 --out fit_arm
 
 Inputs: rosbag2 directories (MCAP or SQLite3), ``.mcap``/``.db3`` files, or ``.csv`` logs with a
 header line (time, position/velocity, effort or current columns: see
@@ -11,7 +12,10 @@ header line (time, position/velocity, effort or current columns: see
 
 Writes ``<out>/report.md``, ``<out>/summary.json``, ``<out>/plots/*.png`` and the parameter file
 (``<out>/friction_params.yaml`` or ``--params-out``) for compensating_controller,
-friction_estimator and plant_simulator. Inputs are never changed: an output that is one of the
+friction_estimator and plant_simulator. ``--joint all`` (or ``--joint j1,j3``) fits every joint as
+``--joint <joint>`` would into ``<out>/<joint>/``, writes ``<out>/index.md`` (model, validation NMSE,
+verdict per joint) and one parameter file in the per-joint layout of the multi-joint nodes
+(:mod:`friction_ros.core.identification.multi_joint`). Inputs are never changed: an output that is one of the
 bags, or a parameter file this command did not write, is refused (``--force`` replaces a file that
 exists). Exit codes: 0 ok, 2 bad input (missing topic/joint, no motion, too little excitation, bad
 option, output collision), 1 unexpected error.
@@ -50,7 +54,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--topic", default="/joint_states", help="sensor_msgs/JointState topic (default /joint_states)"
     )
     p.add_argument(
-        "--joint", default=None, help="joint name (required when the topic carries several joints)"
+        "--joint",
+        default=None,
+        help="joint name (required when the topic carries several joints); 'all' or a list j1,j3 fits each "
+        "joint and writes one parameter file for the multi-joint nodes (per-joint reports in <out>/<joint>/)",
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="with --joint all or a list: joints fitted in parallel processes (default 1; same output for any N)",
     )
     p.add_argument(
         "--models",
@@ -240,6 +253,94 @@ def check_outputs(args) -> None:
             )
 
 
+def fit_options(args, columns) -> dict:
+    """fit_bag's keyword arguments from the command line (but the output paths and progress)."""
+    return dict(
+        events_topic=args.events_topic,
+        current_topic=args.current_topic,
+        current_field=args.current_field,
+        torque_constant=args.torque_constant,
+        gear_ratio=args.gear_ratio,
+        plots=not args.no_plots,
+        torque_delay=args.torque_delay,
+        plant_preset=args.plant_preset,
+        train_seconds=args.train_seconds,
+        train_window=args.train_window,
+        gate=None if args.no_gate else {"current_lag": args.current_lag, "delay": args.delay},
+        optimizer=args.optimizer,
+        maxiter=args.maxiter,
+        seed=args.seed,
+        eps=args.eps,
+        high_threshold=args.high_threshold,
+        columns=columns,
+        time_scale=args.time_scale,
+        load=args.load,
+        ripple_period=args.ripple_period,
+        residual=args.residual,
+        cross_validate=args.cross_validate,
+    )
+
+
+def main_joints(args, columns) -> int:
+    """--joint all / j1,j3: every joint fitted as --joint <joint>, one multi-joint parameter file."""
+    from pathlib import Path
+
+    from friction_ros.core.identification import multi_joint
+    from friction_ros.core.identification.models import check_model_names
+    from friction_ros.core.validation import ParameterError
+
+    try:
+        models = check_model_names(args.models)
+        available = multi_joint.bag_joint_names(args.bags, args.topic)
+        joints = multi_joint.requested_joints(args.joint, available)
+        for j in joints:  # each joint's own outputs: refused like --params-out
+            check_outputs(
+                argparse.Namespace(**{**vars(args), "out": str(Path(args.out) / j), "params_out": None})
+            )
+    except ParameterError as exc:
+        print(f"friction-fit: error: {exc}", file=sys.stderr)
+        return 2
+
+    def on_joint(f) -> None:
+        if not args.quiet:
+            print(f"friction-fit: {f.joint}: {f.verdict} ({f.seconds:.1f} s)", file=sys.stderr)
+
+    try:
+        res = multi_joint.fit_joints(
+            args.bags,
+            joints,
+            models,
+            args.out,
+            params_file=args.params_out,
+            jobs=args.jobs,
+            on_joint=on_joint,
+            topic=args.topic,
+            **fit_options(args, columns),
+        )
+    except ParameterError as exc:
+        print(f"friction-fit: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("friction-fit: interrupted", file=sys.stderr)
+        return 130
+    header = multi_joint.INDEX_HEADER
+    rows = multi_joint.index_rows(res)
+    width = [max(len(h), *(len(r[i]) for r in rows)) for i, h in enumerate(header)]
+    for r in [header, *rows]:
+        print("  ".join(c.ljust(w) for c, w in zip(r, width)).rstrip())
+    for w in res.warnings:
+        print(f"warning: {w}")
+    for f in res.joints:
+        if f.files.get("report"):
+            print(f"wrote report {f.joint}: {f.files['report']}")
+    for kind in ("params", "index"):
+        print(f"wrote {kind}: {res.files[kind]}")
+    if not any(f.compensated for f in res.joints):
+        print("friction-fit: error: no joint could be fitted: see the warnings above", file=sys.stderr)
+        return 2
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     from friction_ros.core.validation import ParameterError
@@ -247,9 +348,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         check_outputs(args)
         columns = parse_columns(args.columns)
+        if args.jobs < 1:
+            raise ParameterError(f"--jobs {args.jobs}: must be >= 1")
     except ParameterError as exc:
         print(f"friction-fit: error: {exc}", file=sys.stderr)
         return 2
+    from friction_ros.core.identification.multi_joint import is_joint_list
+
+    if is_joint_list(args.joint):
+        return main_joints(args, columns)
 
     try:
         from rich.console import Console
@@ -292,30 +399,9 @@ def main(argv: list[str] | None = None) -> int:
                 args.joint,
                 models,
                 args.out,
-                events_topic=args.events_topic,
-                current_topic=args.current_topic,
-                current_field=args.current_field,
-                torque_constant=args.torque_constant,
-                gear_ratio=args.gear_ratio,
                 params_file=args.params_out,
-                plots=not args.no_plots,
-                torque_delay=args.torque_delay,
-                plant_preset=args.plant_preset,
-                train_seconds=args.train_seconds,
-                train_window=args.train_window,
-                gate=None if args.no_gate else {"current_lag": args.current_lag, "delay": args.delay},
-                optimizer=args.optimizer,
-                maxiter=args.maxiter,
-                seed=args.seed,
-                eps=args.eps,
-                high_threshold=args.high_threshold,
                 progress=on_progress,
-                columns=columns,
-                time_scale=args.time_scale,
-                load=args.load,
-                ripple_period=args.ripple_period,
-                residual=args.residual,
-                cross_validate=args.cross_validate,
+                **fit_options(args, columns),
             )
         finally:
             if progress is not None:

@@ -153,8 +153,8 @@ class _Joint:
 class FrictionEstimatorNode(ParameterNode):
     """Thin adapter over one OnlineFrictionEstimator per joint; see the module docstring."""
 
-    def __init__(self):
-        super().__init__("friction_estimator")
+    def __init__(self, **kwargs):
+        super().__init__("friction_estimator", **kwargs)
         schema = parameter_schema(with_joints=False)
         names = [name for name, _ in schema.fields()] + [name for name, _ in schema.sections()]
         reserved = {part for name in names for part in name.split(".")}  # joint j: no <x>.j.<y> clash
