@@ -16,6 +16,29 @@ Modes:
               ``use_sim_time`` follow; the whole graph runs as fast as it can and deterministically.
               If no answer arrives within ``resend_period`` (wall) the pending state is published
               again (a subscriber that joined late gets it); duplicate commands are ignored.
+
+Several joints (``joints: [j1, j2, ...]``; unset = the one joint ``joint_name``, exactly as before):
+one core plant per joint, all stepped with the same ``control_period``, and one ``joint_states``
+message per period with every joint (names in ``joints`` order). Per-joint plants:
+
+* ``presets``: one preset per joint, in the order of ``joints`` (unset: every joint uses ``preset``);
+* ``plant.<joint>.<key>``, ``friction_motor.<joint>.<key>``, ``friction_load.<joint>.<key>``: a
+  joint's own values, laid over the node-level ``plant.*`` / ``friction_*.*`` values, which apply to
+  every joint's preset (layout: :mod:`friction_ros.core.joint_config`); a per-joint friction section
+  that names its own ``model`` replaces the node-level one for that joint. A robot joint's gravity
+  load is ``plant.<joint>.gravity`` (m g l [N*m]) and ``plant.<joint>.gravity_phase`` [rad]
+  (:mod:`friction_ros.core.plant.servo`). Example: ``params/arm7_plant.yaml``.
+
+``joint_commands`` may name any subset of the joints (one message for all from one controller, or
+one message per joint from one controller each); names that are not joints of this node are
+ignored, a message naming none of them is ignored and counted. Realtime: each joint applies its
+newest command and falls back to zero torque after ``command_timeout`` on its own. Lockstep: the
+plant advances once every joint has a command stamped with the pending state's stamp (partial
+messages are merged; a second command for an already answered joint is a duplicate, ignored).
+With several joints the subscription keeps one command per joint (keep-last ``len(joints)``), so
+answers that arrive together are not dropped. Diagnostics: one status for the node; with several
+joints it also has ``<joint>.preset``, ``<joint>.commands_rejected`` and (realtime)
+``<joint>.command_fresh``.
 """
 
 from __future__ import annotations
@@ -23,18 +46,24 @@ from __future__ import annotations
 import math
 import threading
 import time
+from collections.abc import Mapping
+from typing import Any
 
 from builtin_interfaces.msg import Time
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control_period import control_period_field
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
+from friction_ros.core.joint_config import JointLayout, joint_values, name_joint_error
 from friction_ros.core.plant.servo import MAX_COMMAND
-from friction_ros.core.presets import resolve_preset
+from friction_ros.core.presets import Preset, resolve_preset
+from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
 from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
@@ -45,6 +74,13 @@ NODE_FIELDS = [
         "preset",
         "abb_m19s",
         "plant preset: a name in params/ (abb_m19s, seed002_x ...), a YAML path, or '' (the plant.* / friction_*.* parameters are the whole plant)",
+        read_only=True,
+    ),
+    Field(
+        "presets",
+        [],
+        "one plant preset per joint, in the order of joints (empty: every joint uses preset)",
+        kind=str,
         read_only=True,
     ),
     Field("description", "", "free text describing the preset", read_only=True),
@@ -122,59 +158,213 @@ NODE_FIELDS = [
 ]
 
 
+JOINTS_FIELD = Field(
+    "joints",
+    [],
+    "the joints of this plant, in joint_states order; per-joint plant.<joint>.<key> / "
+    "friction_*.<joint>.<key> (empty: the one joint joint_name)",
+    kind=str,
+    read_only=True,
+)
 PRESET_SECTIONS = ("plant", "friction_motor", "friction_load")
+# a per-joint friction section naming its own model replaces the node-level section of that joint
+_REPLACED_BY = {"friction_motor": "model", "friction_load": "model"}
 
 
-def parameter_schema() -> Schema:
+def parameter_schema(with_joints: bool = True) -> Schema:
     """The node's parameters; the preset sections take the keys given in the parameter file (on top
-    of the preset; the plant's keys: :data:`friction_ros.core.plant.params.PLANT_SCHEMA`)."""
+    of the preset; the plant's keys: :data:`friction_ros.core.plant.params.PLANT_SCHEMA`).
+    ``joints`` is declared by :func:`~friction_ros.nodes.joint_parameters.declare_joints` (the node
+    builds the schema without it)."""
     sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
-    return Schema("plant_simulator", [*NODE_FIELDS, *sections, *SCHEDULING])
+    joints = [JOINTS_FIELD] if with_joints else []
+    return Schema("plant_simulator", [*joints, *NODE_FIELDS, *sections, *SCHEDULING])
+
+
+def joint_plant_configs(
+    values: Mapping[str, Any], joints: list[str], overrides: Mapping[str, Mapping[str, Any]]
+) -> list[tuple[str, str, dict]]:
+    """``(joint, preset, sections)`` of every joint: the preset name (``presets[i]`` or ``preset``)
+    and its ``plant`` / ``friction_motor`` / ``friction_load`` overrides (node-level values with the
+    joint's ``overrides``, node-level flat names such as ``plant.gravity``, on top). Pure."""
+    presets = list(values.get("presets") or [])
+    if presets and len(presets) != len(joints):
+        raise ParameterError(
+            f"presets = {presets} has {len(presets)} names for {len(joints)} joints "
+            f"({', '.join(joints)}): must hold one preset per joint, in the order of joints, or none "
+            "(every joint uses preset)"
+        )
+    node_sections = {s: dict(values.get(s) or {}) for s in PRESET_SECTIONS}
+    if values.get("joints"):
+        for key, value in node_sections["plant"].items():
+            if isinstance(value, Mapping):  # plant.<name>.<key> for a name that is not a joint
+                raise ParameterError(
+                    f"plant.{key}.{next(iter(value), '')}: {key!r} is not one of the joints "
+                    f"({', '.join(joints)}), so it has no per-joint plant values"
+                )
+    out = []
+    for i, joint in enumerate(joints):
+        own = dict(overrides.get(joint, {}))
+        for name in own:
+            if name.split(".", 1)[0] not in PRESET_SECTIONS:
+                raise ParameterError(
+                    f"{name.split('.', 1)[0]}.{joint}.{name.split('.', 1)[-1]}: only the plant sections "
+                    f"({', '.join(PRESET_SECTIONS)}) have per-joint values"
+                )
+        sections = joint_values(node_sections, own, _REPLACED_BY)
+        out.append((joint, presets[i] if presets else values["preset"], sections))
+    return out
+
+
+def resolve_joint_presets(
+    values: Mapping[str, Any], joints: list[str], overrides: Mapping[str, Mapping[str, Any]]
+) -> list[Preset]:
+    """The plant preset of every joint, all at the node's ``control_period`` (one joint: the node's
+    preset with its sections, as without ``joints``). Errors name the per-joint parameter when the
+    joint has its own value (``plant.j2.gravity``), else say which joint. Pure."""
+    multi = bool(values.get("joints"))
+    layout = JointLayout(joints, PRESET_SECTIONS)
+    out = []
+    for joint, name, sections in joint_plant_configs(values, joints, overrides):
+        try:
+            out.append(resolve_preset(name, {**sections, "control_period": values["control_period"]}))
+        except ParameterError as exc:
+            if not multi:
+                raise
+            raise ParameterError(
+                name_joint_error(str(exc), layout, joint, overrides.get(joint, {}))
+            ) from None
+    return out
+
+
+def select_joint_commands(
+    msg, index: Mapping[str, int], limits: list[float]
+) -> tuple[dict[int, float], list[tuple[int | None, str, str]], int]:
+    """Efforts of a ``joint_commands`` message for several joints.
+
+    Returns ``(efforts, rejections, unknown)``: ``{joint index: effort}`` (an implausible effort
+    becomes 0.0 and is listed in ``rejections`` as ``(index, reason, detail)``), the rejections (a
+    whole-message one has index None: ``wrong_joint`` when it names none of the joints,
+    ``wrong_length`` for mismatched arrays or an unnamed message) and how many names are not joints
+    of this node (ignored). A name given twice counts once (the first). Pure.
+    """
+    names = list(msg.name)
+    n = len(names)
+    if not n:
+        return (
+            {},
+            [(None, "wrong_length", f"unnamed command with {len(msg.effort)} efforts: must name the joints")],
+            0,
+        )
+    hits = [(k, index[nm]) for k, nm in enumerate(names) if nm in index]
+    if not hits:
+        return (
+            {},
+            [(None, "wrong_joint", f"none of the joints {list(index)} is in name {names} (check joints)")],
+            n,
+        )
+    if len(msg.effort) != n:
+        return {}, [(None, "wrong_length", f"effort has {len(msg.effort)} values for {n} names")], 0
+    efforts: dict[int, float] = {}
+    rejections: list[tuple[int | None, str, str]] = []
+    for k, i in hits:
+        if i in efforts:
+            continue
+        e = float(msg.effort[k])
+        if not math.isfinite(e):
+            rejections.append(
+                (i, "not_finite", f"effort = {e} for {names[k]}: must be a finite torque [N*m]")
+            )
+            e = 0.0
+        elif abs(e) > limits[i]:
+            rejections.append(
+                (
+                    i,
+                    "out_of_range",
+                    f"effort = {e:g} for {names[k]}: must satisfy |effort| <= max_effort = {limits[i]:g} [N*m]",
+                )
+            )
+            e = 0.0
+        efforts[i] = e
+    return efforts, rejections, n - len(hits)
 
 
 class PlantSimulator(ParameterNode):
-    """Thin adapter: commands in, GearheadServoPlant.step, joint states out."""
+    """Thin adapter: commands in, GearheadServoPlant.step (one plant per joint), joint states out."""
 
-    def __init__(self):
-        super().__init__("plant_simulator")
-        self.p = declare_config(self, parameter_schema(), self._apply)
-        sections = {s: self.p.get(s, {}) for s in PRESET_SECTIONS}
-        # the node's control_period is the preset's (it owns the period the plant is stepped at)
-        self.preset = resolve_preset(
-            self.p["preset"], {**sections, "control_period": self.p["control_period"]}
+    def __init__(self, **kwargs):
+        super().__init__("plant_simulator", **kwargs)
+        schema = parameter_schema(with_joints=False)
+        reserved = {item.name for item in schema} | {JOINTS_FIELD.name}
+        joints_param = declare_joints(self, reserved)
+        if joints_param:
+            self.p, self.layout, overrides = declare_joint_config(self, schema, joints_param, self._apply)
+        else:  # one joint (joint_name): the parameters exactly as without ``joints``
+            self.layout, overrides = JointLayout([], PRESET_SECTIONS), {}
+            self.p = declare_config(self, schema, self._apply)
+        self.p["joints"] = joints_param
+        self.multi = bool(joints_param)
+        self.joints = list(joints_param) if self.multi else [self.p["joint_name"]]
+        # the node's control_period is every preset's (it owns the period the plants are stepped at)
+        self.presets = resolve_joint_presets(self.p, self.joints, overrides)
+        self.plants = [pr.make_plant() for pr in self.presets]
+        self.scales = [pl.command_scale for pl in self.plants]
+        # the (first) joint: single-joint code and tools read these
+        self.preset, self.plant, self.scale, self.joint = (
+            self.presets[0],
+            self.plants[0],
+            self.scales[0],
+            self.joints[0],
         )
-        self.plant = self.preset.make_plant()
-        self.scale = self.plant.command_scale
         self.dt = self.preset.control_period
         self.dt_ns = int(round(self.dt * 1e9))
-        self.joint = self.p["joint_name"]
         self.lockstep = self.p["mode"] == "lockstep"
+        n = self.n = len(self.joints)
+        self._index = {j: i for i, j in enumerate(self.joints)}
 
         # joint states and commands are (de)serialised by the wire module's JointState codec and sent as
         # bytes: same wire type, no message objects in the 1 kHz path
-        self._encoder = JointStateEncoder([self.joint])
+        self._encoder = JointStateEncoder(self.joints)
         self._decoder = JointStateDecoder()
         self.state_pub = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
-        self.create_subscription(JointState, "joint_commands", self._on_command, COMMAND_QOS, raw=True)
+        # several joints: one command per joint may arrive at once (one controller per joint)
+        qos = (
+            COMMAND_QOS
+            if n == 1
+            else QoSProfile(
+                history=COMMAND_QOS.history,
+                depth=n,
+                reliability=COMMAND_QOS.reliability,
+                durability=COMMAND_QOS.durability,
+            )
+        )
+        self.create_subscription(JointState, "joint_commands", self._on_command, qos, raw=True)
         # realtime mode is the clock source: wall time without an rclpy Time object per cycle
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
-        self.diag = DiagnosticsPublisher(self, "plant_simulator", self.preset.name)
+        hardware = self.preset.name if not self.multi else ",".join(pr.name for pr in self.presets)
+        self.diag = DiagnosticsPublisher(self, "plant_simulator", hardware)
 
         self._lock = threading.Lock()
-        self._command = 0.0
-        self._command_wall = -math.inf
-        self._commands_rejected = 0  # implausible effort for this joint: zero torque applied instead
-        self._commands_ignored = 0  # another joint / malformed (logged) or a lockstep duplicate
-        self._rejections = RejectionLog(f"joint_commands for {self.joint}", self.p["log_period"])
+        self._command = [0.0] * n
+        self._command_wall = [-math.inf] * n
+        self._commands_rejected = 0  # implausible effort: zero torque applied instead
+        self._rejected_by_joint = [0] * n
+        self._commands_ignored = 0  # no joint of ours / malformed (logged) or a lockstep duplicate
+        self._unknown_names = 0  # names in joint_commands that are not joints of this node (ignored)
+        what = f"joint_commands for {self.joint}" if n == 1 else "joint_commands"
+        self._rejections = RejectionLog(what, self.p["log_period"])
         self._diag_rejected = 0
         self._steps = 0
         self._latency = LatencyHistogram()
         self._last_state_wall = 0.0
-        self.plant.reset(position=self.p["initial_position"])
+        for plant in self.plants:
+            plant.reset(position=self.p["initial_position"])
         self._t_ns = 0
         self._start_wall = time.monotonic()
-        self._answered_ns = -1
+        self._answered_ns = [-1] * n
+        self._answers: list[float | None] = [None] * n  # lockstep: the pending state's commands
+        self._n_answers = 0
         self._missed = 0
         # statistics window: from the first command (+ stats_delay); before it no controller answers
         self._stats_reset_at: float | None = None
@@ -183,7 +373,11 @@ class PlantSimulator(ParameterNode):
         self._stats_sim0 = 0.0
         self._next_clock_ns = 0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
-        self._pending = (self.p["initial_position"], 0.0, 0.0)
+        self._pending = (
+            *([self.p["initial_position"]] * n),
+            *([0.0] * n),
+            *([0.0] * n),
+        )
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
         if self.lockstep:
             self._last_publish = 0.0
@@ -195,13 +389,23 @@ class PlantSimulator(ParameterNode):
             # driven by run_node's executor loop
             self.loop = DeadlineLoop(self.dt, self._tick)
         apply_scheduling(self, self.p)
-        self.get_logger().info(
-            f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
-            f"command scale {self.scale:.6g} (plant unit per N*m)"
-        )
+        if not self.multi:
+            self.get_logger().info(
+                f"preset {self.preset.name}: {self.p['mode']} at {1 / self.dt:g} Hz, joint {self.joint}, "
+                f"command scale {self.scale:.6g} (plant unit per N*m)"
+            )
+        else:
+            each = ", ".join(
+                f"{j} ({pr.name}, scale {k:.6g})"
+                for j, pr, k in zip(self.joints, self.presets, self.scales, strict=True)
+            )
+            self.get_logger().info(f"{n} joints, {self.p['mode']} at {1 / self.dt:g} Hz: {each}")
 
     # -- parameters ---------------------------------------------------------------------------------
     def _apply(self, changes):
+        for k in changes:
+            if self.layout.split(k) is not None:
+                raise ParameterError(f"{k} is read-only (restart the node to change it)")
         for k, v in changes.items():
             self.p[k] = v
 
@@ -221,59 +425,101 @@ class PlantSimulator(ParameterNode):
         self._stats_steps0 = self._steps
         self._stats_sim0 = self.plant.time
 
+    def _limit(self, scale: float) -> float:
+        # plausibility: the node's max_effort and the plant's own command range (MAX_COMMAND)
+        return min(self.p["max_effort"], MAX_COMMAND / abs(scale)) if scale else self.p["max_effort"]
+
+    def _select(self, msg) -> dict[int, float] | None:
+        """``{joint index: effort}`` of a command (rejected efforts: 0.0), None when it is ignored."""
+        now = time.monotonic()
+        if self.n == 1:
+            effort, reason, detail = select_command(msg, self.joint, self._limit(self.scale))
+            if effort is not None:
+                return {0: effort}
+            rejections = [(None if reason in ("wrong_joint", "wrong_length") else 0, reason, detail)]
+            efforts: dict[int, float] = {}
+        else:
+            efforts, rejections, unknown = select_joint_commands(
+                msg, self._index, [self._limit(k) for k in self.scales]
+            )
+            self._unknown_names += unknown
+        for i, reason, detail in rejections:
+            line = self._rejections.reject(reason, detail, now)
+            if i is None:
+                self._commands_ignored += 1  # not a command for our joints: ignored
+                if line:
+                    self.get_logger().warning(f"{line}; ignored")
+                return None
+            self._commands_rejected += 1
+            self._rejected_by_joint[i] += 1
+            if line:
+                self.get_logger().warning(f"{line}; applying zero torque instead")
+            efforts[i] = 0.0
+        return efforts
+
     def _on_command(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
         if self._stats_reset_at is None:
             self._stats_reset_at = time.monotonic() + self.p["stats_delay"]
         if self._stats_reset_at <= time.monotonic():
             self._reset_statistics()
-        # plausibility: the node's max_effort and the plant's own command range (MAX_COMMAND)
-        limit = (
-            min(self.p["max_effort"], MAX_COMMAND / abs(self.scale)) if self.scale else self.p["max_effort"]
-        )
-        effort, reason, detail = select_command(msg, self.joint, limit)
-        if effort is None:
-            line = self._rejections.reject(reason, detail, time.monotonic())
-            if reason in ("wrong_joint", "wrong_length"):
-                self._commands_ignored += 1  # not a command for this joint: ignored
-                if line:
-                    self.get_logger().warning(f"{line}; ignored")
-                return
-            self._commands_rejected += 1
-            if line:
-                self.get_logger().warning(f"{line}; applying zero torque instead")
-            effort = 0.0
+        efforts = self._select(msg)
+        if efforts is None:
+            return
         if self.lockstep:
             if msg.stamp_ns != self._t_ns:
                 self._commands_ignored += 1  # duplicate or stale answer
                 return
-            self._advance(effort)
+            answers = self._answers
+            new = 0
+            for i, e in efforts.items():
+                if answers[i] is None:
+                    answers[i] = e
+                    new += 1
+            if not new:
+                self._commands_ignored += 1  # every joint it names was answered already: duplicate
+                return
+            self._n_answers += new
+            if self._n_answers < self.n:
+                return  # wait for the other joints' commands
+            self._advance(answers)
+            self._answers = [None] * self.n
+            self._n_answers = 0
             self._publish_pending()
             return
         now = time.monotonic()
-        with self._lock:
-            self._command = effort
-            self._command_wall = now
         sent = msg.stamp_ns
+        with self._lock:
+            for i, e in efforts.items():
+                self._command[i] = e
+                self._command_wall[i] = now
+                if sent:
+                    self._answered_ns[i] = sent
         if sent:
-            with self._lock:
-                self._answered_ns = sent
             self._latency.add((self._now_ns() - sent) * 1e-9)
 
     # -- stepping -------------------------------------------------------------------------------------
-    def _advance(self, torque: float) -> None:
-        m = self.plant.step(torque * self.scale, self.dt)
+    def _advance(self, torques) -> None:
+        dt = self.dt
+        if self.n == 1:
+            m = self.plant.step(torques[0] * self.scale, dt)
+            self._pending = (m.position, m.velocity, m.effort)
+        else:
+            ms = [pl.step(t * k, dt) for pl, t, k in zip(self.plants, torques, self.scales, strict=True)]
+            self._pending = (
+                *(m.position for m in ms),
+                *(m.velocity for m in ms),
+                *(m.effort for m in ms),
+            )
         self._steps += 1
         self._t_ns += self.dt_ns
-        self._pending = (m.position, m.velocity, m.effort)
 
     def _publish_pending(self) -> None:
         sec, nanosec = divmod(self._t_ns, 1_000_000_000)
         if self.clock_pub is not None and self._t_ns >= self._next_clock_ns:
             self._next_clock_ns = self._t_ns + self._clock_ns
             self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-        p, v, e = self._pending
-        self.state_pub.publish(self._encoder.pack(sec, nanosec, p, v, e))
+        self.state_pub.publish(self._encoder.pack(sec, nanosec, *self._pending))
         self._last_publish = time.monotonic()
 
     def _resend(self) -> None:
@@ -282,11 +528,15 @@ class PlantSimulator(ParameterNode):
 
     def _tick(self) -> None:
         with self._lock:
-            fresh = time.monotonic() - self._command_wall <= self.p["command_timeout"]
-            torque = self._command if fresh else 0.0
-            if self._steps and self._answered_ns != self._t_ns:
-                self._missed += 1  # the command for the last published state did not arrive in time
-        self._advance(torque)
+            now = time.monotonic()
+            timeout = self.p["command_timeout"]
+            torques = [
+                c if now - w <= timeout else 0.0
+                for c, w in zip(self._command, self._command_wall, strict=True)
+            ]
+            if self._steps and any(a != self._t_ns for a in self._answered_ns):
+                self._missed += 1  # a command for the last published state did not arrive in time
+        self._advance(torques)
         self._t_ns = self._now_ns()
         self._publish_pending()
 
@@ -300,6 +550,8 @@ class PlantSimulator(ParameterNode):
             "commands_ignored": self._commands_ignored,
             **self._rejections.values(),
         }
+        if self.multi:
+            values["unknown_joint_names"] = self._unknown_names
         level, text = OK, "running"
         if self.loop is not None:
             s = self.loop.stats
@@ -310,13 +562,25 @@ class PlantSimulator(ParameterNode):
                 max_lateness_s=s.max_lateness,
             )
             with self._lock:
-                stale = time.monotonic() - self._command_wall > self.p["command_timeout"]
-            if stale:
-                level, text = WARN, "no fresh command: applying zero torque"
+                now = time.monotonic()
+                fresh = [now - w <= self.p["command_timeout"] for w in self._command_wall]
+            if not all(fresh):
+                level = WARN
+                if self.multi:
+                    stale = ", ".join(j for j, f in zip(self.joints, fresh, strict=True) if not f)
+                    text = f"no fresh command for {stale}: applying zero torque to them"
+                else:
+                    text = "no fresh command: applying zero torque"
             if self._latency.n:
                 values.update(
                     latency_p50_s=self._latency.percentile(50), latency_p99_s=self._latency.percentile(99)
                 )
+        if self.multi:
+            for i, j in enumerate(self.joints):
+                values[f"{j}.preset"] = self.presets[i].name
+                values[f"{j}.commands_rejected"] = self._rejected_by_joint[i]
+                if self.loop is not None:
+                    values[f"{j}.command_fresh"] = fresh[i]
         new = self._rejections.total - self._diag_rejected
         self._diag_rejected = self._rejections.total
         if new:

@@ -41,8 +41,10 @@ from friction_ros.core.plant.params import PlantParams
     P_BAND_L,
     P_STICK,
     P_COMPLIANT,
+    P_GRAV_AMP,
+    P_GRAV_PHASE,
     P_SIZE,
-) = range(25)
+) = range(27)
 X_THM, X_WM, X_Q, X_WL, X_I, X_SIZE = range(6)
 
 
@@ -74,6 +76,8 @@ def pack_params(p: PlantParams) -> np.ndarray:
     P[P_BAND_L] = fl.coefficients.get("dv", 0.0) if fl.name == "karnopp" else 0.0
     P[P_STICK] = 1.0 if p.stick_logic else 0.0
     P[P_COMPLIANT] = 1.0 if p.compliant else 0.0
+    P[P_GRAV_AMP] = p.gravity
+    P[P_GRAV_PHASE] = p.gravity_phase
     return P
 
 
@@ -131,6 +135,7 @@ def run_control_periods(P, x, km, pm, sm, dm, kl, pl, sl, dl, cmd, n_sub, h, out
     # static vs dynamic friction split
     skm = km if dm == 0 else -1
     skl = kl if dl == 0 else -1
+    grav_amp = P[P_GRAV_AMP]
     thm, wm, q, wl, cur = x[X_THM], x[X_WM], x[X_Q], x[X_WL], x[X_I]
     fm_last = 0.0
     fl_last = 0.0
@@ -149,6 +154,11 @@ def run_control_periods(P, x, km, pm, sm, dm, kl, pl, sl, dl, cmd, n_sub, h, out
             if P[P_IMAX] > 0.0:
                 cur = min(max(cur, -P[P_IMAX]), P[P_IMAX])
             tm = kt * cur
+            # joint-side load towards -q: constant gravity_force plus, when set, the pendulum term
+            # gravity sin(q + gravity_phase) (skipped at 0: the sums are bit-identical without it)
+            grav = P[P_GRAV]
+            if grav_amp != 0.0:
+                grav = grav + grav_amp * math.sin(q + P[P_GRAV_PHASE])
             if not compliant:
                 qd = wm / r
                 # dynamic friction (advance states once per sub-step)
@@ -159,7 +169,7 @@ def run_control_periods(P, x, km, pm, sm, dm, kl, pl, sl, dl, cmd, n_sub, h, out
                 if dl != 0:
                     fl_last = friction_eval(kl, pl, sl, qd, h, tm * r * eta)
                     fdyn += refl * fl_last
-                ta = tm - P[P_BM] * wm - refl * (P[P_BL] * qd + P[P_KL] * q + P[P_GRAV] - P[P_TLOAD]) - fdyn
+                ta = tm - P[P_BM] * wm - refl * (P[P_BL] * qd + P[P_KL] * q + grav - P[P_TLOAD]) - fdyn
                 wn, fs = body_step(
                     wm,
                     ta,
@@ -207,7 +217,7 @@ def run_control_periods(P, x, km, pm, sm, dm, kl, pl, sl, dl, cmd, n_sub, h, out
                     fdl = friction_eval(kl, pl, sl, wl, h, tc)
                     fl_last = fdl
                 tam = tm - P[P_BM] * wm - refl * tc - fdm
-                tal = tc - P[P_BL] * wl - P[P_KL] * q - P[P_GRAV] + P[P_TLOAD] - fdl
+                tal = tc - P[P_BL] * wl - P[P_KL] * q - grav + P[P_TLOAD] - fdl
                 wmn, fsm = body_step(
                     wm, tam, jm, h, skm, pm, sm, -1, pl, sl, r, 1.0, tm, 0.0, P[P_BAND_M], stick
                 )

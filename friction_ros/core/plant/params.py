@@ -75,6 +75,13 @@ PLANT_SCHEMA = Schema(
         Field("load_damping", 0.0, "viscous damping at the joint", lo=0.0, unit="N*m*s/rad or N*s/m"),
         Field("load_stiffness", 0.0, "stiffness of the joint to ground", lo=0.0, unit="N*m/rad or N/m"),
         Field("gravity_force", 0.0, "constant gravity load acting towards -q", unit="N*m or N"),
+        Field(
+            "gravity",
+            0.0,
+            "pendulum gravity load m g l: the joint feels -gravity sin(q + gravity_phase) (0 = off)",
+            unit="N*m",
+        ),
+        Field("gravity_phase", 0.0, "phase q0 of the pendulum gravity load (q = -q0: hanging)", unit="rad"),
         Field("load_torque", 0.0, "constant external load along +q", unit="N*m or N"),
         Field("backlash", 0.0, "total backlash gap at the joint", lo=0.0, unit="rad or m"),
         Field("coupling_stiffness", 0.0, "transmission stiffness (0 = rigid)", lo=0.0, unit="N*m/rad or N/m"),
@@ -154,6 +161,8 @@ class PlantParams:
     load_damping: float = 0.0
     load_stiffness: float = 0.0
     gravity_force: float = 0.0
+    gravity: float = 0.0
+    gravity_phase: float = 0.0
     load_torque: float = 0.0
     backlash: float = 0.0
     coupling_stiffness: float = 0.0

@@ -7,6 +7,12 @@ eqs. (2)-(4)):
 * rigid transmission: ``J_eq w' = Kt i - Bm w - (Bl w/r + Kl q + m_g - T_load)/(r eta) - F_m(w)
   - F_l(w/r)/(r eta)``, ``J_eq = J_motor + J_transmission + J_load/(r^2 eta)`` (seed 002 eq. (1)-(4),
   seed 003 eq. (1));
+* gravity: ``m_g = gravity_force + gravity sin(q + gravity_phase)``: a constant load towards -q
+  (a vertical linear axis) plus a pendulum load ``m g l sin(q + q0)`` [N*m] (a robot joint that
+  lifts a link; ``gravity`` = m g l, ``gravity_phase`` = q0: the link hangs at q = -q0, is upright
+  at q = pi - q0, and a joint held with zero torque sags towards the hanging position). Both act
+  on the joint side (the load body of a compliant transmission); ``gravity`` = 0 (default) leaves
+  the term out entirely, so plants without it are bit-identical to before it existed;
 * backlash / compliant transmission (``coupling_stiffness > 0``): two bodies coupled by a dead-zone
   spring-damper of total gap ``backlash`` (joint units);
 * actuation: ``current`` (command = amplifier input, i_ref = amplifier_gain*cmd, current loop as a
