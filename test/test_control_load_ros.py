@@ -190,3 +190,30 @@ def test_load_and_residual_parameters_change_at_run_time(tmp_path):
             node.destroy_node()
     finally:
         rclpy.try_shutdown()
+
+
+def test_fitted_file_with_load_terms_and_no_ripple_starts_the_node(tmp_path):
+    """friction-fit writes a load section with gravity but no ripple: the node must start from it
+    (rcl cannot type ``ripple_cos: []``; the export leaves empty lists out)."""
+    import rclpy
+
+    from friction_ros.core.friction.joint_load import JointLoad
+    from friction_ros.core.identification.export import dump_yaml, parameter_document
+    from friction_ros.nodes.compensating_controller import CompensatingControllerNode
+
+    load = JointLoad(gravity=2.0, gravity_phase=0.1).to_config()
+    assert load["ripple_cos"] == []
+    doc = parameter_document({"model": "coulomb_viscous", "fc": 0.5, "fv": 0.1}, 0.01, load=load)
+    path = tmp_path / "fit.yaml"
+    path.write_text(dump_yaml(doc))
+    assert "ripple_cos" not in path.read_text()
+    rclpy.init(args=["--ros-args", "--params-file", str(path)])
+    try:
+        node = CompensatingControllerNode()
+        try:
+            jl = node.controller.load.load
+            assert (jl.gravity, jl.gravity_phase, jl.ripple_cos) == (2.0, 0.1, [])
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()

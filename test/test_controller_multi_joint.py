@@ -227,6 +227,7 @@ def test_a_missing_joint_gets_zero_torque_and_the_others_stay_controlled(tmp_pat
         ),
         ({"joints": ["joint1", "joint1"]}, "joints[1] = 'joint1' appears twice"),
         ({"joints": ["joint1", "pid"]}, "joints[1] = 'pid' clashes"),
+        ({"load": {"ripple_cos": []}}, "an empty list (key: [] or key: ~): ROS 2 cannot type it"),
     ],
 )
 def test_per_joint_parameter_errors_name_the_joint_and_the_key(tmp_path, params, line):

@@ -197,8 +197,8 @@ class JointChannel:
 class CompensatingControllerNode(ParameterNode):
     """Thin adapter over one CompensatingController per joint; see the module docstring."""
 
-    def __init__(self):
-        super().__init__("compensating_controller")
+    def __init__(self, **kwargs):
+        super().__init__("compensating_controller", **kwargs)
         schema = parameter_schema(self.given_section)
         joints = declare_joints(self, {name.split(".")[0] for name, _ in schema.fields()} | {GAINS})
         self.values, self.layout, overrides = declare_joint_config(

@@ -64,7 +64,15 @@ class ParameterNode(Node):
     """
 
     def __init__(self, node_name: str, **kwargs):
-        super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
+        try:
+            super().__init__(node_name, automatically_declare_parameters_from_overrides=True, **kwargs)
+        except ValueError as exc:
+            if "PARAMETER_NOT_SET" not in str(exc):
+                raise
+            raise ParameterError(
+                f"{node_name}: the parameter file has a key with no value or an empty list (key: [] "
+                "or key: ~): ROS 2 cannot type it; leave the key out (list parameters default to [])"
+            ) from None
         self.given_parameters: dict[str, rclpy.parameter.Parameter] = {}
         #: every field declared by :func:`declare_config` (dotted name -> field)
         self.parameter_fields: dict[str, Field] = {}

@@ -1,7 +1,8 @@
 """Experiment event markers: the fields of ``friction_msgs/ExperimentEvent``.
 
 An excitation program emits them (:mod:`friction_ros.core.experiment.excitation`); identification
-reads them back from a bag to find its segments (plateaus, breakaway ramps).
+reads them back from a bag to find its segments (plateaus, breakaway ramps). On an arm each event
+names its joint in ``header.frame_id`` (:func:`event_joint_matches`).
 """
 
 from __future__ import annotations
@@ -41,6 +42,15 @@ def completed_segments(events: list[Event], key: str) -> list[tuple[Event, Event
         elif e.event == ABORT:
             open_.pop(k, None)
     return out
+
+
+def event_joint_matches(frame_id: str, joint: str | None) -> bool:
+    """Whether an event recorded with ``header.frame_id`` belongs to ``joint``.
+
+    An experiment on several joints (``identification_experiment`` with ``joints``) stamps each
+    event with the joint it is about in ``header.frame_id``; a single-joint experiment (and every
+    bag recorded before) leaves it empty, and such an event belongs to any joint."""
+    return not frame_id or joint is None or frame_id == joint
 
 
 _SETTLE_NOTE = re.compile(r"settle=([0-9.eE+-]+)")

@@ -220,6 +220,26 @@ class ExcitationProgram:
             self._finish_segment(t)
             self._skip_until = t + self.config["gap"]
 
+    def stop(self, reason: str) -> list[Event]:
+        """End the program from outside (on an arm: another joint left its limits): an ABORT event
+        for the segment under way, naming ``reason``; the program is done and, like a program a
+        safety limit stopped, commands zero torque from now on."""
+        events: list[Event] = []
+        if self.done:
+            return events
+        seg = self.current
+        self.aborted = True
+        self.abort_reasons.append(reason)
+        if seg is not None and seg.marked and self._seg_t0 is not None:
+            events.append(Event(self.t, seg.program, seg.label, seg.index, ABORT, seg.target, reason))
+        self.ctx.pid.reset(0.0)
+        self.on_limit = "stop"
+        self._done_planned = self.total_duration
+        self._i = len(self.segments)
+        self.done = True
+        self._last_torque = self.ctx.last_torque = 0.0
+        return events
+
     def _track_motion(self, position: float) -> None:
         """Position range and reversals (``travel_counts`` counts back from the last extreme)."""
         if not math.isfinite(position):

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from friction_ros.core.experiment.events import Event
+from friction_ros.core.experiment.events import Event, event_joint_matches
 from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 
@@ -69,7 +69,11 @@ def load_bag(
             et = ev.stamp
         except BagError:
             et = ev.time
+        # on an arm each event names its joint in header.frame_id: keep this joint's (and unnamed) ones
+        frames = ev["header.frame_id"] if "header.frame_id" in ev else None
         for i in range(len(ev)):
+            if frames is not None and not event_joint_matches(str(frames[i]), joint):
+                continue
             events.append(
                 Event(
                     float(et[i]),

@@ -209,8 +209,8 @@ def parameter_document(
                 "inertia": float(inertia),
                 **({"pid": {k: float(v) for k, v in gains.items()}} if gains else {}),
                 **({"load_feedforward": float(load_feedforward)} if load_feedforward else {}),
-                **({"load": load} if load else {}),
-                **({"residual": residual} if residual else {}),
+                **({"load": ros_section(load)} if load else {}),
+                **({"residual": ros_section(residual)} if residual else {}),
                 "friction": config,
                 "compensation": compensation_section(gate),
             }
@@ -226,6 +226,18 @@ def parameter_document(
             }
         },
     }
+
+
+def ros_section(section: dict) -> dict:
+    """``section`` without empty lists: rcl gives ``key: []`` no type and rclpy refuses such a
+    parameter file; an empty list is every list field's default anyway."""
+    out = {}
+    for k, v in section.items():
+        if isinstance(v, dict):
+            out[k] = ros_section(v)
+        elif not (isinstance(v, (list, tuple)) and len(v) == 0):
+            out[k] = v
+    return out
 
 
 def dump_yaml(doc: dict, header: str = "") -> str:
