@@ -1,0 +1,117 @@
+"""Issue 18: the 7-joint arm example over DDS: a plain PD per joint with and without the friction
+add-on (compensation_only, summing the PD's command), in lockstep; composed in one process gives
+the same motion as separate processes."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import yaml
+from ros_graph import ROOT, Graph, Listener
+
+from friction_ros.cli.bringup import NodeSpec, composed_spec
+from friction_ros.core.experiment.references import reference_from_config
+from friction_ros.core.wire import JointStateDecoder
+
+PLANT = str(ROOT / "params" / "arm7_plant.yaml")
+CONTROLLERS = str(ROOT / "params" / "arm7_controllers.yaml")
+JOINTS = [f"joint{i}" for i in range(1, 8)]
+SIM_SECONDS = 4.0
+
+
+def test_committed_arm_controllers_are_what_the_plant_file_gives():
+    r = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "make-arm-example.py"), "--check"],
+        capture_output=True,
+        text=True,
+    )
+    assert r.returncode == 0, r.stderr
+
+
+def _specs(addon: bool, compose: bool) -> list[NodeSpec]:
+    params = [PLANT, CONTROLLERS]
+    sim = {"use_sim_time": True}
+    specs = [NodeSpec("plant_simulator", "arm", params, {"mode": "lockstep"})]
+    if addon:
+        specs.append(
+            NodeSpec(
+                "compensating_controller",
+                "arm",
+                params,
+                sim,
+                name="pd_controller",
+                remaps={"joint_commands": "pd_command"},
+            )
+        )
+        specs.append(
+            NodeSpec(
+                "compensating_controller",
+                "arm",
+                params,
+                sim,
+                name="friction_addon",
+                remaps={"base_command": "pd_command", "controller_state": "compensation_state"},
+            )
+        )
+    else:
+        specs.append(NodeSpec("compensating_controller", "arm", params, sim, name="pd_controller"))
+    return [composed_spec(specs)] if compose else specs
+
+
+def _run(addon: bool, compose: bool = False) -> dict[int, tuple[float, ...]]:
+    """{stamp ns: 7 positions} of the arm's joint_states up to SIM_SECONDS of simulated time."""
+    from sensor_msgs.msg import JointState
+
+    states: dict[int, tuple[float, ...]] = {}
+    dec = JointStateDecoder()
+    last = [0]
+
+    def on_state(data: bytes) -> None:
+        m = dec.decode(data)
+        states[m.stamp_ns] = tuple(m.position)
+        last[0] = max(last[0], m.stamp_ns)
+
+    with Listener() as lis:
+        from friction_ros.nodes.qos import STATE_QOS
+
+        lis.node.create_subscription(JointState, "/arm/joint_states", on_state, STATE_QOS, raw=True)
+        with Graph(_specs(addon, compose)) as g:
+            assert lis.wait_for(lambda: last[0] >= SIM_SECONDS * 1e9, 240, g), (
+                f"the arm reached {last[0] * 1e-9:.2f} s only\n"
+                + "\n".join(g.bringup.output.get(k, [""])[-1] for k in g.bringup.output)
+            )
+            g.assert_alive()
+    return states
+
+
+def _rms_errors(states: dict[int, tuple[float, ...]]) -> np.ndarray:
+    doc = yaml.safe_load(open(CONTROLLERS))
+    refs = doc["/**/pd_controller"]["ros__parameters"]["reference"]
+    gens = [reference_from_config(refs[j]) for j in JOINTS]
+    err = []
+    for stamp, pos in sorted(states.items()):
+        t = stamp * 1e-9
+        err.append([g.sample(t)[0] - p for g, p in zip(gens, pos)])
+    e = np.asarray(err)
+    assert len(e) > 0.3 * SIM_SECONDS / 1e-3, f"only {len(e)} joint states received"
+    return np.sqrt(np.mean(e**2, axis=0))
+
+
+@pytest.mark.ros
+def test_the_addon_halves_every_joints_tracking_error_and_composition_changes_nothing():
+    pd = _rms_errors(_run(addon=False))
+    separate = _run(addon=True)
+    with_addon = _rms_errors(separate)
+    ratio = with_addon / pd
+    table = ", ".join(f"{j} {a:.3g}->{b:.3g}" for j, a, b in zip(JOINTS, pd, with_addon))
+    assert np.all(ratio <= 0.5), f"RMS tracking error PD -> PD + add-on: {table}"
+    assert np.all(np.isfinite(ratio)) and math.isfinite(float(np.max(ratio)))
+    composed = _run(addon=True, compose=True)
+    common = sorted(set(separate) & set(composed))
+    assert len(common) > 0.3 * SIM_SECONDS / 1e-3
+    worst = max(max(abs(a - b) for a, b in zip(separate[s], composed[s])) for s in common)
+    assert worst == 0.0, f"composed and separate processes differ by {worst:g} rad"
