@@ -86,6 +86,18 @@ def test_static_numpy_matches_compiled_kernel_and_is_odd_and_dissipative(name):
         np.testing.assert_allclose(m.torque(-v), -f)
 
 
+@pytest.mark.parametrize("name", MODEL_NAMES)
+def test_scalar_steady_state_equals_the_vectorised_one(name):
+    """The controller's per-period path (``steady_scalar``: the formula on a float) gives the
+    vectorised map's numbers for every model, at 0, near 0 and in sliding."""
+    m = make_model(name, **EXAMPLES[name])
+    for x in (0.0, 1e-9, -1e-9, 1e-6, -5e-4, 0.013, -0.2, 1.0, -3.0):
+        assert m.steady_scalar(x) == pytest.approx(
+            float(m.steady_state(np.array([x]))[0]), rel=1e-12, abs=1e-15
+        )
+        assert isinstance(m.steady_scalar(x), float)
+
+
 def test_stribeck_family_seed004_eq5_and_lorentzian_eq7():
     fc, fs, vs, fv = 0.3, 0.5, 0.1, 0.02
     t = make_model("tustin", fc=fc, fs=fs, vs=vs, fv=fv)

@@ -231,6 +231,8 @@ class JointInputGate:
         self.log = RejectionLog(what or f"joint state of {joint}", log_period)
         self._lead_ns = int(self.max_stamp_lead * 1e9)
         self._one = (joint,)
+        self._names: tuple | None = None  # names of the last multi-joint message and this joint's index
+        self._index = 0
         self.counts = {"accepted": 0, "duplicates": 0, "unstamped": 0, "resyncs": 0}
         self.reset()
 
@@ -264,10 +266,20 @@ class JointInputGate:
             vel = v[0] if v else None
             eff = e[0] if e else None
         else:
-            sel, reason, detail = select_sample(msg, self.joint)
-            if sel is None:
-                return self._reject(reason, detail, now_ns, now_wall)
-            pos, vel, eff = sel
+            names, n = msg.name, len(msg.name)
+            v, e = msg.velocity, msg.effort
+            if names is self._names and len(msg.position) == n and len(v) in (0, n) and len(e) in (0, n):
+                i = self._index  # the same names object as last time (the decoder's layout): same index
+                pos = float(msg.position[i])
+                vel = v[i] if v else None
+                eff = e[i] if e else None
+            else:
+                sel, reason, detail = select_sample(msg, self.joint)
+                if sel is None:
+                    return self._reject(reason, detail, now_ns, now_wall)
+                pos, vel, eff = sel
+                if n and isinstance(names, tuple):
+                    self._names, self._index = names, names.index(self.joint)
         if (vel is None and self.need_velocity) or (eff is None and self.need_effort):
             field = "velocity" if vel is None and self.need_velocity else "effort"
             return self._reject("wrong_length", f"no {field} value (this node needs it)", now_ns, now_wall)

@@ -99,10 +99,10 @@ def build_model(model: Any, name: str = "friction.model"):
 def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
     """Static-model friction at ``v`` with the chosen near-zero smoothing (see module docstring)."""
     if smoothing == "tanh" and v_eps > 0.0:
-        return float(model.steady_state(v)) * math.tanh(abs(v) / v_eps)
+        return model.steady_scalar(v) * math.tanh(abs(v) / v_eps)
     if smoothing == "linear" and v_eps > 0.0 and abs(v) < v_eps:
-        return float(model.steady_state(math.copysign(v_eps, v))) * abs(v) / v_eps if v != 0.0 else 0.0
-    return float(model.steady_state(v))
+        return model.steady_scalar(math.copysign(v_eps, v)) * abs(v) / v_eps if v != 0.0 else 0.0
+    return model.steady_scalar(v)
 
 
 def _presliding_bound(
@@ -289,13 +289,20 @@ class FrictionCompensator:
     @property
     def weights(self) -> tuple[float, float]:
         """(feedforward weight, feedback weight) of the chosen source."""
-        return {
-            "none": (0.0, 0.0),
-            "feedforward": (1.0, 0.0),
-            "feedback": (0.0, 1.0),
-            "observer": (0.0, 1.0),
-            "blended": (self.blend, 1.0 - self.blend),
-        }[self.source]
+        key = (self.source, self.blend)
+        if self._weights_key != key:  # computed once per source/blend, not every period
+            self._weights_key = key
+            self._weights = {
+                "none": (0.0, 0.0),
+                "feedforward": (1.0, 0.0),
+                "feedback": (0.0, 1.0),
+                "observer": (0.0, 1.0),
+                "blended": (self.blend, 1.0 - self.blend),
+            }[self.source]
+        return self._weights
+
+    _weights_key: tuple | None = None
+    _weights = (0.0, 0.0)
 
     def _eval(self, m, v: float, dt: float) -> float:
         if m.is_dynamic:

@@ -98,7 +98,7 @@ from friction_ros.core.validation import (
 )
 
 
-@dataclass
+@dataclass(slots=True)
 class ControllerTerms:
     """All terms of one period (friction_msgs/ControllerState fields, SI units)."""
 
@@ -381,7 +381,8 @@ class CompensatingController:
         """One control period; returns all terms (also kept in ``self.terms``)."""
         if not (isinstance(dt, (int, float)) and dt > 0.0 and math.isfinite(dt)):
             raise ParameterError(f"controller: dt = {dt!r} is out of range: must be > 0 [s]")
-        r_pos, r_vel, r_acc = (float(x) for x in reference)
+        r_pos, r_vel, r_acc = reference
+        r_pos, r_vel, r_acc = float(r_pos), float(r_vel), float(r_acc)
         m_pos = float(measured[0])
         m_vel = None if len(measured) < 2 or measured[1] is None else float(measured[1])
         pos, vel = self.velocity.update(m_pos, m_vel, dt)

@@ -350,6 +350,26 @@ class BandLimitedRandom(Reference):
         self._p = x
         self._v = np.gradient(x, self.sample_time)
         self._a = np.gradient(self._v, self.sample_time)
+        self._lists = (self._t.tolist(), x.tolist(), self._v.tolist(), self._a.tolist())
+
+    def _scalar(self, tau):
+        """Linear interpolation on the uniform grid (np.interp's formula), held past the end."""
+        t, p, v, a = self._lists
+        k = int(tau / self.sample_time)
+        if k >= len(t) - 1:
+            return (p[-1], 0.0, 0.0) if tau > t[-1] else (p[-1], v[-1], a[-1])
+        if t[k] > tau:  # rounding of tau / sample_time
+            k -= 1
+        elif t[k + 1] <= tau:
+            k += 1
+            if k >= len(t) - 1:
+                return (p[-1], 0.0, 0.0) if tau > t[-1] else (p[-1], v[-1], a[-1])
+        f = (tau - t[k]) / (t[k + 1] - t[k])
+        return (
+            (p[k + 1] - p[k]) * f + p[k],
+            (v[k + 1] - v[k]) * f + v[k],
+            (a[k + 1] - a[k]) * f + a[k],
+        )
 
     def _eval(self, tau):
         return (

@@ -1,0 +1,199 @@
+"""Benchmark `manipulator` (issue 18): a 7-joint arm at 1 kHz, one node per role.
+
+The arm of ``params/arm7_plant.yaml`` (7 plants in one plant_simulator, real-time 1 kHz loop), one
+7-joint compensating_controller (the example's PD per joint with its friction and gravity
+compensation, ``params/arm7_controllers.yaml``: pid mode with the add-on's sections) and one
+7-joint friction_estimator (Coulomb-viscous per joint), as separate processes over DDS, for
+``--seconds`` after a warm-up. Figures per scheduling configuration:
+
+* ``controller_cpu_percent`` / ``estimator_cpu_percent``: CPU time of the node's process over wall
+  time (% of one core), 7 joints at 1 kHz (goal: at most 40 % each);
+* ``latency_p99_ms``: state-to-command latency measured by the plant (command arrival minus the
+  stamp of the state it answers; goal < 1 ms);
+* ``missed_percent``: periods in which the answer to the previous state had not arrived;
+* ``timer_floor_missed_percent``: a bare Python loop sleeping to 1 kHz deadlines on core 0 (no ROS,
+  no work) woken more than 1 ms late, with the same scheduling: cycles no node can make (goal:
+  ``missed_percent`` at most 1.5x the floor, composed and pinned).
+
+Configurations: ``separate`` (three processes, normal scheduling), ``pinned_fifo`` (plant and
+controller on core 0 with SCHED_FIFO 80, estimator on core 1), ``composed_fifo`` (plant and
+controller in one process, one executor, on core 0 with SCHED_FIFO 80; estimator on core 1).
+The composed process's CPU is the plant's and the controller's together.
+
+    .venv/bin/python bench/manipulator.py             # 30 s per configuration
+    .venv/bin/python bench/manipulator.py --quick     # 10 s (iterate; not for README)
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import yaml
+
+sys.path.append(str(Path(__file__).resolve().parent))
+from _common import print_table, write_results  # noqa: E402
+from loop import cpu_s, timer_floor  # noqa: E402
+
+from friction_ros.cli.bringup import Bringup, NodeSpec, composed_spec  # noqa: E402
+from friction_ros.core.experiment.arm_example import joint_presets  # noqa: E402
+from friction_ros.core.experiment.joint_scale import JointScale  # noqa: E402
+
+os.environ.setdefault("ROS_DOMAIN_ID", str(130 + os.getpid() % 40))
+os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+ROOT = Path(__file__).resolve().parents[1]
+PLANT = ROOT / "params" / "arm7_plant.yaml"
+CONTROLLERS = ROOT / "params" / "arm7_controllers.yaml"
+
+CONFIGS = {
+    "separate": ({}, {}, {}, False),
+    "pinned_fifo": (
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"cpu_affinity": 1},
+        False,
+    ),
+    "composed_fifo": (
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"realtime_priority": 80, "cpu_affinity": 0},
+        {"cpu_affinity": 1},
+        True,
+    ),
+}
+
+
+def node_parameters(tmp: Path) -> Path:
+    """The 7-joint controller (PD + the add-on's compensation in pid mode) and estimator."""
+    doc = yaml.safe_load(CONTROLLERS.read_text())
+    pd = doc["/**/pd_controller"]["ros__parameters"]
+    addon = doc["/**/friction_addon"]["ros__parameters"]
+    ctrl = {k: v for k, v in pd.items()}
+    for section in ("friction", "compensation", "load"):
+        if section in addon:
+            ctrl[section] = addon[section]
+    plant = next(v["ros__parameters"] for v in yaml.safe_load(PLANT.read_text()).values())
+    est = {"joints": ctrl["joints"], "model": "coulomb_viscous", "publish_every": 10, "gains": {}}
+    for joint, preset in joint_presets(plant):
+        est["gains"][joint] = {"inertia": float(JointScale.from_preset(preset, period=1e-3).inertia)}
+    path = tmp / "arm_nodes.yaml"
+    doc = {
+        "/**/compensating_controller": {"ros__parameters": ctrl},
+        "/**/friction_estimator": {"ros__parameters": est},
+    }
+    path.write_text(yaml.safe_dump(json.loads(json.dumps(doc))))  # no YAML aliases: rcl refuses them
+    return path
+
+
+def run(tmp: Path, config: str, seconds: float, warmup: float) -> dict:
+    plant_s, ctrl_s, est_s, compose = CONFIGS[config]
+    params = node_parameters(tmp)
+    stats = tmp / f"stats_{config}.json"
+    plant = {"mode": "realtime", "stats_file": str(stats), "stats_delay": 2.0, **plant_s}
+    chain = [
+        NodeSpec("plant_simulator", "", [str(PLANT)], plant),
+        NodeSpec("compensating_controller", "", [str(params)], dict(ctrl_s)),
+    ]
+    est = NodeSpec("friction_estimator", "", [str(params)], dict(est_s))
+    specs = [composed_spec(chain), est] if compose else [*chain, est]
+    bring = Bringup(specs, quiet=True)
+    bring.start()
+    time.sleep(warmup)
+    cpu0 = {s.label: cpu_s(p.pid) for s, p in bring.procs}
+    wall0 = time.monotonic()
+    end = wall0 + seconds
+    while time.monotonic() < end and not bring.failed():
+        time.sleep(0.5)
+    cpu1 = {s.label: cpu_s(p.pid) for s, p in bring.procs}
+    wall = time.monotonic() - wall0
+    failed = bring.failed()
+    bring.stop()
+    if failed:
+        raise SystemExit(f"nodes failed: {failed}\n" + "\n".join(sum(bring.output.values(), [])[-40:]))
+    out = json.loads(stats.read_text())
+    cpu = {k: 100.0 * (cpu1[k] - cpu0[k]) / wall for k in cpu0}
+    ctrl_label = specs[0].label if compose else "compensating_controller"
+    return {
+        "seconds": seconds,
+        "rate_hz": out["rate_hz"],
+        "latency_p50_ms": out["latency_p50_s"] * 1e3,
+        "latency_p99_ms": out["latency_p99_s"] * 1e3,
+        "latency_max_ms": out["latency_max_s"] * 1e3,
+        "missed_percent": 100.0 * out["missed_commands"] / max(out["cycles"], 1),
+        "overruns": out["overruns"],
+        "cycles": out["cycles"],
+        "cpu_percent": cpu,
+        "controller_cpu_percent": cpu[ctrl_label],
+        "estimator_cpu_percent": cpu["friction_estimator"],
+        "plant_cpu_percent": None if compose else cpu["plant_simulator"],
+    }
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--seconds", type=float, default=30.0)
+    parser.add_argument("--quick", action="store_true", help="10 s per configuration (not for README)")
+    args = parser.parse_args()
+    seconds = 10.0 if args.quick else args.seconds
+    floor = timer_floor(seconds)
+    figures: dict = {"joints": 7, "rate_hz_target": 1000.0, "timer_floor": floor, "configurations": {}}
+    with tempfile.TemporaryDirectory() as d:
+        for config in CONFIGS:
+            r = run(Path(d), config, seconds, warmup=6.0)
+            key = "default" if config == "separate" else "pinned_fifo"
+            fl = floor.get(key, {}).get("late_1ms_percent")
+            r["timer_floor_missed_percent"] = fl
+            r["missed_vs_floor"] = None if not fl else r["missed_percent"] / fl
+            figures["configurations"][config] = r
+    # headline figures (issue 18's names): the composed and pinned configuration; the controller
+    # and estimator CPU of separate pinned processes (the composed process holds the plant too)
+    comp, pin = figures["configurations"]["composed_fifo"], figures["configurations"]["pinned_fifo"]
+    figures.update(
+        controller_cpu_percent=pin["controller_cpu_percent"],
+        estimator_cpu_percent=pin["estimator_cpu_percent"],
+        latency_p99_ms=comp["latency_p99_ms"],
+        missed_percent=comp["missed_percent"],
+        timer_floor_missed_percent=comp["timer_floor_missed_percent"],
+    )
+    rows = []
+    for name, r in figures["configurations"].items():
+        rows.append(
+            [
+                name,
+                r["rate_hz"],
+                r["controller_cpu_percent"],
+                r["estimator_cpu_percent"],
+                r["plant_cpu_percent"] if r["plant_cpu_percent"] is not None else "(in controller)",
+                r["latency_p50_ms"],
+                r["latency_p99_ms"],
+                r["missed_percent"],
+                r["timer_floor_missed_percent"],
+            ]
+        )
+    print_table(
+        f"7-joint arm at 1 kHz, {seconds:g} s per configuration (goals: controller and estimator <= 40 % "
+        "of a core each, p99 < 1 ms, missed <= 1.5x the timer floor composed and pinned)",
+        [
+            "configuration",
+            "rate Hz",
+            "controller CPU %",
+            "estimator CPU %",
+            "plant CPU %",
+            "latency p50 ms",
+            "latency p99 ms",
+            "missed %",
+            "timer floor missed %",
+        ],
+        rows,
+    )
+    write_results("manipulator", figures)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
