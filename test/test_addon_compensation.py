@@ -94,6 +94,7 @@ def test_addon_node_sums_the_arm_command_and_switches_off(tmp_path):
     with Listener() as lis:
         comp = lis.subscribe(Float64MultiArray, "compensation_command", COMMAND_QOS)
         cmds = lis.subscribe(JointState, "joint_commands", RECORDED_QOS)
+        sums = lis.subscribe(Float64MultiArray, "commands", COMMAND_QOS)
         terms = lis.subscribe(ControllerState, "controller_state", RECORDED_QOS)
         states = lis.publisher(JointState, "joint_states")
         desired = lis.publisher(JointState, "desired_joint_states")
@@ -139,6 +140,7 @@ def test_addon_node_sums_the_arm_command_and_switches_off(tmp_path):
             assert got == pytest.approx(want, abs=1e-12)
             assert want[0] == pytest.approx(1.0 + 0.25, abs=1e-6)  # fc + fv v of joint a
             assert arm(1.0, -2.0) == pytest.approx([1.0 + want[0], -2.0 + want[1]], abs=1e-12)
+            assert lis.wait_for(lambda: bool(sums) and list(sums[-1].data) == list(cmds[-1].effort), 10, g)
             # switched off: the arm's command passes unchanged
             fut = client.call_async(SetBool.Request(data=False))
             assert lis.wait_for(lambda: fut.done(), 20, g) and fut.result().success

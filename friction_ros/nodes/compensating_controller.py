@@ -21,10 +21,11 @@ compensation, for an arm that already has a controller. Its desired motion comes
 ``reference`` (the JointTrajectory sent to the arm's trajectory controller), ``desired_joint_states``
 (the newest desired position/velocity per joint) or ``reference.*`` parameters; until one of them
 is there the output is 0. It is published as ``compensation_command`` (std_msgs/Float64MultiArray
-in ``joints`` order: ros2_controllers' forward_command_controller / effort controllers) and as
-``joint_commands`` (JointState effort: topic_based_ros2_control); with ``sum_base_command`` the
-arm controller's own command (``base_command``, JointState effort) is added and the sum is
-``joint_commands``. ``~/set_feedforward_control`` (std_srvs/SetBool, as ros2_controllers'
+in ``joints`` order, every period) and as ``joint_commands`` (JointState effort:
+topic_based_ros2_control); with ``sum_base_command`` the arm controller's own command
+(``base_command``, JointState effort) is added and the sum is ``joint_commands`` and ``commands``
+(Float64MultiArray: remap it onto a ros2_controllers forward_command_controller's / effort
+controller's ``~/commands``). ``~/set_feedforward_control`` (std_srvs/SetBool, as ros2_controllers'
 pid_controller) switches the compensation on/off; ``compensation_scale`` (global, or per joint
 ``gains.<joint>.compensation_scale``) scales it. The limit-cycle detector watches every joint.
 
@@ -36,7 +37,7 @@ Topics (all relative, so one namespace per joint or arm works):
   (friction_msgs/FrictionEstimate per joint, adopted when ``adopt_estimator_coefficients`` is
   true), ``base_command`` (add-on with ``sum_base_command``)
 * out ``joint_commands`` (sensor_msgs/JointState effort = joint torque N*m, keep-last 1),
-  ``compensation_command`` (add-on), ``controller_state`` (friction_msgs/ControllerState, one per
+  ``compensation_command`` and ``commands`` (add-on), ``controller_state`` (friction_msgs/ControllerState, one per
   joint per period: every term, for plotting), ``diagnostics`` (one status per joint)
 
 Parameters: the node's own (below) plus the sections of the core controller, one ROS parameter per
@@ -255,6 +256,9 @@ class CompensatingControllerNode(ParameterNode):
             ]
             if self.sum_base:
                 self.create_subscription(JointState, "base_command", self._on_base_command, COMMAND_QOS)
+                self.sum_array_pub = self.create_publisher(Float64MultiArray, "commands", COMMAND_QOS)
+                self._sum_msg = Float64MultiArray()
+                self._sum_msg.layout.dim = list(self._compensation_msg.layout.dim)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
 
@@ -519,10 +523,11 @@ class CompensatingControllerNode(ParameterNode):
 
     def _publish_sum(self, sec: int, nanosec: int) -> None:
         base = self._base
-        self.last_command = self._cmd_encoder.pack(
-            sec, nanosec, *(base.get(ch.joint, 0.0) + ch.compensation for ch in self.channels)
-        )
+        total = [base.get(ch.joint, 0.0) + ch.compensation for ch in self.channels]
+        self.last_command = self._cmd_encoder.pack(sec, nanosec, *total)
         self.commands.publish(self.last_command)
+        self._sum_msg.data = total
+        self.sum_array_pub.publish(self._sum_msg)
 
     def _publish_terms(self, ch: JointChannel, sec: int, nanosec: int, t: ControllerTerms) -> None:
         self.state_pub.publish(
