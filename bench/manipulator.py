@@ -20,6 +20,11 @@ controller on core 0 with SCHED_FIFO 80, estimator on core 1), ``composed_fifo``
 controller in one process, one executor, on core 0 with SCHED_FIFO 80; estimator on core 1).
 The composed process's CPU is the plant's and the controller's together.
 
+Tracking (the same arm, deterministic core loop, no middleware: the DDS test checks the same
+wiring): per joint, RMS tracking error and stick fraction of the plain PD and of PD + add-on over
+20 s, for reference seeds 1, 2, 3 (the example uses seed = joint number); the ratio must be <= 0.5
+on every joint and seed.
+
     .venv/bin/python bench/manipulator.py             # 30 s per configuration
     .venv/bin/python bench/manipulator.py --quick     # 10 s (iterate; not for README)
 """
@@ -134,14 +139,76 @@ def run(tmp: Path, config: str, seconds: float, warmup: float) -> dict:
     }
 
 
+def tracking(duration: float, seeds=(1, 2, 3)) -> list[dict]:
+    """PD vs PD + add-on per joint and reference seed (see the module docstring)."""
+    from friction_ros.core.control.controller import controller_from_ros_parameters
+    from friction_ros.core.harness import run_closed_loop
+
+    doc = yaml.safe_load(CONTROLLERS.read_text())
+    pd = doc["/**/pd_controller"]["ros__parameters"]
+    addon = doc["/**/friction_addon"]["ros__parameters"]
+    plant = next(v["ros__parameters"] for v in yaml.safe_load(PLANT.read_text()).values())
+    rows = []
+    for joint, preset in joint_presets(plant):
+        plain = {"mode": "pid", "pid": pd["gains"][joint]}
+        comp = dict(plain)
+        comp["friction"] = addon["friction"][joint]
+        comp["compensation"] = {
+            k: v for k, v in addon["compensation"].items() if not isinstance(v, dict)
+        } | addon["compensation"].get(joint, {})
+        if joint in addon.get("load", {}):
+            comp["load"] = addon["load"][joint]
+        for seed in seeds:
+            ref = {**pd["reference"][joint], "seed": seed}
+            out = {}
+            for name, cfg in (("pd", plain), ("addon", comp)):
+                ctrl, _ = controller_from_ros_parameters(cfg)
+                m = run_closed_loop(preset, ctrl, ref, duration, 1e-3).metrics
+                out[name] = m
+            rows.append(
+                {
+                    "joint": joint,
+                    "preset": preset.name,
+                    "seed": seed,
+                    "rms_pd": out["pd"]["rms_error"],
+                    "rms_addon": out["addon"]["rms_error"],
+                    "ratio": out["addon"]["rms_error"] / out["pd"]["rms_error"],
+                    "stick_pd": out["pd"].get("stick_fraction"),
+                    "stick_addon": out["addon"].get("stick_fraction"),
+                }
+            )
+    return rows
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=30.0)
     parser.add_argument("--quick", action="store_true", help="10 s per configuration (not for README)")
     args = parser.parse_args()
     seconds = 10.0 if args.quick else args.seconds
+    track = tracking(5.0 if args.quick else 20.0)
+    print_table(
+        "7-joint arm: plain PD vs PD + friction add-on (RMS tracking error, rad; stick fraction while the "
+        "reference moves; goal ratio <= 0.5 on every joint and seed)",
+        ["joint", "preset", "seed", "RMS PD", "RMS PD + add-on", "ratio", "stick PD", "stick PD + add-on"],
+        [
+            [
+                r["joint"],
+                r["preset"],
+                r["seed"],
+                r["rms_pd"],
+                r["rms_addon"],
+                r["ratio"],
+                r["stick_pd"],
+                r["stick_addon"],
+            ]
+            for r in track
+        ],
+    )
     floor = timer_floor(seconds)
     figures: dict = {"joints": 7, "rate_hz_target": 1000.0, "timer_floor": floor, "configurations": {}}
+    figures["tracking"] = track
+    figures["tracking_worst_ratio"] = max(r["ratio"] for r in track)
     with tempfile.TemporaryDirectory() as d:
         for config in CONFIGS:
             r = run(Path(d), config, seconds, warmup=6.0)

@@ -34,9 +34,15 @@ def generate_launch_description():
         DeclareLaunchArgument("plant_params", default_value=os.path.join(params, "arm7_plant.yaml")),
         DeclareLaunchArgument("addon_params", default_value=os.path.join(params, "arm7_controllers.yaml")),
         DeclareLaunchArgument("joint_states", default_value="joint_states", description="measured states"),
-        DeclareLaunchArgument("base_command", default_value="pd_command", description="the arm controller's command"),
-        DeclareLaunchArgument("joint_commands", default_value="joint_commands", description="command + compensation"),
-        DeclareLaunchArgument("use_sim_time", default_value="false", description="true with a lockstep plant"),
+        DeclareLaunchArgument(
+            "base_command", default_value="pd_command", description="the arm controller's command"
+        ),
+        DeclareLaunchArgument(
+            "joint_commands", default_value="joint_commands", description="command + compensation"
+        ),
+        DeclareLaunchArgument(
+            "use_sim_time", default_value="false", description="true with a lockstep plant"
+        ),
     ]
     sim = IfCondition(arg("simulate"))
     nodes = [

@@ -20,6 +20,16 @@ measured (``--breakaway``, ``--inertia``, ``--torque-limit``, ``--speed-limit``,
 ``--resolution``) to size it the same way; without them the ``--profile`` values are used as they
 are (``--sizing profile``, scaled for the ABB M19-S). ``--set`` overrides any key afterwards.
 
+An arm: ``--joints j1,j2,j3 --presets abb_m19s,seed004_dc_motor,seed000_gearhead`` (or a
+multi-joint parameter file such as ``--params params/arm7_plant.yaml``, whose ``joints``,
+``presets`` and ``plant.<joint>.*`` are used) runs each joint's program, sized to its own plant,
+one joint after another (``--joint-sequence one_at_a_time``, the others held by a PD hold) or all
+at once (``together``); ``--set limits.j2.max_travel=0.5`` sets one joint's value
+(:mod:`friction_ros.cli.experiment_arm`). The bag has every joint on ``joint_states`` and each
+event names its joint, so ``friction-fit BAG --joint j2`` fits j2 from j2's segments. A joint
+leaving its limits stops the whole arm (zero torque on every joint, exit 3); the summary is
+printed for every joint.
+
 Starts separate processes (friction-bringup machinery): ``plant_simulator`` (unless ``--no-sim``),
 ``bag_recorder`` (joint_states, experiment_events, optionally diagnostics) and
 ``identification_experiment``, which waits for the recorder before it begins. When the program is
@@ -50,6 +60,7 @@ from pathlib import Path
 import yaml
 
 from friction_ros.cli.bringup import Bringup, NodeSpec
+from friction_ros.cli.experiment_arm import arm_setup
 from friction_ros.cli.experiment_config import (
     flatten,
     nest,
@@ -59,6 +70,7 @@ from friction_ros.cli.experiment_config import (
     typed_like_defaults,
 )
 from friction_ros.cli.experiment_summary import summarize
+from friction_ros.core.experiment.arm import SEQUENCES
 from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
 from friction_ros.core.experiment.excitation_config import PROFILES, PROGRAM_NAMES, resolve_config
 from friction_ros.core.experiment.experiment_sizing import fit_to_limits
@@ -87,6 +99,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="bag directory (default bags/experiment_<preset>_<date>)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing bag directory")
     p.add_argument("--joint", default="joint1", help="joint name (%(default)s)")
+    arm = p.add_argument_group("an arm (several joints; see 'Experiments on an arm' in the README)")
+    arm.add_argument(
+        "--joints",
+        metavar="J1,J2,...",
+        help="the arm's joints (default: the joints of the --params file, e.g. params/arm7_plant.yaml)",
+    )
+    arm.add_argument(
+        "--presets",
+        metavar="P1,P2,...",
+        help="one plant preset per joint (default: the --params file's presets, else --preset for every joint)",
+    )
+    arm.add_argument(
+        "--joint-sequence",
+        choices=SEQUENCES,
+        default=SEQUENCES[0],
+        help="one_at_a_time: each joint's program in turn, the others held; together: all at once (%(default)s)",
+    )
+    arm.add_argument(
+        "--joint-gap", type=float, default=0.5, help="time between two joints' programs [s] (%(default)s)"
+    )
     p.add_argument("--namespace", default="", help="namespace of the joint's topics")
     p.add_argument(
         "--params", action="append", default=[], help="parameter YAML for the plant and the experiment"
@@ -138,18 +170,28 @@ def main(argv: list[str] | None = None) -> int:
     try:
         sets = parse_sets(args.set)
         preset = None if args.no_sim else args.preset
-        preset_obj = None
-        if preset:
-            from friction_ros.core.presets import load_preset
+        if args.joint_gap < 0 or not math.isfinite(args.joint_gap):
+            raise ParameterError(f"--joint-gap {args.joint_gap:g}: must be >= 0 s")
+        arm = arm_setup(args, sets)
+        if arm is None:
+            preset_obj = None
+            if preset:
+                from friction_ros.core.presets import load_preset
 
-            preset_obj = load_preset(preset)
-        sized = sized_config(args, preset_obj, sets)
-        sized_flat = typed_like_defaults(flatten(sized), args.profile)
-        sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
-        core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets})}
-        # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
-        program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
-        sized_flat = node_values(program.config, args.profile, sized_flat)
+                preset_obj = load_preset(preset)
+            sized = sized_config(args, preset_obj, sets)
+            sized_flat = typed_like_defaults(flatten(sized), args.profile)
+            sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
+            core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets})}
+            # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
+            program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
+            sized_flat = node_values(program.config, args.profile, sized_flat)
+            plan = (program.name, program.marked_count, program.total_duration)
+            summary_joints = [(args.joint, preset)]
+        else:
+            sized_flat = arm.node_params
+            plan = (arm.name, arm.marked_count, arm.total_duration(args.joint_sequence, args.joint_gap))
+            summary_joints = list(zip(arm.joints, arm.plants))
         if sized_flat:
             import tempfile
 
@@ -157,7 +199,8 @@ def main(argv: list[str] | None = None) -> int:
             with open(fd, "w") as fh:
                 yaml.safe_dump({"identification_experiment": {"ros__parameters": sized_flat}}, fh)
         stamp = time.strftime("%Y%m%d_%H%M%S")
-        out = Path(args.output or Path("bags") / f"experiment_{preset or 'joint'}_{stamp}")
+        kind = (preset or "joint") if arm is None else "arm"
+        out = Path(args.output or Path("bags") / f"experiment_{kind}_{stamp}")
         # what a failed run that recorded nothing may remove: the folder it creates, or only its own
         # files in an empty folder that was there
         created = (
@@ -170,10 +213,19 @@ def main(argv: list[str] | None = None) -> int:
         out.parent.mkdir(parents=True, exist_ok=True)
         states, events = _topic(args.namespace, "joint_states"), _topic(args.namespace, "experiment_events")
         topics = [states, events] + ([_topic(args.namespace, "diagnostics")] if args.diagnostics else [])
+        joints_over = (
+            {"joint_name": args.joint}
+            if arm is None
+            else {
+                "joints": arm.joints,
+                "joint_sequence": args.joint_sequence,
+                "joint_gap": float(args.joint_gap),
+            }
+        )
         exp_over = {
             "profile": args.profile,
             "program": args.program,
-            "joint_name": args.joint,
+            **joints_over,
             "wait_for_subscribers": 1,
             **sets,
         }
@@ -192,12 +244,17 @@ def main(argv: list[str] | None = None) -> int:
             )
         ]
         if preset:
+            plant_joints = (
+                {"joint_name": args.joint}
+                if arm is None
+                else {"joints": arm.joints, **({"presets": arm.presets} if arm.presets else {})}
+            )
             specs.append(
                 NodeSpec(
                     "plant_simulator",
                     args.namespace,
                     list(args.params),
-                    {"preset": preset, "mode": args.mode, "joint_name": args.joint},
+                    {"preset": preset, "mode": args.mode, **plant_joints},
                 )
             )
         exp_params = ([params_tmp] if params_tmp else []) + list(args.params)
@@ -210,23 +267,30 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
 
-    timeout = args.timeout if args.timeout else 60.0 + 10.0 * program.total_duration
+    name, marked, total = plan
+    timeout = args.timeout if args.timeout else 60.0 + 10.0 * total
+    if arm is None:
+        where = f"simulated {preset} ({args.mode})" if preset else "real joint (drive_interface must run)"
+    else:
+        plants = ", ".join(arm.presets) if arm.presets else preset
+        where = f"joints {', '.join(arm.joints)} ({args.joint_sequence}); " + (
+            f"simulated {plants} ({args.mode})" if preset else "real arm (drive_interface must run)"
+        )
     print(
-        f"[experiment] {program.name} ({args.profile}): {program.marked_count} segments, "
-        f"{program.total_duration:.1f} s planned; "
-        + (f"simulated {preset} ({args.mode})" if preset else "real joint (drive_interface must run)")
-        + f"; recording {', '.join(topics)} to {out}",
+        f"[experiment] {name} ({args.profile}): {marked} segments, {total:.1f} s planned; {where}"
+        f"; recording {', '.join(topics)} to {out}",
         flush=True,
     )
     try:
-        return _run(args, specs, out, created, timeout, preset, events, states)
+        return _run(args, specs, out, created, timeout, summary_joints, events, states)
     finally:
         if params_tmp:
             Path(params_tmp).unlink(missing_ok=True)
 
 
-def _run(args, specs, out: Path, created: str, timeout: float, preset, events: str, states: str) -> int:
-    """Run the graph; print the bag, the summary and, for a failed run, one ``error:`` line."""
+def _run(args, specs, out: Path, created: str, timeout: float, joints, events: str, states: str) -> int:
+    """Run the graph; print the bag, the summary and, for a failed run, one ``error:`` line.
+    ``joints``: ``(joint, preset)`` of each joint summarised (the preset gives the true friction)."""
     bring = Bringup(specs, quiet=args.quiet)
     stop = threading.Event()
     signal.signal(signal.SIGINT, lambda *_: stop.set())
@@ -287,7 +351,7 @@ def _run(args, specs, out: Path, created: str, timeout: float, preset, events: s
         return 1
     print(f"[experiment] bag: {out.resolve()} ({wall:.1f} s wall)", flush=True)
     try:
-        print(summarize(out, args.joint, preset, events, states), flush=True)
+        print("\n".join(summarize(out, j, p, events, states) for j, p in joints), flush=True)
     except (ParameterError, ValueError, OSError) as exc:
         error = error or f"summary not available: {exc}"
     if error is not None:
@@ -308,7 +372,8 @@ def _waiting_reason(bring: Bringup, exp_label: str) -> str:
     """Why the program did not run: the experiment's line about joint_states without its joint."""
     text = _last_line_with(bring.output.get(exp_label, []), "joint_states carry no joint")
     if text:
-        return ": " + text.split("; set joint_name")[0] + " (set --joint)"
+        arm = "; set joints" in text
+        return ": " + text.split("; set joint")[0] + (" (set --joints)" if arm else " (set --joint)")
     return ""
 
 

@@ -47,12 +47,13 @@ _SCALE_LIMITS = {
 }
 
 
-def sized_config(args, preset, sets: dict | None = None) -> dict:
+def sized_config(args, preset, sets: dict | None = None, load: float | None = None) -> dict:
     """The program's sections sized to the joint (preset or probe values), or {} for the profile.
 
     Limits given with ``--set`` (``limits.max_travel``/``max_velocity``/``max_torque``) bound the
     joint's travel, speed and torque before sizing, so the plateaus, amplitudes and ramps are
-    derived within them."""
+    derived within them. ``load``: the constant load [N*m] the joint feels at its start (an arm
+    joint's gravity there) instead of the preset's constant load."""
     from dataclasses import replace
 
     from friction_ros.core.experiment.experiment_sizing import experiment_config
@@ -77,6 +78,11 @@ def sized_config(args, preset, sets: dict | None = None) -> dict:
                 + " (or --sizing profile)"
             )
         scale = JointScale.from_probe(**given, period=NODE_PERIOD)
+    if load is not None:
+        try:
+            scale = replace(scale, load=float(load))
+        except ParameterError as exc:
+            raise ParameterError(f"the load at the start position ({load:+.4g} N*m): {exc}") from None
     bounds = {}
     for key, field in _SCALE_LIMITS.items():
         value = (sets or {}).get(key)

@@ -5,8 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 
-def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, states_topic: str) -> str:
-    """The text printed after a run: segments, aborts, breakaways, plateau map."""
+def summarize(bag: Path, joint: str, preset, events_topic: str, states_topic: str) -> str:
+    """The text printed after a run: segments, aborts, breakaways, plateau map. ``preset``: the
+    simulated joint's preset (name or Preset; None on a real joint) for the true friction column;
+    a joint with a pendulum gravity load has none (its load changes along the plateaus)."""
     from friction_ros.core.identification.bag_loading import load_bag
     from friction_ros.core.identification.plateau_map import plateau_map
 
@@ -38,13 +40,18 @@ def summarize(bag: Path, joint: str, preset: str | None, events_topic: str, stat
 
             from friction_ros.core.presets import load_preset
 
-            truth_preset = load_preset(preset)
+            truth_preset = load_preset(preset) if isinstance(preset, str) else preset
             p = truth_preset.params
             holding = p.gravity_force - p.load_torque  # the torque that holds a constant load
+            if getattr(p, "gravity", 0.0):
+                truth_preset = None  # a pendulum load: no constant holding torque
 
             def truth(v: float) -> float:
                 # what a plateau measures on the simulated joint: joint-level friction + holding torque
                 return float(truth_preset.joint_friction(np.array([v]))[0]) + holding
+
+            if truth_preset is None:
+                truth = None
 
         pm = plateau_map(bag, joint, topic=states_topic, events_topic=events_topic)
         lines.append(f"plateau map (first {pm.settle:g} s of each plateau discarded):")

@@ -29,6 +29,20 @@ event and an error line give the reason). Ctrl-C/SIGTERM: zero torque, exit. Pro
 (percentage, segment) is logged every ``progress_period`` s of wall time. Joint states that do not
 carry ``joint_name`` are logged (once, naming the joints they carry, then every 10 s while they
 last), so a wrong joint name does not wait silently.
+
+An arm (``joints: [j1, j2, ...]``; unset = the one joint ``joint_name``, exactly as before): one
+program per joint (:mod:`friction_ros.core.experiment.arm`), every ``joint_states`` message (which
+must carry every joint) answered by one ``joint_commands`` message with every joint's torque.
+``joint_sequence``: ``one_at_a_time`` (default; the joints in turn, ``joint_gap`` s apart, the
+others held at their position by a PD hold with ``hold_p``/``hold_d``, by default each joint's
+velocity-loop gains, which are the tracking design's PD) or ``together``. Per-joint values in the
+layout of :mod:`friction_ros.core.joint_config`: ``<section>.<joint>.<key>`` (``limits.j2.max_travel``,
+``plateaus.j2.v_max`` ...) and ``gains.<joint>.<key>`` for ``program``, ``sequence``, ``gap``,
+``bias``, ``hold_p``, ``hold_d``, on top of the node-level values. Each event names its joint in
+``header.frame_id`` (``friction-fit --joint j2`` keeps j2's; a single-joint experiment leaves it
+empty). A joint leaving its limits (held or excited, ``on_limit: stop``) or not excited stops the
+whole experiment: zero torque on every joint and one error line naming the joint and the limit
+(``joint j2: position limit ... limits.j2.max_travel``); the exit codes are those above.
 """
 
 from __future__ import annotations
@@ -43,14 +57,19 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control_period import control_period_field
+from friction_ros.core.experiment.arm import SEQUENCES, ArmExperiment, hold_gains
 from friction_ros.core.experiment.events import EVENT_NAMES
 from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
 from friction_ros.core.experiment.excitation_config import DEFAULTS, PROFILES, SECTIONS, profile_defaults
 from friction_ros.core.input_gate import select_sample
+from friction_ros.core.joint_config import GAINS, name_joint_error
+from friction_ros.core.validation import ParameterError
+from friction_ros.core.wire import JointStateEncoder
 from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints, values_of_joint
 from friction_ros.nodes.parameters import ParameterNode, declare_config
-from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import request_stop, run_node
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
@@ -129,6 +148,47 @@ NODE_FIELDS = [
     ),
     Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
 ]
+#: the node's parameters with ``joints`` (an arm); without ``joints`` they are not declared
+ARM_FIELDS = [
+    Field(
+        "joint_sequence",
+        SEQUENCES[0],
+        "with joints: one_at_a_time (each joint's program in turn, the others held by a PD hold) or "
+        "together (every joint's program at once)",
+        choices=SEQUENCES,
+        read_only=True,
+    ),
+    Field(
+        "joint_gap",
+        0.5,
+        "with joints, one_at_a_time: time every joint is held between two joints' programs",
+        lo=0.0,
+        hi=60.0,
+        unit="s",
+        read_only=True,
+    ),
+    Field(
+        "hold_p",
+        0.0,
+        "PD hold of a joint not being excited: position gain (0: the joint's velocity_loop.i, the "
+        "tracking design's K_p)",
+        lo=0.0,
+        hi=1e9,
+        unit="N*m/rad",
+        read_only=True,
+    ),
+    Field(
+        "hold_d",
+        0.0,
+        "PD hold: velocity gain (0: the joint's velocity_loop.p, the tracking design's K_d)",
+        lo=0.0,
+        hi=1e9,
+        unit="N*m*s/rad",
+        read_only=True,
+    ),
+]
+#: node-level keys a joint may have its own value of, as ``gains.<joint>.<key>``
+PER_JOINT_PLAIN_KEYS = ("program", "sequence", "gap", "bias", "hold_p", "hold_d")
 _RESULT = {"code": 0}
 
 
@@ -137,15 +197,37 @@ def _profile_of(node: ParameterNode) -> str:
     return given.value if given is not None and given.value in PROFILES else "default"
 
 
-def parameter_schema(profile: str = "default") -> Schema:
-    """The node's parameters; program-level defaults follow the chosen ``profile``."""
+def parameter_schema(profile: str = "default", arm: bool = False) -> Schema:
+    """The node's parameters; program-level defaults follow the chosen ``profile``. ``arm``: with
+    the parameters of an experiment on several joints (``joints``)."""
     base = profile_defaults(profile)
     fields = [
         dataclasses.replace(f, default=copy.deepcopy(base[f.name])) if f.name in ("sequence", "gap") else f
         for f in NODE_FIELDS
     ]
     sections = [Schema.from_defaults(s, base[s], f"{s} parameter", read_only=True) for s in SECTIONS]
-    return Schema("identification_experiment", [*fields, *sections])
+    return Schema("identification_experiment", [*fields, *(ARM_FIELDS if arm else []), *sections])
+
+
+class ArmCommandPublisher:
+    """``joint_commands`` of several joints: one message with every joint's effort (same interface
+    as :class:`~friction_ros.nodes.commands.CommandPublisher`: ``last``, ``republish``)."""
+
+    def __init__(self, node, joints: list[str], topic: str = "joint_commands"):
+        self.joints = list(joints)
+        self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
+        self._encoder = JointStateEncoder(self.joints, ("effort",))
+        self.last: bytes | None = None
+
+    def publish(self, stamp, torques) -> None:
+        self.last = self._encoder.pack(stamp.sec, stamp.nanosec, *(float(x) for x in torques))
+        self.pub.publish(self.last)
+
+    def republish(self) -> bool:
+        if self.last is None:
+            return False
+        self.pub.publish(self.last)
+        return True
 
 
 class IdentificationExperiment(ParameterNode):
@@ -153,20 +235,16 @@ class IdentificationExperiment(ParameterNode):
 
     def __init__(self):
         super().__init__("identification_experiment")
-        self.values = declare_config(self, parameter_schema(_profile_of(self)), self._apply)
-        cfg = {s: self.values[s] for s in SECTIONS}
-        cfg.update(
-            program=self.values["program"],
-            profile=self.values["profile"],
-            sequence=list(self.values["sequence"]),
-            gap=self.values["gap"],
-            bias=self.values["bias"],
-            dt=self.values["control_period"],
-        )
-        self.program = ExcitationProgram(cfg)  # ParameterError -> refuses to start
-
-        self.joint = self.values["joint_name"]
-        self.commands = CommandPublisher(self, self.joint)
+        profile = _profile_of(self)
+        reserved = {item.name for item in parameter_schema(profile, arm=True)} | {GAINS, "joints"}
+        self.arm_joints = declare_joints(self, reserved)  # [] -> one joint, joint_name
+        if self.arm_joints:
+            self._init_arm(profile)
+        else:
+            self.values = declare_config(self, parameter_schema(profile), self._apply)
+            self.program = ExcitationProgram(_program_config(self.values, self.values))  # may refuse
+            self.joint = self.values["joint_name"]
+            self.commands = CommandPublisher(self, self.joint)
         self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", RECORDED_QOS)
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
         self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
@@ -184,11 +262,42 @@ class IdentificationExperiment(ParameterNode):
         self._wall0: float | None = None
         self._wrong_joint_logged: float | None = None
         self.counts = {"cycles": 0, "duplicates": 0, "rejected_states": 0, "events": 0, "aborts": 0}
+        what = (
+            f"joint {self.joint}"
+            if not self.arm_joints
+            else f"joints {', '.join(self.arm_joints)} ({self.values['joint_sequence']})"
+        )
         self.get_logger().info(
             f"program {self.program.name} (profile {self.values['profile']}): {self.program.marked_count} "
-            f"segments, {self.program.total_duration:.1f} s planned; joint {self.joint}"
+            f"segments, {self.program.total_duration:.1f} s planned; {what}"
             + ("" if self._ready else f"; waiting for {self.values['wait_for_subscribers']} recorder(s)")
         )
+
+    def _init_arm(self, profile: str) -> None:
+        """Several joints: per-joint programs and holds (module docstring of core.experiment.arm)."""
+        joints = self.arm_joints
+        self.values, self.layout, overrides = declare_joint_config(
+            self, parameter_schema(profile, arm=True), joints, self._apply, plain_keys=PER_JOINT_PLAIN_KEYS
+        )
+        programs, holds = [], []
+        for j in joints:
+            jv = values_of_joint(self.values, overrides[j], j, single=False)
+            try:
+                prog = ExcitationProgram(_program_config(jv, self.values))
+                holds.append(hold_gains(prog.config, jv["hold_p"], jv["hold_d"]))
+            except ParameterError as exc:
+                raise ParameterError(name_joint_error(str(exc), self.layout, j, overrides[j])) from None
+            programs.append(prog)
+
+        def describe(joint: str, text: str) -> str:
+            named = name_joint_error(text, self.layout, joint, overrides[joint])
+            return named if named.startswith(f"joint {joint}: ") else f"joint {joint}: {named}"
+
+        self.program = ArmExperiment(
+            joints, programs, self.values["joint_sequence"], self.values["joint_gap"], holds, describe
+        )
+        self.joint = ",".join(joints)
+        self.commands = ArmCommandPublisher(self, joints)
 
     def _apply(self, changes: dict) -> None:
         self.values.update(changes)
@@ -212,22 +321,38 @@ class IdentificationExperiment(ParameterNode):
             self._seen_since = now
         return now - self._seen_since >= MATCH_GRACE
 
+    def _rejected_state(self, msg: JointState, joint: str, reason: str, detail: str) -> None:
+        self.counts["rejected_states"] += 1
+        now = time.monotonic()
+        if self._wrong_joint_logged is None or now - self._wrong_joint_logged >= WRONG_JOINT_LOG_PERIOD:
+            self._wrong_joint_logged = now
+            seen = ", ".join(msg.name) if msg.name else f"{len(msg.position)} unnamed position(s)"
+            fix = (
+                "set joint_name (friction-experiment --joint) to one of them"
+                if not self.arm_joints
+                else "set joints (friction-experiment --joints) to joints they carry"
+            )
+            self.get_logger().warning(
+                f"joint_states carry no joint {joint!r} (they carry: {seen}); {fix} "
+                f"({self.counts['rejected_states']} state(s) ignored so far)"
+                if reason == "wrong_joint"
+                else f"ignored joint_states: {detail} ({self.counts['rejected_states']} state(s) ignored so far)"
+            )
+
     def _on_state(self, msg: JointState) -> None:
-        sel, reason, detail = select_sample(msg, self.joint)
-        if sel is None:
-            self.counts["rejected_states"] += 1
-            now = time.monotonic()
-            if self._wrong_joint_logged is None or now - self._wrong_joint_logged >= WRONG_JOINT_LOG_PERIOD:
-                self._wrong_joint_logged = now
-                seen = ", ".join(msg.name) if msg.name else f"{len(msg.position)} unnamed position(s)"
-                self.get_logger().warning(
-                    f"joint_states carry no joint {self.joint!r} (they carry: {seen}); set joint_name "
-                    f"(friction-experiment --joint) to one of them ({self.counts['rejected_states']} "
-                    "state(s) ignored so far)"
-                    if reason == "wrong_joint"
-                    else f"ignored joint_states: {detail} ({self.counts['rejected_states']} state(s) ignored so far)"
-                )
-            return
+        if self.arm_joints:
+            samples = []
+            for j in self.arm_joints:
+                sel, reason, detail = select_sample(msg, j)
+                if sel is None:
+                    self._rejected_state(msg, j, reason, detail)
+                    return
+                samples.append(sel)
+        else:
+            sel, reason, detail = select_sample(msg, self.joint)
+            if sel is None:
+                self._rejected_state(msg, self.joint, reason, detail)
+                return
         if not self._ready:
             if not self._subscribers_ready():
                 return  # not answered: lockstep plant waits and re-sends, realtime plant times out to 0
@@ -241,18 +366,26 @@ class IdentificationExperiment(ParameterNode):
                 self.counts["duplicates"] += 1
                 self.commands.republish()  # lockstep re-send: same answer, no recompute
             return
-        pos, vel, _effort = sel
-        if vel is None:
-            vel = math.nan
         if self._t0_ns is None:
             self._t0_ns = t_ns
             self._wall0 = time.monotonic()
         self._last_ns = t_ns
         self._last_stamp = msg.header.stamp
-        torque, events = self.program.update((t_ns - self._t0_ns) * 1e-9, pos, vel)
-        for e in events:
-            self._publish_event(msg.header.stamp, e)
-        self._publish_command(msg.header.stamp, torque)
+        t = (t_ns - self._t0_ns) * 1e-9
+        if self.arm_joints:
+            vel = [math.nan if s[1] is None else s[1] for s in samples]
+            torques, arm_events = self.program.update(t, [s[0] for s in samples], vel)
+            for i, e in arm_events:
+                self._publish_event(msg.header.stamp, e, self.arm_joints[i])
+            self.commands.publish(msg.header.stamp, torques)
+        else:
+            pos, vel, _effort = sel
+            if vel is None:
+                vel = math.nan
+            torque, events = self.program.update(t, pos, vel)
+            for e in events:
+                self._publish_event(msg.header.stamp, e)
+            self._publish_command(msg.header.stamp, torque)
         self.counts["cycles"] += 1
         self._report_progress()
         if self.program.done and self._done_wall is None:
@@ -274,9 +407,11 @@ class IdentificationExperiment(ParameterNode):
                     f"in {wall:.1f} s wall"
                 )
 
-    def _publish_event(self, stamp, e) -> None:
+    def _publish_event(self, stamp, e, joint: str = "") -> None:
+        """``joint`` (an arm): the joint the event is about, in ``header.frame_id`` (events.event_joint_matches)."""
         m = ExperimentEvent()
         m.header.stamp = stamp
+        m.header.frame_id = joint
         m.program = e.program
         m.segment = e.segment
         m.index = int(e.index)
@@ -287,7 +422,8 @@ class IdentificationExperiment(ParameterNode):
         self.counts["events"] += 1
         if e.event != 0:
             level = self.get_logger().warning if e.event == 2 else self.get_logger().debug
-            level(f"{EVENT_NAMES[e.event]} {e.program}/{e.segment} at {e.time:.3f} s {e.note}".rstrip())
+            who = f"{joint}: " if joint and not e.note.startswith(f"joint {joint}: ") else ""
+            level(f"{who}{EVENT_NAMES[e.event]} {e.program}/{e.segment} at {e.time:.3f} s {e.note}".rstrip())
         if e.event == 2:
             self.counts["aborts"] += 1
 
@@ -336,11 +472,28 @@ class IdentificationExperiment(ParameterNode):
         self.diag.publish(level, text, values)
 
     def on_shutdown(self) -> None:
-        """Leave the joint safe: answer the newest state (or now) with zero torque."""
+        """Leave the joint(s) safe: answer the newest state (or now) with zero torque."""
         stamp = self._last_stamp if self._last_stamp is not None else self.get_clock().now().to_msg()
         for _ in range(3):
-            self._publish_command(stamp, 0.0)
+            if self.arm_joints:
+                self.commands.publish(stamp, [0.0] * len(self.arm_joints))
+            else:
+                self._publish_command(stamp, 0.0)
             time.sleep(0.01)
+
+
+def _program_config(values: dict, node_values: dict) -> dict:
+    """An excitation program's config from the node's values (``values``: one joint's, on an arm)."""
+    cfg = {s: values[s] for s in SECTIONS}
+    cfg.update(
+        program=values["program"],
+        profile=node_values["profile"],
+        sequence=list(values["sequence"]),
+        gap=values["gap"],
+        bias=values["bias"],
+        dt=node_values["control_period"],
+    )
+    return cfg
 
 
 def main(args=None) -> int:

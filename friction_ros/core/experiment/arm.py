@@ -27,7 +27,9 @@ Safety: a held joint leaving its limits, a joint whose program a safety limit st
 experiment: every running program ends with an ABORT for its open segment, every joint gets zero
 torque from then on, ``abort_reasons[-1]`` names the joint first (``joint j2: position limit:
 ...``; ``not_excited``: ``joint not excited: joint j2: ...``). A held joint's ABORT event is ``program`` ``arm``, segment
-``hold``. After a completed experiment every joint is held (the end tail).
+``hold``. Every ABORT a joint's program emits has its reason prefixed with the joint (``describe``
+maps it, e.g. to the per-joint parameter name). After a completed experiment every joint is held
+(the end tail).
 """
 
 from __future__ import annotations
@@ -242,7 +244,9 @@ class ArmExperiment:
         for i in list(self._running):
             prog = self.programs[i]
             tau, evs = prog.update(t, q[i], v[i])
-            events += [(i, e._replace(time=self.t)) for e in evs]
+            for e in evs:  # an ABORT's reason names the joint (and its per-joint parameter)
+                note = self.describe(self.joints[i], e.note) if e.event == ABORT and e.note else e.note
+                events.append((i, e._replace(time=self.t, note=note)))
             torques[i] = tau
             if not prog.done:
                 continue

@@ -115,7 +115,10 @@ def arm_parameter_document(
         p = preset.params
         gravity = float(getattr(p, "gravity", 0.0) or 0.0)
         if gravity:
-            addon["load"][joint] = {"gravity": _r(gravity), "gravity_phase": _r(getattr(p, "gravity_phase", 0.0))}
+            addon["load"][joint] = {
+                "gravity": _r(gravity),
+                "gravity_phase": _r(getattr(p, "gravity_phase", 0.0)),
+            }
         limit = _r(scale.torque_limit)
         pd["gains"][joint].update(u_clamp_max=limit, u_clamp_min=-limit)
         table.append(

@@ -179,7 +179,6 @@ class StaticModel(FrictionModel):
         return self.steady_state(v)
 
 
-
 class DynamicModel(FrictionModel):
     """A model with internal state: ``reset/state/step/simulate/simulate_batch``."""
 
