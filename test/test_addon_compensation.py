@@ -167,3 +167,51 @@ def test_addon_node_sums_the_arm_command_and_switches_off(tmp_path):
             assert tb.command == pytest.approx(tb.friction_feedforward + tb.load_feedforward, abs=1e-12)
         out = g.output("compensating_controller")
     assert "no desired trajectory yet" in out and "compensation off" in out
+
+
+def _pd_plus_addon(addon_cfg, seconds=4.0):
+    """abb_m19s with the seed 003 PD (an arm's own controller) plus an add-on; RMS error, add-on."""
+    import numpy as np
+
+    from friction_ros.core.experiment.references import reference_from_config
+    from friction_ros.core.presets import make_plant
+
+    ref = reference_from_config(
+        {"type": "band_limited_random", "amplitude": 0.05, "cutoff": 1.0, "duration": 10.0, "seed": 1}
+    )
+    plant = make_plant("abb_m19s")
+    pd = CompensatingController({"mode": "pid", "pid": {"p": 200.0, "d": 0.15}})
+    addon = CompensatingController(addon_cfg) if addon_cfg else None
+    plant.reset(position=ref.sample(0.0)[0])
+    pos, vel, errs = ref.sample(0.0)[0], 0.0, []
+    for k in range(int(seconds / 1e-3)):
+        t = k * 1e-3
+        r = ref.sample(t)
+        u = pd.compute(t, r, (pos, vel), 1e-3).command
+        if addon is not None:
+            u += addon.compute(t, r, (pos, vel), 1e-3).command
+        m = plant.step(u * plant.command_scale, 1e-3)
+        pos, vel = m.position, m.velocity
+        errs.append(ref.sample(t + 1e-3)[0] - m.true_position)
+    return float(np.sqrt(np.mean(np.square(errs)))), addon
+
+
+def test_the_limit_cycle_detector_switches_a_destabilising_addon_off():
+    """An add-on fed back from the measured velocity (static Stribeck, the case that made the seed
+    003 loop limit-cycle ~9x worse) on an arm's PD: the detector switches it off, latched, and the
+    arm tracks as with the PD alone; with the detector off the error is several times the PD's."""
+    bad = {
+        "mode": "compensation_only",
+        "pid": {"p": 200.0, "d": 0.15},  # the arm controller's gains (feedback-path bound)
+        "friction": {
+            "model": {"model": "stribeck", "fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0},
+            "source": "feedback",
+        },
+    }
+    pd_alone, _ = _pd_plus_addon(None)
+    unwatched, _ = _pd_plus_addon({**bad, "limit_cycle_detection": False})
+    watched, addon = _pd_plus_addon(bad)
+    assert unwatched > 3.0 * pd_alone
+    assert addon.compensation_fallback and "limit cycle" in addon.fallback_reason
+    assert addon.limit_cycle.fired_at < 1.0
+    assert watched < 1.5 * pd_alone
