@@ -17,6 +17,7 @@ ORDER = [
     "robustness",
     "real_data",
     "learned_residual",
+    "manipulator",
     "models",
     "compensation",
     "fitting",
@@ -37,6 +38,7 @@ TITLES = {
     "bags": "MCAP recording and reading (issue 7)",
     "real_data": "Identification on a realistic synthetic joint and a real pendulum (issue 17)",
     "learned_residual": "Learned residual on a physics backbone: candidates (issue 17)",
+    "manipulator": "A 7-joint arm: one node per role, the friction add-on on a plain PD (issue 18)",
 }
 BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"
 

@@ -286,13 +286,14 @@ class FrictionEstimatorNode(ParameterNode):
         dt = (t_ns - jt.last_ns) * 1e-9 if jt.last_ns is not None else self.values["control_period"]
         jt.last_ns = t_ns
         est = jt.estimator
-        e = est.update(t_ns * 1e-9, gate.position, gate.velocity, gate.effort, dt)
+        excited = est.step(t_ns * 1e-9, gate.position, gate.velocity, gate.effort, dt)
         counts = jt.counts
         counts["samples"] += 1
-        counts["excited_samples"] += int(e.excitation_ok)
+        counts["excited_samples"] += int(excited)
         jt.n += 1
         if jt.n % self._publish_every:
             return
+        e = est.record()  # coefficient lists and convergence: only for a published estimate
         out = FrictionEstimate()
         out.header.stamp.sec, out.header.stamp.nanosec = msg.sec, msg.nanosec
         out.joint_name = jt.name

@@ -247,6 +247,8 @@ class OnlineFrictionEstimator:
         self.estimate = FrictionEstimateData(
             model=self.model_name, coefficient_names=list(self.coefficient_names)
         )
+        # the last sample: time, friction torque, model torque, filtered velocity, state, excited
+        self._sample: tuple = (0.0, 0.0, 0.0, 0.0, [], False)
 
     # -- results -------------------------------------------------------------------------------------
     @property
@@ -312,7 +314,15 @@ class OnlineFrictionEstimator:
     def update(
         self, t: float, position: float, velocity: float, effort: float, dt: float
     ) -> FrictionEstimateData:
-        """One sample: measured position (unused by the static fits), velocity, effort (N*m)."""
+        """One sample: measured position (unused by the static fits), velocity, effort (N*m).
+        Returns the whole estimate record (also kept in ``estimate``)."""
+        self.step(t, position, velocity, effort, dt)
+        return self.record()
+
+    def step(self, t: float, position: float, velocity: float, effort: float, dt: float) -> bool:
+        """One sample without building the estimate record (a node's per-sample path: the record's
+        coefficient lists and convergence test are made only when published, :meth:`record`).
+        Returns whether the sample excited the model."""
         if not (isinstance(dt, (int, float)) and dt > 0.0 and math.isfinite(dt)):
             raise ParameterError(f"estimator: dt = {dt!r} is out of range: must be > 0 [s]")
         y, vf, _ = self.front.update(effort, velocity, dt)
@@ -324,33 +334,41 @@ class OnlineFrictionEstimator:
                 self.excited_samples += 1
             model_torque = self.rls.predict(phi)
             state: list[float] = []
-            std = self.rls.std_list()
-            coefficients = list(self.rls.theta_list())
-            converged = self._converged(std)
         else:
             obs = self.lugre
             s0 = obs.model.coefficients["sigma0"]
             # correction through the friction-measurement residual (L / sigma0 scales it to z)
-            corr = self.observer_gain * (y - self.estimate.model_torque) / s0
+            corr = self.observer_gain * (y - self._sample[2]) / s0
             v_raw = float(velocity)  # the observer runs on the measured velocity (no filter lag)
             model_torque = (
                 obs.step(v_raw, dt, error=0.0) if corr == 0.0 else self._lugre_step(v_raw, dt, corr)
             )
             state = [obs.z]
+        self._sample = (float(t), float(y), float(model_torque), float(vf), state, bool(excited))
+        return excited
+
+    def record(self) -> FrictionEstimateData:
+        """The estimate record of the last sample (friction_msgs/FrictionEstimate fields)."""
+        t, y, model_torque, vf, state, excited = self._sample
+        if self.rls is not None:
+            std = self.rls.std_list()
+            coefficients = list(self.rls.theta_list())
+            converged = self._converged(std)
+        else:
             std = []
             coefficients = list(self.coefficients.values())
             converged = True
         self.estimate = FrictionEstimateData(
-            time=float(t),
+            time=t,
             model=self.model_name,
-            friction_torque=float(y),
-            model_torque=float(model_torque),
-            velocity=float(vf),
-            state=state,
+            friction_torque=y,
+            model_torque=model_torque,
+            velocity=vf,
+            state=list(state),
             coefficient_names=list(self.coefficient_names),
             coefficients=coefficients,
             coefficient_std=std,
-            excitation_ok=bool(excited),
+            excitation_ok=excited,
             converged=converged,
         )
         return self.estimate

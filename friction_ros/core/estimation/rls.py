@@ -105,12 +105,21 @@ class RecursiveLeastSquares:
         denom = lam + _dot(phi, Pphi)
         K = [x / denom for x in Pphi]
         self._th = [th[i] + K[i] * r for i in rng]
-        P = [[P[i][j] - K[i] * Pphi[j] for j in rng] for i in rng]
-        if lam < 1.0:
-            f = 1.0 / lam - 1.0
-            d = [1.0 if x != 0.0 else 0.0 for x in phi]
-            P = [[P[i][j] + f * (d[i] * P[i][j] * d[j]) for j in rng] for i in rng]
-        P = [[0.5 * (P[i][j] + P[j][i]) for j in rng] for i in rng]
+        # P <- sym(F(P - K Pphi^T)), F: forgetting on the excited directions (d), sym: 0.5 (A + A^T);
+        # one pass over the upper triangle with the same operations in the same order per element
+        f = 1.0 / lam - 1.0 if lam < 1.0 else 0.0
+        d = [1.0 if x != 0.0 else 0.0 for x in phi]
+        new = [[0.0] * n for _ in rng]
+        for i in rng:
+            Pi, Ki, Pphii, di, row = P[i], K[i], Pphi[i], d[i], new[i]
+            for j in range(i, n):
+                pij = Pi[j] - Ki * Pphi[j]
+                pji = P[j][i] - K[j] * Pphii
+                if f:
+                    pij = pij + f * (di * pij * d[j])
+                    pji = pji + f * (d[j] * pji * di)
+                row[j] = new[j][i] = 0.5 * (pij + pji)
+        P = new
         dmax = max(P[i][i] for i in rng)
         if dmax > self.max_covariance:
             c = self.max_covariance / dmax
