@@ -249,3 +249,50 @@ def test_per_joint_parameter_errors_name_the_joint_and_the_key(tmp_path, params,
     err = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(err) == 1 and line in err[0], r.stderr
     assert "Traceback" not in r.stdout + r.stderr
+
+
+def test_per_joint_parameters_change_at_run_time_for_that_joint_only(tmp_path):
+    """In-process node: gains.<joint>.p changes that joint's PID (states kept), a node-level key
+    changes every joint without its own value, a bad per-joint value is refused naming its key."""
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from friction_ros.nodes.compensating_controller import CompensatingControllerNode
+
+    params = {
+        "joints": ["a", "b", "c"],
+        "pid": {"p": 100.0, "d": 1.0},
+        "gains": {"b": {"p": 50.0}},
+        "friction": {"c": {"model": "coulomb_viscous", "fc": 0.5, "fv": 0.1}},
+    }
+    path = write_params(tmp_path / "p.yaml", {"compensating_controller": {"ros__parameters": params}})
+    rclpy.init(args=["--ros-args", "--params-file", path])
+    try:
+        node = CompensatingControllerNode()
+        try:
+            ctrl = {ch.joint: ch.controller for ch in node.channels}
+            p = {j: c.pid.config()["p"] for j, c in ctrl.items()}
+            assert p == {"a": 100.0, "b": 50.0, "c": 100.0}
+            assert ctrl["c"].friction.model.name == "coulomb_viscous" and ctrl["a"].friction.model is None
+            ok = node.set_parameters([Parameter("gains.b.p", value=80.0)])[0]
+            assert ok.successful, ok.reason
+            now = {ch.joint: ch.controller for ch in node.channels}
+            assert now["b"] is ctrl["b"] and now["b"].pid.config()["p"] == 80.0  # same object: states kept
+            assert now["a"].pid.config()["p"] == 100.0
+            ok = node.set_parameters([Parameter("pid.p", value=120.0)])[0]
+            assert ok.successful, ok.reason
+            p = {ch.joint: ch.controller.pid.config()["p"] for ch in node.channels}
+            assert p == {"a": 120.0, "b": 80.0, "c": 120.0}
+            bad = node.set_parameters([Parameter("friction.c.fc", value=-1.0)])[0]
+            assert not bad.successful and bad.reason.startswith("friction.c.fc = -1"), bad.reason
+            assert node.channels[2].controller.friction.model.coefficients["fc"] == 0.5
+            ok = node.set_parameters([Parameter("friction.c.fc", value=0.7)])[0]
+            assert ok.successful, ok.reason
+            assert node.channels[2].controller.friction.model.coefficients["fc"] == 0.7
+            assert (
+                node.channels[0].controller is now["a"] or node.channels[0].controller.friction.model is None
+            )
+        finally:
+            node.destroy_node()
+    finally:
+        rclpy.try_shutdown()
