@@ -53,7 +53,6 @@ import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 
@@ -72,18 +71,17 @@ from friction_ros.core.input_gate import (
     DUPLICATE,
     REJECTED,
     RESYNC,
-    JointInputGate,
 )
 from friction_ros.core.joint_config import GAINS, name_joint_error
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import (
     CONTROLLER_STATE_FLOATS,
-    ControllerStateEncoder,
     JointStateDecoder,
     JointStateEncoder,
 )
+from friction_ros.nodes.addon_output import AddonOutput
 from friction_ros.nodes.commands import stamp_to_ns
-from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.controller_joints import JointChannel
 from friction_ros.nodes.joint_parameters import (
     current_joint_values,
     declare_joint_config,
@@ -155,46 +153,6 @@ assert CONTROLLER_STATE_FLOATS == tuple(
 ), "friction_msgs/ControllerState and the wire encoder disagree"
 
 
-class JointChannel:
-    """One joint of the node: its controller, reference, plausibility gate and health."""
-
-    def __init__(self, node: CompensatingControllerNode, joint: str, values: dict, overrides: dict):
-        self.joint = joint
-        self.values = values
-        self.overrides = overrides
-        self.controller, ref_cfg = node.build_controller(joint, values, overrides)
-        self.reference = reference_from_config(ref_cfg)
-        # add-on: the built-in generator counts only when a reference section was given
-        self.has_reference = bool(node.given_section("reference")) or any(
-            k.startswith("reference.") for k in overrides
-        )
-        self.trajectory: TrajectoryReference | None = None
-        self.desired: tuple[float, float, float] | None = None  # from desired_joint_states
-        # plausibility gate of the joint states (stamps, jumps, magnitudes): bad samples never
-        # reach the controller's state (integrator, filters, observers, limit-cycle detector)
-        self.gate = JointInputGate(joint, node.values.get("input_gate"), period=node.dt)
-        self.state_encoder = ControllerStateEncoder(joint)
-        self.diag = DiagnosticsPublisher(node, "compensating_controller", joint)
-        self.command = 0.0
-        self.compensation = 0.0
-        self.last_state_wall = time.monotonic()
-        self.timed_out = False
-        self.fallback_logged = False
-        self.residual_logged = False
-        self.diag_rejected = 0
-        self.waiting_logged = False
-
-    def replace(self, controller, reference, values, overrides) -> None:
-        controller.compensation_enabled = self.controller.compensation_enabled
-        self.controller, self.reference, self.values, self.overrides = (
-            controller,
-            reference,
-            values,
-            overrides,
-        )
-        self.residual_logged = False
-
-
 class CompensatingControllerNode(ParameterNode):
     """Thin adapter over one CompensatingController per joint; see the module docstring."""
 
@@ -243,22 +201,11 @@ class CompensatingControllerNode(ParameterNode):
         self.sum_base = bool(self.values["sum_base_command"])
         if self.sum_base and not self.addon:
             raise ParameterError("sum_base_command = true needs mode compensation_only (an add-on)")
-        self.compensation_pub = None
-        self._base: dict[str, float] = {}
-        self._pending_base_ns: int | None = None
-        if self.addon:
-            self.compensation_pub = self.create_publisher(
-                Float64MultiArray, "compensation_command", COMMAND_QOS
-            )
-            self._compensation_msg = Float64MultiArray()
-            self._compensation_msg.layout.dim = [
-                MultiArrayDimension(label="joints", size=len(self.joints), stride=len(self.joints))
-            ]
-            if self.sum_base:
-                self.create_subscription(JointState, "base_command", self._on_base_command, COMMAND_QOS)
-                self.sum_array_pub = self.create_publisher(Float64MultiArray, "commands", COMMAND_QOS)
-                self._sum_msg = Float64MultiArray()
-                self._sum_msg.layout.dim = list(self._compensation_msg.layout.dim)
+        self.addon_output = (
+            AddonOutput(self, self.channels, self.sum_base, self._send, self._sim_clock)
+            if self.addon
+            else None
+        )
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
 
@@ -483,7 +430,7 @@ class CompensatingControllerNode(ParameterNode):
                 self.get_logger().error(self._label(ch) + ch.controller.fallback_reason)
                 self._publish_diagnostics()
             if listening:
-                self._publish_terms(ch, msg.sec, msg.nanosec, terms)
+                self.state_pub.publish(ch.terms_message(msg.sec, msg.nanosec, terms))
         self._compute_times.append(time.perf_counter() - c0)
         self._last_ns = t_ns
         self._last_t = t
@@ -491,73 +438,15 @@ class CompensatingControllerNode(ParameterNode):
         self._publish_commands(msg.sec, msg.nanosec, t_ns)
 
     def _publish_commands(self, sec: int, nanosec: int, t_ns: int) -> None:
-        if self.addon:
-            self._compensation_msg.data = [ch.compensation for ch in self.channels]
-            self.compensation_pub.publish(self._compensation_msg)
-            if self.sum_base:
-                if self._pending_base_ns == t_ns:  # the base command of this state came first
-                    self._pending_base_ns = None
-                    self._publish_sum(sec, nanosec)
-                return
-        self.last_command = self._cmd_encoder.pack(sec, nanosec, *(ch.command for ch in self.channels))
-        self.commands.publish(self.last_command)
-
-    def _on_base_command(self, msg: JointState) -> None:
-        """The arm controller's command (JointState effort by name): sent on with the compensation
-        added. In lockstep (sim time) a base command stamped for a state not yet computed waits for it."""
-        names = list(msg.name)
-        if len(msg.effort) != len(names):
-            self.get_logger().warning(
-                f"base_command ignored: {len(msg.effort)} efforts for {len(names)} names",
-                throttle_duration_sec=5.0,
-            )
+        if self.addon_output is not None:
+            self.addon_output.state_done(sec, nanosec, t_ns)
             return
-        for n, e in zip(names, msg.effort):
-            if n in self._by_joint and math.isfinite(e):
-                self._base[n] = float(e)
-        stamp = stamp_to_ns(msg.header.stamp)
-        if self._sim_clock and (self._last_ns is None or stamp > self._last_ns):
-            self._pending_base_ns = stamp
-            return
-        self._publish_sum(msg.header.stamp.sec, msg.header.stamp.nanosec)
+        self._send(sec, nanosec, [ch.command for ch in self.channels])
 
-    def _publish_sum(self, sec: int, nanosec: int) -> None:
-        base = self._base
-        total = [base.get(ch.joint, 0.0) + ch.compensation for ch in self.channels]
-        self.last_command = self._cmd_encoder.pack(sec, nanosec, *total)
+    def _send(self, sec: int, nanosec: int, efforts) -> None:
+        """joint_commands (all joints); the bytes are kept for a lockstep re-send."""
+        self.last_command = self._cmd_encoder.pack(sec, nanosec, *efforts)
         self.commands.publish(self.last_command)
-        self._sum_msg.data = total
-        self.sum_array_pub.publish(self._sum_msg)
-
-    def _publish_terms(self, ch: JointChannel, sec: int, nanosec: int, t: ControllerTerms) -> None:
-        self.state_pub.publish(
-            ch.state_encoder.pack(
-                sec,
-                nanosec,
-                t.mode,
-                (
-                    t.reference_position,
-                    t.reference_velocity,
-                    t.reference_acceleration,
-                    t.position,
-                    t.velocity,
-                    t.error,
-                    t.error_dot,
-                    t.p_term,
-                    t.i_term,
-                    t.d_term,
-                    t.velocity_feedforward,
-                    t.inertia_feedforward,
-                    t.friction_feedforward,
-                    t.friction_feedback,
-                    t.load_feedforward,
-                    t.learned_feedforward,
-                    t.command_unlimited,
-                    t.command,
-                ),
-                t.saturated,
-            )
-        )
 
     def _resync(self, ch: JointChannel) -> None:
         """The gate adopted a new reference after a run of consistent rejected samples."""
@@ -593,54 +482,21 @@ class CompensatingControllerNode(ParameterNode):
                 f"{self._label(ch)}no valid joint state for {limit:g} s{why}: commanding zero torque"
             )
         stamp = self.get_clock().now().to_msg()
-        if self.sum_base:
-            self._publish_sum(stamp.sec, stamp.nanosec)
+        self._publish_safe(stamp.sec, stamp.nanosec)
+
+    def _publish_safe(self, sec: int, nanosec: int) -> None:
+        """Publish the channels' commands now (a timed-out joint's is 0; the add-on: its sum)."""
+        if self.addon_output is not None:
+            self.addon_output.publish_safe(sec, nanosec)
         else:
-            self._publish_commands(stamp.sec, stamp.nanosec, -1)
+            self._send(sec, nanosec, [ch.command for ch in self.channels])
 
     def _publish_diagnostics(self) -> None:
         ct = sorted(self._compute_times[-5000:])
         self._compute_times = self._compute_times[-5000:]
         for ch in self.channels:
-            self._publish_joint_diagnostics(ch, ct)
-
-    def _publish_joint_diagnostics(self, ch: JointChannel, ct: list[float]) -> None:
-        values = dict(self.counts)
-        gate, ctrl = ch.gate, ch.controller
-        values["rejected_states"] = gate.log.total
-        values.update(gate.log.values())
-        values.update(unstamped_states=gate.counts["unstamped"], resyncs=gate.counts["resyncs"])
-        new_rejections = gate.log.total - ch.diag_rejected
-        ch.diag_rejected = gate.log.total
-        if ct:
-            values["compute_p50_s"] = ct[len(ct) // 2]
-            values["compute_p99_s"] = ct[min(len(ct) - 1, int(len(ct) * 0.99))]
-        level, text = OK, f"{ctrl.mode} running"
-        if not ctrl.compensation_enabled:
-            text = f"{ctrl.mode} running, compensation switched off (~/set_feedforward_control)"
-        if self.addon and not (ch.has_reference or ch.trajectory or ch.desired):
-            level, text = WARN, "waiting for a desired trajectory: compensation output 0"
-        if new_rejections:
-            level = WARN
-            text = (
-                f"{new_rejections} joint states rejected since the last status (last: {gate.log.last_reason})"
-            )
-        if ch.timed_out:
-            level, text = WARN, "no joint state: commanding zero torque"
-        if ctrl.compensation_fallback:
-            level, text = ERROR, ctrl.fallback_reason
-        values["residual_nonfinite"] = ctrl.residual_nonfinite
-        if ctrl.residual_note and not ch.residual_logged:
-            ch.residual_logged = True  # once per controller (a parameter change builds a new one)
-            self.get_logger().error(self._label(ch) + ctrl.residual_note)
-        if ctrl.residual_nonfinite and level == OK:
-            level, text = WARN, ctrl.residual_note
-        values["compensation_fallback"] = int(ctrl.compensation_fallback)
-        values["compensation_enabled"] = int(ctrl.compensation_enabled)
-        values["feedback_bound_limited"] = int(bool(ctrl.feedback_bound_note))
-        if ctrl.feedback_bound_note:
-            values["feedback_bound"] = ctrl.feedback_bound_note
-        ch.diag.publish(level, text, values)
+            log = lambda text, ch=ch: self.get_logger().error(self._label(ch) + text)  # noqa: E731
+            ch.diag.publish(*ch.status(self.counts, ct, self.addon, log))
 
     def on_shutdown(self) -> None:
         """Leave the joints safe: the last command is zero torque (the add-on: the base command
@@ -649,10 +505,7 @@ class CompensatingControllerNode(ParameterNode):
             ch.command = ch.compensation = 0.0
         for _ in range(3):
             stamp = self.get_clock().now().to_msg()
-            if self.sum_base:
-                self._publish_sum(stamp.sec, stamp.nanosec)
-            else:
-                self._publish_commands(stamp.sec, stamp.nanosec, -1)
+            self._publish_safe(stamp.sec, stamp.nanosec)
             time.sleep(0.01)
 
 
