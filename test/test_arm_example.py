@@ -20,7 +20,7 @@ from friction_ros.core.wire import JointStateDecoder
 PLANT = str(ROOT / "params" / "arm7_plant.yaml")
 CONTROLLERS = str(ROOT / "params" / "arm7_controllers.yaml")
 JOINTS = [f"joint{i}" for i in range(1, 8)]
-SIM_SECONDS = 4.0
+SIM_SECONDS = 6.0
 
 
 def test_committed_arm_controllers_are_what_the_plant_file_gives():
@@ -88,30 +88,38 @@ def _run(addon: bool, compose: bool = False) -> dict[int, tuple[float, ...]]:
     return states
 
 
-def _rms_errors(states: dict[int, tuple[float, ...]]) -> np.ndarray:
+def _rms_errors(states: dict[int, tuple[float, ...]], t_start: float) -> np.ndarray:
+    """Per-joint RMS of reference - measured position over the states stamped at or after t_start."""
     doc = yaml.safe_load(open(CONTROLLERS))
     refs = doc["/**/pd_controller"]["ros__parameters"]["reference"]
     gens = [reference_from_config(refs[j]) for j in JOINTS]
     err = []
     for stamp, pos in sorted(states.items()):
         t = stamp * 1e-9
-        err.append([g.sample(t)[0] - p for g, p in zip(gens, pos)])
+        if t >= t_start:
+            err.append([g.sample(t)[0] - p for g, p in zip(gens, pos)])
     e = np.asarray(err)
-    assert len(e) > 0.3 * SIM_SECONDS / 1e-3, f"only {len(e)} joint states received"
+    # the listener keeps what it can of 1000 states per simulated second and may match the plant
+    # late on a loaded machine: judge a common window, long enough
+    assert len(e) >= 200 and max(states) * 1e-9 - t_start > 1.5, (
+        f"only {len(e)} joint states after {t_start:.2f} s"
+    )
     return np.sqrt(np.mean(e**2, axis=0))
 
 
 @pytest.mark.ros
 def test_the_addon_halves_every_joints_tracking_error_and_composition_changes_nothing():
-    pd = _rms_errors(_run(addon=False))
+    pd_states = _run(addon=False)
     separate = _run(addon=True)
-    with_addon = _rms_errors(separate)
+    t_start = max(1.0, min(pd_states) * 1e-9, min(separate) * 1e-9)  # after the start transient
+    pd = _rms_errors(pd_states, t_start)
+    with_addon = _rms_errors(separate, t_start)
     ratio = with_addon / pd
     table = ", ".join(f"{j} {a:.3g}->{b:.3g}" for j, a, b in zip(JOINTS, pd, with_addon))
     assert np.all(ratio <= 0.5), f"RMS tracking error PD -> PD + add-on: {table}"
     assert np.all(np.isfinite(ratio)) and math.isfinite(float(np.max(ratio)))
     composed = _run(addon=True, compose=True)
     common = sorted(set(separate) & set(composed))
-    assert len(common) > 0.3 * SIM_SECONDS / 1e-3
+    assert len(common) >= 50 and (common[-1] - common[0]) * 1e-9 > 0.5 * SIM_SECONDS
     worst = max(max(abs(a - b) for a, b in zip(separate[s], composed[s])) for s in common)
     assert worst == 0.0, f"composed and separate processes differ by {worst:g} rad"

@@ -247,8 +247,9 @@ def test_three_namespaced_joints_run_without_cross_talk(tmp_path):
         states = {a: lis.subscribe(ControllerState, f"/{a}/controller_state") for a in "xyz"}
         with Graph(specs) as g:
             # 250 Hz per joint: six control processes plus this one share two cores
-            ok = lis.wait_for(lambda: all(len(states[a]) > 750 for a in "xyz"), 90, g)
-            assert ok, {a: len(states[a]) for a in "xyz"}
+            # every reader matched and received (a loaded machine discovers late)
+            ok = lis.wait_for(lambda: all(len(states[a]) > 750 and joints[a] for a in "xyz"), 90, g)
+            assert ok, {a: (len(states[a]), len(joints[a])) for a in "xyz"}
     for i, a in enumerate("xyz"):
         assert {tuple(m.name) for m in joints[a]} == {(f"{a}_joint",)}
         assert {m.joint_name for m in states[a]} == {f"{a}_joint"}

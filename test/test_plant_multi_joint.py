@@ -110,12 +110,13 @@ def test_arm7_parameter_file_builds_seven_joints_with_gravity_on_the_pitch_joint
         "seed001_harmonic_drive",
         "abb_m19s",
         "seed000_gearhead",
-        "seed000_gearhead",
+        "seed001_harmonic_drive",
         "seed004_dc_motor",
         "seed004_dc_motor",
     ]
     assert [p.params.gravity for p in presets] == [0.0, 4.0, 1.5, 0.6, 0.0, 0.003, 0.0]
-    assert [p.params.seed for p in presets] == [3, 1, 13, 0, 0, 4, 7]
+    assert [p.params.seed for p in presets] == [3, 1, 13, 0, 11, 4, 7]
+    assert presets[3].params.encoder_cpr == 4096  # an arm joint's encoder, not the preset's 60 counts
     for p in presets:
         plant = p.make_plant()
         if p.params.gravity:
