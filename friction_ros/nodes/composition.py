@@ -16,15 +16,13 @@ the others.
 
 from __future__ import annotations
 
-import gc
 import importlib
 import sys
 
 import rclpy
 
 from friction_ros.core.validation import ParameterError
-from friction_ros.nodes.loops import DeadlineLoop
-from friction_ros.nodes.runtime import make_executor, start_process
+from friction_ros.nodes.runtime import spin_until_stopped, start_process
 
 #: node module -> its node class
 NODE_CLASSES = {
@@ -87,33 +85,8 @@ def main(argv: list[str] | None = None) -> int:
             n.destroy_node()
         rclpy.try_shutdown()
         return 2
-    gc.collect()
-    gc.freeze()
-    executor = make_executor()
-    for _, n in nodes:
-        executor.add_node(n)
-    loops = [n.loop for _, n in nodes if isinstance(getattr(n, "loop", None), DeadlineLoop)]
-    try:
-        if loops:  # a real-time plant paces the executor (one loop per process)
-            while not stop.is_set() and rclpy.ok():
-                loops[0].run_once(executor)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
-    except rclpy.executors.ExternalShutdownException:
-        pass
-    finally:
-        order = sorted(nodes, key=lambda mn: mn[0] not in STOP_FIRST)
-        for _module, n in order:
-            shutdown = getattr(n, "on_shutdown", None)
-            if shutdown is not None:
-                try:
-                    shutdown()
-                except Exception as exc:  # last line of defence: report, still tear down
-                    print(f"error during shutdown of {n.get_name()}: {exc}", file=sys.stderr)
-        for _, n in nodes:
-            executor.remove_node(n)
-            n.destroy_node()
-        rclpy.try_shutdown()
+    order = sorted(nodes, key=lambda mn: mn[0] not in STOP_FIRST)  # torque commanders stop first
+    spin_until_stopped([n for _, n in order], stop)
     return 0
 
 

@@ -25,6 +25,7 @@ from friction_ros.nodes.parameters import (
     _add_runtime_validation,
     _declare_one,
     _value,
+    check_unknown_parameters,
     declare_config,
 )
 
@@ -104,16 +105,11 @@ def declare_joint_config(
         _declare_one(node, name, spec)
         node.parameter_fields[name] = spec
         overrides[joint][base] = spec.check(_value(node, name, spec), name)
-    declared = set(node.list_parameters([], 0).names) | {"use_sim_time"}
-    unknown = sorted(
-        k for k in node.given_parameters if k not in declared and not k.startswith("qos_overrides")
+    check_unknown_parameters(
+        node,
+        f"per-joint values are gains.<joint>.<key> or <section>.<joint>.<key> for joints "
+        f"{', '.join(joints)}; see the node's parameter list (ros2 param list)",
     )
-    if unknown:
-        raise ParameterError(
-            f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
-            f"per-joint values are gains.<joint>.<key> or <section>.<joint>.<key> for joints "
-            f"{', '.join(joints)}; see the node's parameter list (ros2 param list)"
-        )
     if apply is not None:  # after every declaration: declaring runs the set-parameter callbacks
         _add_runtime_validation(node, apply)
     return values, layout, overrides

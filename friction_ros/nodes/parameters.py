@@ -206,18 +206,24 @@ def declare_config(
         if value is not None and name in by_name:
             values[name] = by_name[name].check(_plain(value), name)
     if check_unknown:
-        declared = set(node.list_parameters([], 0).names) | {"use_sim_time"}
-        unknown = sorted(
-            k for k in node.given_parameters if k not in declared and not k.startswith("qos_overrides")
-        )
-        if unknown:
-            raise ParameterError(
-                f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
-                f"declared parameters are: {', '.join(sorted(declared))}"
-            )
+        check_unknown_parameters(node)
     if apply is not None:
         _add_runtime_validation(node, apply)
     return unflatten(values)
+
+
+def check_unknown_parameters(node: ParameterNode, hint: str | None = None) -> None:
+    """Refuse given parameters that no declaration took (typos do not pass silently); ``hint``
+    replaces the list of declared names in the message."""
+    declared = set(node.list_parameters([], 0).names) | {"use_sim_time"}
+    unknown = sorted(
+        k for k in node.given_parameters if k not in declared and not k.startswith("qos_overrides")
+    )
+    if unknown:
+        raise ParameterError(
+            f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
+            + (hint or f"declared parameters are: {', '.join(sorted(declared))}")
+        )
 
 
 def _value(node: ParameterNode, name: str, spec: Field) -> Any:

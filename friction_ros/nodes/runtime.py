@@ -192,29 +192,39 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    # Everything built so far (modules, node, core objects) lives for the whole run: keep it out of
+    spin_until_stopped([node], stop)
+    return 0
+
+
+def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
+    """Spin ``nodes`` on one executor until ``stop`` (a real-time plant's deadline loop paces it),
+    then call each node's ``on_shutdown()`` in the given order (torque commanders first) and destroy
+    them; rclpy is shut down at the end."""
+    # Everything built so far (modules, nodes, core objects) lives for the whole run: keep it out of
     # the cyclic collector so a full collection does not scan it (multi-ms pauses in the loop).
     gc.collect()
     gc.freeze()
     executor = make_executor()
-    executor.add_node(node)
-    loop = getattr(node, "loop", None)
+    for node in nodes:
+        executor.add_node(node)
+    loops = [n.loop for n in nodes if isinstance(getattr(n, "loop", None), DeadlineLoop)]
     try:
-        if isinstance(loop, DeadlineLoop):
+        if loops:
             while not stop.is_set() and rclpy.ok():
-                loop.run_once(executor)
+                loops[0].run_once(executor)
         while not stop.is_set() and rclpy.ok():
             executor.spin_once(timeout_sec=0.05)
     except rclpy.executors.ExternalShutdownException:
         pass
     finally:
-        shutdown = getattr(node, "on_shutdown", None)
-        if shutdown is not None:
-            try:
-                shutdown()
-            except Exception as exc:  # last line of defence: report, still tear down
-                print(f"error during shutdown of {node.get_name()}: {exc}", file=sys.stderr)
-        executor.remove_node(node)
-        node.destroy_node()
+        for node in nodes:
+            shutdown = getattr(node, "on_shutdown", None)
+            if shutdown is not None:
+                try:
+                    shutdown()
+                except Exception as exc:  # last line of defence: report, still tear down
+                    print(f"error during shutdown of {node.get_name()}: {exc}", file=sys.stderr)
+        for node in nodes:
+            executor.remove_node(node)
+            node.destroy_node()
         rclpy.try_shutdown()
-    return 0
