@@ -215,3 +215,68 @@ def test_the_limit_cycle_detector_switches_a_destabilising_addon_off():
     assert addon.compensation_fallback and "limit cycle" in addon.fallback_reason
     assert addon.limit_cycle.fired_at < 1.0
     assert watched < 1.5 * pd_alone
+
+
+@pytest.mark.ros
+def test_estimates_are_adopted_only_by_joints_that_adopt_them_and_only_when_converged(tmp_path):
+    """friction_estimate (FrictionEstimate per joint) over DDS: joint b adopts, joint a does not;
+    an unconverged estimate changes nothing."""
+    from friction_msgs.msg import FrictionEstimate
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+
+    from friction_ros.core.coefficient_exchange import to_fields
+
+    joints = ["a", "b"]
+    params = {
+        "joints": joints,
+        "mode": "compensation_only",
+        "friction": {"model": "coulomb_viscous", "fc": 1.0, "fv": 0.5},
+        "compensation": {"source": "feedforward", "smoothing_velocity": 1e-6},
+        "adopt_estimator_coefficients": False,
+        "gains": {"b": {"adopt_estimator_coefficients": True}},
+        "state_timeout": 5.0,
+    }
+    path = write_params(tmp_path / "p.yaml", {"compensating_controller": {"ros__parameters": params}})
+    with Listener() as lis:
+        comp = lis.subscribe(Float64MultiArray, "compensation_command", COMMAND_QOS)
+        states = lis.publisher(JointState, "joint_states")
+        desired = lis.publisher(JointState, "desired_joint_states")
+        estimates = lis.publisher(FrictionEstimate, "friction_estimate")
+        with Graph([NodeSpec("compensating_controller", "", [path])]) as g:
+            assert lis.wait_for(
+                lambda: (
+                    states.get_subscription_count()
+                    and desired.get_subscription_count()
+                    and estimates.get_subscription_count()
+                    and lis.matched("compensation_command")
+                ),
+                60,
+                g,
+            )
+            desired.publish(JointState(name=joints, position=[0.0, 0.0], velocity=[1.0, 1.0]))
+            time.sleep(0.3)
+
+            def output():
+                m = JointState(name=joints, position=[0.0, 0.0], velocity=[1.0, 1.0], effort=[0.0, 0.0])
+                m.header.stamp = lis.node.get_clock().now().to_msg()
+                n = len(comp)
+                states.publish(m)
+                assert lis.wait_for(lambda: len(comp) > n, 10, g)
+                return list(comp[-1].data)
+
+            def estimate(joint, fc, converged):
+                model, names, values = to_fields({"model": "coulomb_viscous", "fc": fc, "fv": 0.0})
+                msg = FrictionEstimate(
+                    joint_name=joint, model=model, coefficient_names=names, coefficients=values
+                )
+                msg.converged = converged
+                estimates.publish(msg)
+                time.sleep(0.3)
+
+            assert output() == pytest.approx([1.5, 1.5], abs=1e-9)  # fc + fv * 1 rad/s
+            estimate("b", 3.0, converged=False)
+            assert output() == pytest.approx([1.5, 1.5], abs=1e-9)
+            estimate("b", 3.0, converged=True)
+            estimate("a", 3.0, converged=True)
+            assert output() == pytest.approx([1.5, 3.0], abs=1e-9)

@@ -52,6 +52,7 @@ import math
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
@@ -196,7 +197,9 @@ class CompensatingControllerNode(ParameterNode):
         self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
         self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
         self.create_subscription(JointState, "desired_joint_states", self._on_desired, STATE_QOS)
-        self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS)
+        # raw: an estimator publishes per joint (700 messages/s for 7 joints at publish_every 10);
+        # they are deserialised only while a joint adopts them
+        self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, raw=True)
         self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
         self.sum_base = bool(self.values["sum_base_command"])
         if self.sum_base and not self.addon:
@@ -346,7 +349,15 @@ class CompensatingControllerNode(ParameterNode):
                     vel = msg.velocity[i] if i < len(msg.velocity) and math.isfinite(msg.velocity[i]) else 0.0
                     ch.desired, ch.trajectory = (float(msg.position[i]), float(vel), 0.0), None
 
-    def _on_estimate(self, msg: FrictionEstimate) -> None:
+    @property
+    def adopting(self) -> bool:
+        """Whether any joint adopts the estimator's coefficients (``adopt_estimator_coefficients``)."""
+        return any(ch.values.get("adopt_estimator_coefficients") for ch in self.channels)
+
+    def _on_estimate(self, data: bytes) -> None:
+        if not self.adopting:
+            return  # nothing adopts: no message object
+        msg = deserialize_message(data, FrictionEstimate)
         if not msg.converged:
             return
         ch = self._by_joint.get(msg.joint_name) if msg.joint_name else self.channels[0]

@@ -90,7 +90,7 @@ from friction_ros.core.control.load_compensation import (
     learned_residual,
 )
 from friction_ros.core.control.pid import Pid
-from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SchemeOutput, SlidingMode
+from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
 from friction_ros.core.validation import (
     ParameterError,
     check_keys,
@@ -208,6 +208,8 @@ class VelocityEstimator:
 
 class CompensatingController:
     """Controller façade; see the module docstring and :data:`CONTROLLER_DEFAULTS`."""
+
+    _dt_checked: float | None = None  # the last period length compute() validated
 
     def __init__(self, config: Mapping[str, Any] | None = None):
         self._build(self._merge(default_config(), config or {}))
@@ -375,12 +377,15 @@ class CompensatingController:
         if self.residual is not None:
             self.residual.reset()
         self._prev_cmd = None
+        self._dt_checked = None
 
     # -- the control law ---------------------------------------------------------------------------
     def compute(self, t: float, reference, measured, dt: float) -> ControllerTerms:
         """One control period; returns all terms (also kept in ``self.terms``)."""
-        if not (isinstance(dt, (int, float)) and dt > 0.0 and math.isfinite(dt)):
-            raise ParameterError(f"controller: dt = {dt!r} is out of range: must be > 0 [s]")
+        if dt != self._dt_checked:  # checked once per period length, not every period
+            if not (isinstance(dt, (int, float)) and dt > 0.0 and math.isfinite(dt)):
+                raise ParameterError(f"controller: dt = {dt!r} is out of range: must be > 0 [s]")
+            self._dt_checked = dt
         r_pos, r_vel, r_acc = reference
         r_pos, r_vel, r_acc = float(r_pos), float(r_vel), float(r_acc)
         m_pos = float(measured[0])
@@ -415,7 +420,7 @@ class CompensatingController:
         if addon:
             k = self.compensation_scale
             f_ff, f_fb, tau_l, tau_r, ff_vel = k * f_ff, k * f_fb, k * tau_l, k * tau_r, k * ff_vel
-            s = SchemeOutput(0.0, 0.0, 0.0, 0.0, 0.0)
+            p_t = i_t = d_t = s_vff = s_fb = 0.0
             unlimited = ff_vel + f_ff + f_fb + tau_l + tau_r
             if lo > hi:
                 lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
@@ -437,10 +442,11 @@ class CompensatingController:
                 integral_lower=self.u_clamp_min,
                 integral_upper=self.u_clamp_max,
             )
-            s = SchemeOutput(out.p_term, out.i_term, out.d_term, 0.0, 0.0)
+            p_t, i_t, d_t, s_vff, s_fb = out.p_term, out.i_term, out.d_term, 0.0, 0.0
             unlimited, cmd, sat = out.unlimited, out.command, out.saturated
         else:
             s = self.scheme.compute(e, edot, (r_pos, r_vel, r_acc), (pos, vel), dt)
+            p_t, i_t, d_t, s_vff, s_fb = s.p_term, s.i_term, s.d_term, s.velocity_feedforward, s.friction_feedback
             unlimited = (
                 s.p_term
                 + s.i_term
@@ -479,13 +485,13 @@ class CompensatingController:
             velocity=vel,
             error=e,
             error_dot=edot,
-            p_term=s.p_term,
-            i_term=s.i_term,
-            d_term=s.d_term,
-            velocity_feedforward=ff_vel + s.velocity_feedforward,
+            p_term=p_t,
+            i_term=i_t,
+            d_term=d_t,
+            velocity_feedforward=ff_vel + s_vff,
             inertia_feedforward=ff_inertia,
             friction_feedforward=f_ff,
-            friction_feedback=f_fb + s.friction_feedback,
+            friction_feedback=f_fb + s_fb,
             load_feedforward=tau_l,
             learned_feedforward=tau_r,
             command_unlimited=unlimited,

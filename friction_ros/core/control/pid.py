@@ -78,7 +78,7 @@ PID_SCHEMA = Schema(
 PID_DEFAULTS: dict[str, Any] = PID_SCHEMA.defaults()
 
 
-@dataclass
+@dataclass(slots=True)
 class PidOutput:
     """Terms of one PID evaluation (N*m)."""
 

@@ -63,7 +63,7 @@ def describing_damping(y: Callable, A: float, omega: float = 1.0, n: int = 2001)
     return float(8.0 / (math.pi * A * A * omega) * np.trapezoid(f, u))
 
 
-@dataclass
+@dataclass(slots=True)
 class SchemeOutput:
     """Feedback terms of one scheme evaluation (N*m)."""
 

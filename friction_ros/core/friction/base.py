@@ -280,6 +280,19 @@ class DynamicModel(FrictionModel):
         raise NotImplementedError
 
 
+def sign(v):
+    """``np.sign`` that keeps a Python float a float (0 at +-0, NaN at NaN): the scalar path of the
+    steady-state formulas (:meth:`FrictionModel.steady_scalar`) without a numpy call per term."""
+    if type(v) is float:
+        return 1.0 if v > 0.0 else -1.0 if v < 0.0 else (0.0 if v == 0.0 else v)
+    return np.sign(v)
+
+
+def exp(x):
+    """``np.exp`` that keeps a Python float a float (``math.exp``); see :func:`sign`."""
+    return math.exp(x) if type(x) is float else np.exp(x)
+
+
 def stribeck_np(av: np.ndarray, fc: Any, fs: Any, vs: Any, delta: Any) -> np.ndarray:
-    """Vectorised Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta)."""
-    return fc + (fs - fc) * np.exp(-((av / vs) ** delta))
+    """Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta), on arrays or a float."""
+    return fc + (fs - fc) * exp(-((av / vs) ** delta))

@@ -12,7 +12,7 @@ from friction_ros.core.config import Field
 from friction_ros.core.validation import ParameterError
 
 from . import _kernels
-from .base import StaticModel, stribeck_np
+from .base import StaticModel, sign, stribeck_np
 
 # The coefficients the static maps share; each model's docstring gives the equation it uses them in.
 _FC = Field(
@@ -69,7 +69,7 @@ class Coulomb(StaticModel):
     COEFS = (_FC,)
 
     def _steady(self, v):
-        return self._c["fc"] * np.sign(v)
+        return self._c["fc"] * sign(v)
 
 
 class Viscous(StaticModel):
@@ -101,7 +101,7 @@ class CoulombViscous(StaticModel):
     )
 
     def _steady(self, v):
-        return self._c["fc"] * np.sign(v) + self._c["fv"] * v
+        return self._c["fc"] * sign(v) + self._c["fv"] * v
 
 
 class Stribeck(StaticModel):
@@ -120,7 +120,7 @@ class Stribeck(StaticModel):
 
     def _steady(self, v):
         c = self._c
-        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], c["delta"]) * np.sign(v) + c["fv"] * v
+        return stribeck_np(abs(v), c["fc"], c["fs"], c["vs"], c["delta"]) * sign(v) + c["fv"] * v
 
 
 class Tustin(Stribeck):
@@ -135,7 +135,7 @@ class Tustin(Stribeck):
 
     def _steady(self, v):
         c = self._c
-        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], 1.0) * np.sign(v) + c["fv"] * v
+        return stribeck_np(abs(v), c["fc"], c["fs"], c["vs"], 1.0) * sign(v) + c["fv"] * v
 
 
 class Gaussian(Tustin):
@@ -149,7 +149,7 @@ class Gaussian(Tustin):
 
     def _steady(self, v):
         c = self._c
-        return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], 2.0) * np.sign(v) + c["fv"] * v
+        return stribeck_np(abs(v), c["fc"], c["fs"], c["vs"], 2.0) * sign(v) + c["fv"] * v
 
 
 class Lorentzian(StaticModel):
@@ -164,7 +164,7 @@ class Lorentzian(StaticModel):
 
     def _steady(self, v):
         c = self._c
-        return (c["fc"] + (c["fs"] - c["fc"]) / (1.0 + (v / c["vs"]) ** 2)) * np.sign(v) + c["fv"] * v
+        return (c["fc"] + (c["fs"] - c["fc"]) / (1.0 + (v / c["vs"]) ** 2)) * sign(v) + c["fv"] * v
 
 
 class StribeckEps(StaticModel):
