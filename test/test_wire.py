@@ -18,7 +18,7 @@ import struct
 
 import pytest
 from builtin_interfaces.msg import Time
-from friction_msgs.msg import ControllerState, DriveState
+from friction_msgs.msg import ControllerState, DriveState, FrictionEstimate
 from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
@@ -30,6 +30,7 @@ from friction_ros.core.wire import (
     DRIVE_STATE_UINTS,
     ControllerStateEncoder,
     DriveStateEncoder,
+    FrictionEstimateEncoder,
     JointStateDecoder,
     JointStateEncoder,
     Writer,
@@ -268,3 +269,32 @@ def test_bag_codec_shares_the_wire_primitives_and_matches_rclpy():
     cm = ControllerState(joint_name="j", mode="pid", command=1.5, saturated=True)
     cvalue = {"joint_name": "j", "mode": "pid", "command": 1.5, "saturated": True}
     assert_wire(encode(cdefs, "friction_msgs/msg/ControllerState", cvalue), cm)
+
+
+@pytest.mark.parametrize(
+    "model, state, names, coefs, std",
+    [
+        ("coulomb_viscous", [], ["fc", "fv"], [1.5, 0.25], [0.1, 0.2]),
+        ("lugre", [0.001], ["fc", "fs", "vs", "sigma0", "sigma1", "fv"], [1, 2, 0.1, 1e4, 3, 0.2], []),
+        ("gms", [1e-3, -2e-3, 3e-3], ["k[0]", "alpha[0]"], [math.pi, -math.inf], [1e-9, math.inf]),
+        ("", [], [], [], []),
+    ],
+)
+@pytest.mark.parametrize("joint", ["", "j1", "élbow_joint_3"])
+def test_friction_estimate_encoder_is_byte_identical_to_rclpy(joint, model, state, names, coefs, std):
+    enc = FrictionEstimateEncoder(joint)
+    for flags in ((True, False), (False, True)):
+        m = FrictionEstimate(
+            joint_name=joint, model=model, friction_torque=0.5, model_torque=-0.25, velocity=1.25,
+            state=state, coefficient_names=names, coefficients=coefs, coefficient_std=std,
+            excitation_ok=flags[0], converged=flags[1],
+        )  # fmt: skip
+        m.header.stamp.sec, m.header.stamp.nanosec = 1_700_000_000, 42
+        data = enc.pack(1_700_000_000, 42, model, 0.5, -0.25, 1.25, state, names, coefs, std, *flags)
+        assert_wire(data, m)
+        back = deserialize_message(data, FrictionEstimate)
+        assert list(back.coefficients) == pytest.approx(coefs)
+        assert list(back.coefficient_std) == pytest.approx(std)
+        assert (back.joint_name, back.model, back.converged) == (joint, model, flags[1])
+    with pytest.raises(ValueError, match="2 coefficient names, 1 values"):
+        enc.pack(0, 0, "m", 0.0, 0.0, 0.0, [], ["a", "b"], [1.0], [], False, False)

@@ -199,7 +199,9 @@ class CompensatingControllerNode(ParameterNode):
         self.create_subscription(JointState, "desired_joint_states", self._on_desired, STATE_QOS)
         # raw: an estimator publishes per joint (700 messages/s for 7 joints at publish_every 10);
         # they are deserialised only while a joint adopts them
-        self.create_subscription(FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, raw=True)
+        self.create_subscription(
+            FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, raw=True
+        )
         self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
         self.sum_base = bool(self.values["sum_base_command"])
         if self.sum_base and not self.addon:

@@ -60,7 +60,7 @@ from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrict
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.joint_config import GAINS, joint_values, name_joint_error
 from friction_ros.core.validation import ParameterError
-from friction_ros.core.wire import JointStateDecoder
+from friction_ros.core.wire import FrictionEstimateEncoder, JointStateDecoder
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import current_joint_values, declare_joint_config, declare_joints
 from friction_ros.nodes.parameters import (
@@ -136,7 +136,9 @@ def joint_config(node_values: dict, overrides: dict) -> dict:
 class _Joint:
     """One joint of the node: its estimator, input gate and counters."""
 
-    __slots__ = ("name", "estimator", "config", "gate", "index", "last_ns", "n", "counts", "diag_rejected")
+    __slots__ = (
+        "name", "estimator", "config", "gate", "index", "last_ns", "n", "counts", "diag_rejected", "encoder",
+    )  # fmt: skip
 
     def __init__(self, name: str, estimator: OnlineFrictionEstimator, config: dict, gate: JointInputGate):
         self.name = name
@@ -148,6 +150,7 @@ class _Joint:
         self.n = 0
         self.counts = {"samples": 0, "excited_samples": 0, "published": 0}
         self.diag_rejected = 0
+        self.encoder = FrictionEstimateEncoder(name)  # its FrictionEstimate as bytes, one struct.pack
 
 
 class FrictionEstimatorNode(ParameterNode):
@@ -294,22 +297,24 @@ class FrictionEstimatorNode(ParameterNode):
         if jt.n % self._publish_every:
             return
         e = est.record()  # coefficient lists and convergence: only for a published estimate
-        out = FrictionEstimate()
-        out.header.stamp.sec, out.header.stamp.nanosec = msg.sec, msg.nanosec
-        out.joint_name = jt.name
         model, names, coefs = to_fields(est.model_config())
-        out.model = model
-        out.friction_torque = e.friction_torque
-        out.model_torque = e.model_torque
-        out.velocity = e.velocity
-        out.state = [float(x) for x in e.state]
-        out.coefficient_names = names
-        out.coefficients = coefs
         std = est.coefficient_std
-        out.coefficient_std = [float(std.get(n, math.nan)) for n in names] if std else []
-        out.excitation_ok = e.excitation_ok
-        out.converged = e.converged
-        self.pub.publish(out)
+        self.pub.publish(
+            jt.encoder.pack(
+                msg.sec,
+                msg.nanosec,
+                model,
+                float(e.friction_torque),
+                float(e.model_torque),
+                float(e.velocity),
+                [float(x) for x in e.state],
+                names,
+                [float(c) for c in coefs],
+                [float(std.get(n, math.nan)) for n in names] if std else [],
+                e.excitation_ok,
+                e.converged,
+            )
+        )
         counts["published"] += 1
 
     # -- diagnostics ---------------------------------------------------------------------------------

@@ -446,7 +446,13 @@ class CompensatingController:
             unlimited, cmd, sat = out.unlimited, out.command, out.saturated
         else:
             s = self.scheme.compute(e, edot, (r_pos, r_vel, r_acc), (pos, vel), dt)
-            p_t, i_t, d_t, s_vff, s_fb = s.p_term, s.i_term, s.d_term, s.velocity_feedforward, s.friction_feedback
+            p_t, i_t, d_t, s_vff, s_fb = (
+                s.p_term,
+                s.i_term,
+                s.d_term,
+                s.velocity_feedforward,
+                s.friction_feedback,
+            )
             unlimited = (
                 s.p_term
                 + s.i_term

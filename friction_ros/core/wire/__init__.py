@@ -4,7 +4,7 @@
   sequences of float64, builtin_interfaces/Time, std_msgs/Header, the template :class:`Writer`
   and :func:`compile_template` (a template with variable slots -> one ``struct.Struct``).
 * :mod:`.messages`: fast encoders/decoders of the messages the nodes publish and take every period
-  (sensor_msgs/JointState, friction_msgs/ControllerState, friction_msgs/DriveState), byte-for-byte
+  (sensor_msgs/JointState, friction_msgs/ControllerState, DriveState, FrictionEstimate), byte-for-byte
   what rclpy's serialiser writes.
 
 The schema-driven codec of the bag reader/writer (:mod:`friction_ros.core.bag.cdr`, any message
@@ -30,6 +30,7 @@ from .messages import (
     ControllerStateEncoder,
     DecodedJointState,
     DriveStateEncoder,
+    FrictionEstimateEncoder,
     JointStateDecoder,
     JointStateEncoder,
 )
@@ -45,6 +46,7 @@ __all__ = [
     "U32",
     "ControllerStateEncoder",
     "DriveStateEncoder",
+    "FrictionEstimateEncoder",
     "DecodedJointState",
     "JointStateDecoder",
     "JointStateEncoder",

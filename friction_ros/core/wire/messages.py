@@ -10,6 +10,7 @@ and compiles it (:func:`~.cdr.compile_template`) into one ``struct.Struct``: a m
 * sensor_msgs/JointState: :class:`JointStateEncoder`, :class:`JointStateDecoder` -> :class:`DecodedJointState`
 * friction_msgs/ControllerState: :class:`ControllerStateEncoder`
 * friction_msgs/DriveState: :class:`DriveStateEncoder`
+* friction_msgs/FrictionEstimate: :class:`FrictionEstimateEncoder`
 """
 
 from __future__ import annotations
@@ -319,3 +320,70 @@ class DriveStateEncoder:
 
     def pack(self, sec: int, nanosec: int, *values) -> bytes:
         return self._struct.pack(CDR_LE, sec, nanosec, self._mid, *values)
+
+
+class FrictionEstimateEncoder:
+    """friction_msgs/FrictionEstimate of one joint -> CDR bytes with one ``struct.pack``.
+
+    The layout is fixed by the model string, the number of states, the coefficient names and
+    whether standard deviations are sent; one compiled layout per such key (a model change
+    compiles a new one). ``pack(sec, nanosec, model, friction_torque, model_torque, velocity,
+    state, names, coefficients, std, excitation_ok, converged)``; ``std`` empty or one per name.
+    """
+
+    def __init__(self, joint: str):
+        self.joint = joint
+        self._layouts: dict[tuple, tuple[struct.Struct, list]] = {}
+
+    def _layout(self, key: tuple) -> tuple[struct.Struct, list]:
+        model, n_state, names, n_std = key
+        w = Writer()
+        slots = [(w.header(), "iI")]
+        w.string(self.joint)
+        w.string(model)
+        slots.append((w.put("3d", 0.0, 0.0, 0.0), "3d"))
+        for count in (n_state,):
+            off = w.float64s([0.0] * count)
+            if count:
+                slots.append((off, f"{count}d"))
+        w.strings(names)
+        for count in (len(names), n_std):
+            off = w.float64s([0.0] * count)
+            if count:
+                slots.append((off, f"{count}d"))
+        slots.append((w.put("2?", False, False), "2?"))
+        st, chunks = compile_template(w.buf, slots)
+        # the pack arguments in template order: a constant chunk (bytes) or a number of values
+        plan: list[bytes | int] = []
+        pos, it = 0, iter(chunks)
+        for off, f in sorted(slots):
+            if off > pos:
+                plan.append(next(it))
+            plan.append(len(struct.unpack("<" + f, bytes(struct.calcsize("<" + f)))))
+            pos = off + struct.calcsize("<" + f)
+        plan.extend(it)
+        self._layouts[key] = (st, plan)
+        return st, plan
+
+    def pack(
+        self, sec, nanosec, model, friction_torque, model_torque, velocity, state, names, coefficients, std,
+        excitation_ok, converged,
+    ) -> bytes:  # fmt: skip
+        if len(coefficients) != len(names) or (len(std) and len(std) != len(names)):
+            raise ValueError(
+                f"{len(names)} coefficient names, {len(coefficients)} values, {len(std)} std: must agree"
+            )
+        key = (model, len(state), tuple(names), len(std))
+        st, plan = self._layouts.get(key) or self._layout(key)
+        values = (
+            sec, nanosec, friction_torque, model_torque, velocity, *state, *coefficients, *std,
+            bool(excitation_ok), bool(converged),
+        )  # fmt: skip
+        args, i = [], 0
+        for item in plan:
+            if isinstance(item, int):
+                args.extend(values[i : i + item])
+                i += item
+            else:
+                args.append(item)
+        return st.pack(*args)
