@@ -20,13 +20,21 @@ controller on core 0 with SCHED_FIFO 80, estimator on core 1), ``composed_fifo``
 controller in one process, one executor, on core 0 with SCHED_FIFO 80; estimator on core 1).
 The composed process's CPU is the plant's and the controller's together.
 
+Runs are repeated (``--repeats``, default 3) and interleaved (timer floor, middleware floor, each
+configuration; then again), and every figure is the median with its range: on this 2-core VM one
+run of the same configuration differs from the next by +-30 % and more (a slow phase of the host
+shows in every configuration of that round). The ``middleware floor``
+(``bench/_middleware_floor.py``) is the composed topology with no work in it (a stand-in plant
+publishing 7-joint states at 1 kHz, a stand-in controller answering each, a listener process in
+the estimator's place): the misses and latency of rclpy + executor + Fast DDS alone.
+
 Tracking (the same arm, deterministic core loop, no middleware: the DDS test checks the same
 wiring): per joint, RMS tracking error and stick fraction of the plain PD and of PD + add-on over
 20 s, for reference seeds 1, 2, 3 (the example uses seed = joint number); the ratio must be <= 0.5
 on every joint and seed.
 
-    .venv/bin/python bench/manipulator.py             # 30 s per configuration
-    .venv/bin/python bench/manipulator.py --quick     # 10 s (iterate; not for README)
+    .venv/bin/python bench/manipulator.py             # 30 s per configuration, 3 interleaved runs
+    .venv/bin/python bench/manipulator.py --quick     # 10 s, one run (iterate; not for README)
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import statistics
 import sys
 import tempfile
 import time
@@ -43,6 +52,7 @@ import yaml
 
 sys.path.append(str(Path(__file__).resolve().parent))
 from _common import print_table, write_results  # noqa: E402
+from _middleware_floor import measure as middleware_floor  # noqa: E402
 from loop import cpu_s, timer_floor  # noqa: E402
 
 from friction_ros.cli.bringup import Bringup, NodeSpec, composed_spec  # noqa: E402
@@ -180,12 +190,40 @@ def tracking(duration: float, seeds=(1, 2, 3)) -> list[dict]:
     return rows
 
 
+FIGURES = (
+    "rate_hz",
+    "controller_cpu_percent",
+    "estimator_cpu_percent",
+    "plant_cpu_percent",
+    "latency_p50_ms",
+    "latency_p99_ms",
+    "missed_percent",
+)
+
+
+def median_of(runs: list[dict], keys) -> dict:
+    """Median and range of each figure over repeated runs (the VM's run-to-run spread is +-30 %)."""
+    out: dict = {}
+    for k in keys:
+        vals = sorted(r[k] for r in runs if isinstance(r.get(k), (int, float)))
+        if vals:
+            out[k] = float(statistics.median(vals))
+            out[k + "_range"] = [vals[0], vals[-1]]
+    return out
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=30.0)
-    parser.add_argument("--quick", action="store_true", help="10 s per configuration (not for README)")
+    parser.add_argument(
+        "--repeats", type=int, default=3, help="runs of every configuration (medians reported)"
+    )
+    parser.add_argument(
+        "--quick", action="store_true", help="10 s per configuration, one run (not for README)"
+    )
     args = parser.parse_args()
     seconds = 10.0 if args.quick else args.seconds
+    repeats = 1 if args.quick else max(1, args.repeats)
     track = tracking(5.0 if args.quick else 20.0)
     print_table(
         "7-joint arm: plain PD vs PD + friction add-on (RMS tracking error, rad; stick fraction while the "
@@ -205,46 +243,89 @@ def main() -> int:
             for r in track
         ],
     )
-    floor = timer_floor(seconds)
-    figures: dict = {"joints": 7, "rate_hz_target": 1000.0, "timer_floor": floor, "configurations": {}}
+    figures: dict = {"joints": 7, "rate_hz_target": 1000.0, "repeats": repeats, "seconds": seconds}
     figures["tracking"] = track
     figures["tracking_worst_ratio"] = max(r["ratio"] for r in track)
+    floors: list[dict] = []
+    middleware: list[dict] = []
+    runs: dict[str, list[dict]] = {c: [] for c in CONFIGS}
     with tempfile.TemporaryDirectory() as d:
-        for config in CONFIGS:
-            r = run(Path(d), config, seconds, warmup=6.0)
-            key = "default" if config == "separate" else "pinned_fifo"
-            fl = floor.get(key, {}).get("late_1ms_percent")
-            r["timer_floor_missed_percent"] = fl
-            r["missed_vs_floor"] = None if not fl else r["missed_percent"] / fl
-            figures["configurations"][config] = r
-    # headline figures (issue 18's names): the composed and pinned configuration; the controller
-    # and estimator CPU of separate pinned processes (the composed process holds the plant too)
+        for rep in range(repeats):  # interleaved: a slow phase of the VM hits every configuration
+            fl = timer_floor(seconds / 2)
+            floors.append(
+                {k: v.get("late_1ms_percent") for k, v in fl.items()}
+                | {f"{k}_max_late_ms": v.get("max_late_ms") for k, v in fl.items()}
+            )
+            middleware.append(middleware_floor(seconds))
+            for config in CONFIGS:
+                runs[config].append(run(Path(d), config, seconds, warmup=6.0))
+                print(f"run {rep + 1}/{repeats} {config}: done", flush=True)
+    floor = median_of(floors, ("default", "pinned_fifo", "default_max_late_ms", "pinned_fifo_max_late_ms"))
+    figures["timer_floor"] = {"runs": floors, **floor}
+    figures["middleware_floor"] = {
+        "runs": middleware,
+        **median_of(middleware, ("missed_percent", "latency_p50_ms", "latency_p99_ms", "cpu_percent")),
+    }
+    figures["configurations"] = {}
+    for config, rs in runs.items():
+        r = {"runs": rs, **median_of(rs, FIGURES)}
+        key = "default" if config == "separate" else "pinned_fifo"
+        fl = floor.get(key)
+        r["timer_floor_missed_percent"] = fl
+        r["missed_vs_floor"] = None if not fl else r["missed_percent"] / fl
+        figures["configurations"][config] = r
+    # headline figures (issue 18's names, medians): the composed and pinned configuration; the
+    # controller and estimator CPU of separate pinned processes (the composed process holds the plant)
     comp, pin = figures["configurations"]["composed_fifo"], figures["configurations"]["pinned_fifo"]
+    mw = figures["middleware_floor"]
     figures.update(
         controller_cpu_percent=pin["controller_cpu_percent"],
         estimator_cpu_percent=pin["estimator_cpu_percent"],
         latency_p99_ms=comp["latency_p99_ms"],
         missed_percent=comp["missed_percent"],
         timer_floor_missed_percent=comp["timer_floor_missed_percent"],
+        middleware_floor_missed_percent=mw.get("missed_percent"),
+        middleware_floor_latency_p99_ms=mw.get("latency_p99_ms"),
     )
-    rows = []
-    for name, r in figures["configurations"].items():
+
+    def cell(r: dict, k: str):
+        if k not in r:
+            return "(in controller)" if k == "plant_cpu_percent" else "-"
+        lo, hi = r[k + "_range"]
+        return f"{r[k]:.3g} ({lo:.3g}-{hi:.3g})" if repeats > 1 else r[k]
+
+    rows = [
+        [
+            name,
+            cell(r, "rate_hz"),
+            cell(r, "controller_cpu_percent"),
+            cell(r, "estimator_cpu_percent"),
+            cell(r, "plant_cpu_percent"),
+            cell(r, "latency_p50_ms"),
+            cell(r, "latency_p99_ms"),
+            cell(r, "missed_percent"),
+            r["timer_floor_missed_percent"],
+        ]
+        for name, r in figures["configurations"].items()
+    ]
+    if "missed_percent" in mw:
         rows.append(
             [
-                name,
-                r["rate_hz"],
-                r["controller_cpu_percent"],
-                r["estimator_cpu_percent"],
-                r["plant_cpu_percent"] if r["plant_cpu_percent"] is not None else "(in controller)",
-                r["latency_p50_ms"],
-                r["latency_p99_ms"],
-                r["missed_percent"],
-                r["timer_floor_missed_percent"],
+                "middleware floor (no work, composed, pinned)",
+                "-",
+                cell(mw, "cpu_percent"),
+                "-",
+                "(in controller)",
+                cell(mw, "latency_p50_ms"),
+                cell(mw, "latency_p99_ms"),
+                cell(mw, "missed_percent"),
+                floor.get("pinned_fifo"),
             ]
         )
     print_table(
-        f"7-joint arm at 1 kHz, {seconds:g} s per configuration (goals: controller and estimator <= 40 % "
-        "of a core each, p99 < 1 ms, missed <= 1.5x the timer floor composed and pinned)",
+        f"7-joint arm at 1 kHz, {seconds:g} s per configuration, median (range) of {repeats} interleaved runs "
+        "(goals: controller and estimator <= 40 % of a core each, p99 < 1 ms, missed <= 1.5x the timer floor "
+        "composed and pinned)",
         [
             "configuration",
             "rate Hz",

@@ -298,3 +298,36 @@ def test_friction_estimate_encoder_is_byte_identical_to_rclpy(joint, model, stat
         assert (back.joint_name, back.model, back.converged) == (joint, model, flags[1])
     with pytest.raises(ValueError, match="2 coefficient names, 1 values"):
         enc.pack(0, 0, "m", 0.0, 0.0, 0.0, [], ["a", "b"], [1.0], [], False, False)
+
+
+@pytest.mark.parametrize("n_status", [0, 1, 3])
+def test_diagnostic_array_encoding_is_byte_identical_to_rclpy(n_status):
+    from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+
+    from friction_ros.core.wire import encode_diagnostic_array
+
+    statuses = [
+        (
+            i % 4,
+            f"/ns/node/j{i}",
+            "running" * i,
+            "" if i == 1 else f"hw{i}",
+            [(f"k{k}", "v" * k) for k in range(i + 1)],
+        )
+        for i in range(n_status)
+    ]
+    msg = DiagnosticArray()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = 1_700_000_000, 42
+    for level, name, text, hw, values in statuses:
+        msg.status.append(
+            DiagnosticStatus(
+                level=bytes([level]),
+                name=name,
+                message=text,
+                hardware_id=hw,
+                values=[KeyValue(key=k, value=v) for k, v in values],
+            )
+        )
+    data = encode_diagnostic_array(1_700_000_000, 42, statuses)
+    assert_wire(data, msg)
+    assert deserialize_message(data, DiagnosticArray) == msg

@@ -83,12 +83,14 @@ from friction_ros.core.wire import (
 from friction_ros.nodes.addon_output import AddonOutput
 from friction_ros.nodes.commands import stamp_to_ns
 from friction_ros.nodes.controller_joints import JointChannel
+from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import (
     current_joint_values,
     declare_joint_config,
     declare_joints,
     values_of_joint,
 )
+from friction_ros.nodes.loops import LatencyHistogram
 from friction_ros.nodes.parameters import (
     SCHEDULING,
     ParameterNode,
@@ -211,6 +213,9 @@ class CompensatingControllerNode(ParameterNode):
             if self.addon
             else None
         )
+        self.diag = DiagnosticsPublisher(
+            self, "compensating_controller", self.joints[0] if self.single else ""
+        )
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
 
@@ -225,7 +230,7 @@ class CompensatingControllerNode(ParameterNode):
             "adopted": 0,
             "rejected_estimates": 0,
         }
-        self._compute_times: list[float] = []
+        self._compute = compute_histogram()  # compute time per state since the last diagnostics
         apply_scheduling(self, self.values)
         for ch in self.channels:
             c = ch.controller
@@ -444,7 +449,7 @@ class CompensatingControllerNode(ParameterNode):
                 self._publish_diagnostics()
             if listening:
                 self.state_pub.publish(ch.terms_message(msg.sec, msg.nanosec, terms))
-        self._compute_times.append(time.perf_counter() - c0)
+        self._compute.add(time.perf_counter() - c0)
         self._last_ns = t_ns
         self._last_t = t
         self.counts["cycles"] += 1
@@ -505,11 +510,15 @@ class CompensatingControllerNode(ParameterNode):
             self._send(sec, nanosec, [ch.command for ch in self.channels])
 
     def _publish_diagnostics(self) -> None:
-        ct = sorted(self._compute_times[-5000:])
-        self._compute_times = self._compute_times[-5000:]
+        compute, self._compute = self._compute, compute_histogram()
+        statuses = []
         for ch in self.channels:
             log = lambda text, ch=ch: self.get_logger().error(self._label(ch) + text)  # noqa: E731
-            ch.diag.publish(*ch.status(self.counts, ct, self.addon, log))
+            statuses.append((ch.joint, *ch.status(self.counts, compute, self.addon, log)))
+        if self.single:
+            self.diag.publish(*statuses[0][1:])
+        else:
+            self.diag.publish_joints(statuses)
 
     def on_shutdown(self) -> None:
         """Leave the joints safe: the last command is zero torque (the add-on: the base command
@@ -520,6 +529,11 @@ class CompensatingControllerNode(ParameterNode):
             stamp = self.get_clock().now().to_msg()
             self._publish_safe(stamp.sec, stamp.nanosec)
             time.sleep(0.01)
+
+
+def compute_histogram() -> LatencyHistogram:
+    """Compute times of one diagnostics period: 1 us bins up to 20 ms (no list to sort)."""
+    return LatencyHistogram(bin_s=1e-6, bins=20_000)
 
 
 def main(args=None) -> int:

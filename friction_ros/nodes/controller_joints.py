@@ -11,7 +11,7 @@ from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import JointInputGate
 from friction_ros.core.wire import ControllerStateEncoder
-from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.diagnostics import ERROR, OK, WARN
 
 
 class JointChannel:
@@ -35,7 +35,6 @@ class JointChannel:
         # reach the controller's state (integrator, filters, observers, limit-cycle detector)
         self.gate = JointInputGate(joint, node.values.get("input_gate"), period=node.dt)
         self.state_encoder = ControllerStateEncoder(joint)
-        self.diag = DiagnosticsPublisher(node, "compensating_controller", joint)
         self.command = 0.0
         self.compensation = 0.0
         self.last_state_wall = time.monotonic()
@@ -84,8 +83,9 @@ class JointChannel:
             t.saturated,
         )
 
-    def status(self, counts: dict, ct: list[float], addon: bool, log) -> tuple[int, str, dict]:
-        """Diagnostics of this joint: (level, text, values); ``ct``: sorted compute times [s]."""
+    def status(self, counts: dict, compute, addon: bool, log) -> tuple[int, str, dict]:
+        """Diagnostics of this joint: (level, text, values); ``compute``: the node's compute times
+        of the period (a :class:`~friction_ros.nodes.loops.LatencyHistogram`, s)."""
         values = dict(counts)
         gate, ctrl = self.gate, self.controller
         values["rejected_states"] = gate.log.total
@@ -93,9 +93,9 @@ class JointChannel:
         values.update(unstamped_states=gate.counts["unstamped"], resyncs=gate.counts["resyncs"])
         new_rejections = gate.log.total - self.diag_rejected
         self.diag_rejected = gate.log.total
-        if ct:
-            values["compute_p50_s"] = ct[len(ct) // 2]
-            values["compute_p99_s"] = ct[min(len(ct) - 1, int(len(ct) * 0.99))]
+        if compute.n:
+            values["compute_p50_s"] = compute.percentile(50)
+            values["compute_p99_s"] = compute.percentile(99)
         level, text = OK, f"{ctrl.mode} running"
         if not ctrl.compensation_enabled:
             text = f"{ctrl.mode} running, compensation switched off (~/set_feedforward_control)"

@@ -2,16 +2,21 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 
+from friction_ros.core.wire import encode_diagnostic_array
 from friction_ros.nodes.qos import STATE_QOS
 
 
 class DiagnosticsPublisher:
-    """Publish one ``diagnostic_msgs/DiagnosticArray`` status for a node on ``diagnostics``."""
+    """Publish a node's ``diagnostic_msgs/DiagnosticArray`` on ``diagnostics``: one status
+    (``<namespace>/<name>``), or one per joint (``<namespace>/<name>/<joint>``, hardware_id the
+    joint) in one array. Encoded by the wire module (no message objects: a 7-joint status took
+    ~0.9 ms of the executor thread as rclpy messages, a missed 1 kHz cycle per period)."""
 
     def __init__(self, node: Node, name: str, hardware_id: str = ""):
         self.node = node
@@ -19,18 +24,35 @@ class DiagnosticsPublisher:
         self.hardware_id = hardware_id
         self.pub = node.create_publisher(DiagnosticArray, "diagnostics", STATE_QOS)
 
-    def publish(self, level: int, message: str, values: dict[str, Any]) -> DiagnosticStatus:
-        status = DiagnosticStatus(
-            level=level if isinstance(level, bytes) else bytes([level]),
-            name=f"{self.node.get_namespace().rstrip('/')}/{self.name}",
-            message=message,
-            hardware_id=self.hardware_id,
-            values=[KeyValue(key=k, value=_fmt(v)) for k, v in values.items()],
+    @property
+    def full_name(self) -> str:
+        return f"{self.node.get_namespace().rstrip('/')}/{self.name}"
+
+    def publish(self, level: int, message: str, values: dict[str, Any]) -> None:
+        """One status for the node."""
+        self._send([(_level(level), self.full_name, message, self.hardware_id, _pairs(values))])
+
+    def publish_joints(self, statuses: Iterable[tuple[str, int, str, dict[str, Any]]]) -> None:
+        """One status per ``(joint, level, message, values)``, in one array."""
+        base = self.full_name
+        self._send(
+            [
+                (_level(level), f"{base}/{joint}", text, joint, _pairs(values))
+                for joint, level, text, values in statuses
+            ]
         )
-        msg = DiagnosticArray(status=[status])
-        msg.header.stamp = self.node.get_clock().now().to_msg()
-        self.pub.publish(msg)
-        return status
+
+    def _send(self, statuses: list) -> None:
+        sec, nanosec = self.node.get_clock().now().seconds_nanoseconds()
+        self.pub.publish(encode_diagnostic_array(sec, nanosec, statuses))
+
+
+def _level(level) -> int:
+    return level[0] if isinstance(level, bytes) else int(level)
+
+
+def _pairs(values: dict[str, Any]) -> list[tuple[str, str]]:
+    return [(k, _fmt(v)) for k, v in values.items()]
 
 
 def _fmt(v: Any) -> str:

@@ -49,7 +49,6 @@ import math
 import re
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from friction_msgs.msg import FrictionEstimate
 from sensor_msgs.msg import JointState
 
@@ -340,25 +339,7 @@ class FrictionEstimatorNode(ParameterNode):
         if self.single:
             self.diag.publish(*self._status(self._joints[0]))
             return
-        ns = self.get_namespace().rstrip("/")
-        msg = DiagnosticArray()
-        for jt in self._joints:
-            level, text, values = self._status(jt)
-            msg.status.append(
-                DiagnosticStatus(
-                    level=bytes([level]) if not isinstance(level, bytes) else level,
-                    name=f"{ns}/friction_estimator/{jt.name}",
-                    message=text,
-                    hardware_id=jt.name,
-                    values=[KeyValue(key=k, value=_fmt(v)) for k, v in values.items()],
-                )
-            )
-        msg.header.stamp = self.get_clock().now().to_msg()
-        self.diag.pub.publish(msg)
-
-
-def _fmt(v) -> str:
-    return f"{v:.6g}" if isinstance(v, float) else str(v)
+        self.diag.publish_joints((jt.name, *self._status(jt)) for jt in self._joints)
 
 
 def main(args=None) -> int:

@@ -131,7 +131,8 @@ class LatencyHistogram:
     BIN_S = 1e-5
     BINS = 10_000
 
-    def __init__(self):
+    def __init__(self, bin_s: float = BIN_S, bins: int = BINS):
+        self.BIN_S, self.BINS = bin_s, bins
         self.counts = np.zeros(self.BINS + 1, dtype=np.int64)
         self.n = 0
         self.max = 0.0

@@ -4,8 +4,8 @@
   sequences of float64, builtin_interfaces/Time, std_msgs/Header, the template :class:`Writer`
   and :func:`compile_template` (a template with variable slots -> one ``struct.Struct``).
 * :mod:`.messages`: fast encoders/decoders of the messages the nodes publish and take every period
-  (sensor_msgs/JointState, friction_msgs/ControllerState, DriveState, FrictionEstimate), byte-for-byte
-  what rclpy's serialiser writes.
+  (sensor_msgs/JointState, friction_msgs/ControllerState, DriveState, FrictionEstimate) or second
+  (diagnostic_msgs/DiagnosticArray), byte-for-byte what rclpy's serialiser writes.
 
 The schema-driven codec of the bag reader/writer (:mod:`friction_ros.core.bag.cdr`, any message
 type from its ``.msg`` definition) is built on the same primitives.
@@ -33,6 +33,7 @@ from .messages import (
     FrictionEstimateEncoder,
     JointStateDecoder,
     JointStateEncoder,
+    encode_diagnostic_array,
 )
 
 __all__ = [
@@ -50,6 +51,7 @@ __all__ = [
     "DecodedJointState",
     "JointStateDecoder",
     "JointStateEncoder",
+    "encode_diagnostic_array",
     "Writer",
     "compile_template",
     "encapsulation",

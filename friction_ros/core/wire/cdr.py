@@ -76,9 +76,12 @@ class Writer:
         self.buf += data
 
     def string(self, text: str) -> int:
-        raw = string_bytes(text)
-        off = self.u32(len(raw))
-        self.buf += raw
+        raw = text.encode() + b"\0"  # string_bytes, inlined: a status array writes hundreds
+        buf = self.buf
+        off = len(buf) + (-(len(buf) - ORIGIN) % 4)
+        buf += bytes(off - len(buf))
+        buf += U32.pack(len(raw))
+        buf += raw
         return off
 
     def strings(self, texts: Sequence[str]) -> int:
