@@ -58,6 +58,34 @@ def test_deadline_loop_ticks_at_its_period_between_executor_callbacks():
     assert np.median(np.diff(ticks)) == pytest.approx(0.005, abs=0.001)
 
 
+def test_deadline_loop_runs_waiting_callbacks_before_a_late_tick():
+    """A command that arrived before the step is applied by it, even when the loop reaches the
+    deadline late (the previous callback overran): it is not left a period behind the tick."""
+    events = []
+
+    class Executor:  # spin_once runs one waiting callback, else waits up to the timeout
+        queue: list = []
+
+        def spin_once(self, timeout_sec):
+            if self.queue:
+                self.queue.pop(0)()
+            else:
+                time.sleep(timeout_sec)
+
+    ex = Executor()
+    loop = DeadlineLoop(0.01, lambda: events.append("tick"))
+    loop.run_once(ex)  # first tick at once
+    ex.queue.append(lambda: events.append("command"))
+    time.sleep(0.012)  # the deadline passed while the command was waiting
+    loop.run_once(ex)
+    assert events == ["tick", "command", "tick"]
+    ex.queue.extend([lambda: events.append("a"), lambda: events.append("b"), lambda: events.append("c")])
+    time.sleep(0.012)
+    loop.run_once(ex)  # at most READY_BEFORE_TICK waiting callbacks go first: the tick is not starved
+    assert events[3:] == ["a", "b", "tick"][: DeadlineLoop.READY_BEFORE_TICK] + ["tick"]
+    assert ex.queue and loop.stats.cycles == 3
+
+
 def test_scheduling_parameters_pin_and_raise_every_thread_of_a_node(tmp_path):
     """drive_interface started with cpu_affinity / realtime_priority: all its threads (executor and
     the middleware's) end up on that CPU, with SCHED_FIFO where the machine permits it."""

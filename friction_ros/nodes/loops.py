@@ -98,8 +98,17 @@ class DeadlineLoop:
     def stop(self, timeout: float = 0.0) -> None:
         self._next = None
 
+    #: callbacks already waiting that are run before a tick (see :meth:`run_once`)
+    READY_BEFORE_TICK = 2
+
     def run_once(self, executor, max_wait: float = 0.05) -> None:
-        """Process callbacks until the next deadline (at most ``max_wait``), then tick if it is due."""
+        """Process callbacks until the next deadline (at most ``max_wait``), then tick if it is due.
+
+        Before the tick, up to :data:`READY_BEFORE_TICK` callbacks that are already waiting run
+        (``spin_once(0)``): a command that arrived before the step is applied by it, as a drive
+        applies what is in its receive buffer when its cycle runs. Without this, a command queued
+        while the previous callback overran the deadline waited a whole period behind the tick.
+        """
         now = time.monotonic()
         if self._next is None:
             self._next = now
@@ -108,6 +117,8 @@ class DeadlineLoop:
             executor.spin_once(timeout_sec=min(remaining, max_wait))
             if time.monotonic() < self._next:
                 return
+        for _ in range(self.READY_BEFORE_TICK):
+            executor.spin_once(timeout_sec=0.0)
         start = time.monotonic()
         lateness = start - self._next
         self.stats.max_lateness = max(self.stats.max_lateness, lateness)
