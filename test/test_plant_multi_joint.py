@@ -15,16 +15,12 @@ from ros_graph import Graph, Listener, stamp_s, write_params
 
 from friction_ros.cli.bringup import NodeSpec
 from friction_ros.core.config import flatten, unflatten
+from friction_ros.core.input_gate import select_joint_commands
 from friction_ros.core.joint_config import JointLayout
+from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, joint_plant_configs, resolve_joint_presets
 from friction_ros.core.presets import load_preset, resolve_preset
 from friction_ros.core.validation import ParameterError
-from friction_ros.nodes.plant_simulator import (
-    PRESET_SECTIONS,
-    joint_plant_configs,
-    parameter_schema,
-    resolve_joint_presets,
-    select_joint_commands,
-)
+from friction_ros.nodes.plant_simulator import parameter_schema
 
 ROOT = Path(__file__).resolve().parents[1]
 HALF_PI = math.pi / 2

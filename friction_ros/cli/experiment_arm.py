@@ -106,7 +106,7 @@ def arm_joints(args) -> tuple[list[str], list[str] | None, dict[str, Any], dict[
 def joint_plants(args, joints: list[str], presets: list[str] | None, plant: dict[str, Any]) -> list:
     """Each joint's plant preset as plant_simulator resolves it (per-joint plant values included)."""
     from friction_ros.core.config import unflatten
-    from friction_ros.nodes.plant_simulator import PRESET_SECTIONS, resolve_joint_presets
+    from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, resolve_joint_presets
 
     layout = JointLayout(joints, PRESET_SECTIONS)
     node_flat, per_joint = layout.split_all(

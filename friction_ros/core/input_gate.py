@@ -28,6 +28,7 @@ loop is adopted instead of freezing the node forever). Per sample the cost is a 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 from friction_ros.core.validation import ParameterError, check_int, check_real
@@ -415,3 +416,55 @@ def _g(x) -> str:
 
 def _wall(now_wall, now_ns: int) -> float:
     return now_wall if now_wall is not None else now_ns * 1e-9
+
+
+def select_joint_commands(
+    msg, index: Mapping[str, int], limits: list[float]
+) -> tuple[dict[int, float], list[tuple[int | None, str, str]], int]:
+    """Efforts of a ``joint_commands`` message for several joints.
+
+    Returns ``(efforts, rejections, unknown)``: ``{joint index: effort}`` (an implausible effort
+    becomes 0.0 and is listed in ``rejections`` as ``(index, reason, detail)``), the rejections (a
+    whole-message one has index None: ``wrong_joint`` when it names none of the joints,
+    ``wrong_length`` for mismatched arrays or an unnamed message) and how many names are not joints
+    of this node (ignored). A name given twice counts once (the first). Pure.
+    """
+    names = list(msg.name)
+    n = len(names)
+    if not n:
+        return (
+            {},
+            [(None, "wrong_length", f"unnamed command with {len(msg.effort)} efforts: must name the joints")],
+            0,
+        )
+    hits = [(k, index[nm]) for k, nm in enumerate(names) if nm in index]
+    if not hits:
+        return (
+            {},
+            [(None, "wrong_joint", f"none of the joints {list(index)} is in name {names} (check joints)")],
+            n,
+        )
+    if len(msg.effort) != n:
+        return {}, [(None, "wrong_length", f"effort has {len(msg.effort)} values for {n} names")], 0
+    efforts: dict[int, float] = {}
+    rejections: list[tuple[int | None, str, str]] = []
+    for k, i in hits:
+        if i in efforts:
+            continue
+        e = float(msg.effort[k])
+        if not math.isfinite(e):
+            rejections.append(
+                (i, "not_finite", f"effort = {e} for {names[k]}: must be a finite torque [N*m]")
+            )
+            e = 0.0
+        elif abs(e) > limits[i]:
+            rejections.append(
+                (
+                    i,
+                    "out_of_range",
+                    f"effort = {e:g} for {names[k]}: must satisfy |effort| <= max_effort = {limits[i]:g} [N*m]",
+                )
+            )
+            e = 0.0
+        efforts[i] = e
+    return efforts, rejections, n - len(hits)

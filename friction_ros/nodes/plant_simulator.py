@@ -46,8 +46,6 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Mapping
-from typing import Any
 
 from builtin_interfaces.msg import Time
 from rclpy.qos import QoSProfile
@@ -56,10 +54,10 @@ from sensor_msgs.msg import JointState
 
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control_period import control_period_field
-from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command
-from friction_ros.core.joint_config import JointLayout, joint_values, name_joint_error
+from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command, select_joint_commands
+from friction_ros.core.joint_config import JointLayout
+from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, resolve_joint_presets
 from friction_ros.core.plant.servo import MAX_COMMAND
-from friction_ros.core.presets import Preset, resolve_preset
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
@@ -166,9 +164,6 @@ JOINTS_FIELD = Field(
     kind=str,
     read_only=True,
 )
-PRESET_SECTIONS = ("plant", "friction_motor", "friction_load")
-# a per-joint friction section naming its own model replaces the node-level section of that joint
-_REPLACED_BY = {"friction_motor": "model", "friction_load": "model"}
 
 
 def parameter_schema(with_joints: bool = True) -> Schema:
@@ -179,114 +174,6 @@ def parameter_schema(with_joints: bool = True) -> Schema:
     sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
     joints = [JOINTS_FIELD] if with_joints else []
     return Schema("plant_simulator", [*joints, *NODE_FIELDS, *sections, *SCHEDULING])
-
-
-def joint_plant_configs(
-    values: Mapping[str, Any], joints: list[str], overrides: Mapping[str, Mapping[str, Any]]
-) -> list[tuple[str, str, dict]]:
-    """``(joint, preset, sections)`` of every joint: the preset name (``presets[i]`` or ``preset``)
-    and its ``plant`` / ``friction_motor`` / ``friction_load`` overrides (node-level values with the
-    joint's ``overrides``, node-level flat names such as ``plant.gravity``, on top). Pure."""
-    presets = list(values.get("presets") or [])
-    if presets and len(presets) != len(joints):
-        raise ParameterError(
-            f"presets = {presets} has {len(presets)} names for {len(joints)} joints "
-            f"({', '.join(joints)}): must hold one preset per joint, in the order of joints, or none "
-            "(every joint uses preset)"
-        )
-    node_sections = {s: dict(values.get(s) or {}) for s in PRESET_SECTIONS}
-    if values.get("joints"):
-        for key, value in node_sections["plant"].items():
-            if isinstance(value, Mapping):  # plant.<name>.<key> for a name that is not a joint
-                raise ParameterError(
-                    f"plant.{key}.{next(iter(value), '')}: {key!r} is not one of the joints "
-                    f"({', '.join(joints)}), so it has no per-joint plant values"
-                )
-    out = []
-    for i, joint in enumerate(joints):
-        own = dict(overrides.get(joint, {}))
-        for name in own:
-            if name.split(".", 1)[0] not in PRESET_SECTIONS:
-                raise ParameterError(
-                    f"{name.split('.', 1)[0]}.{joint}.{name.split('.', 1)[-1]}: only the plant sections "
-                    f"({', '.join(PRESET_SECTIONS)}) have per-joint values"
-                )
-        sections = joint_values(node_sections, own, _REPLACED_BY)
-        out.append((joint, presets[i] if presets else values["preset"], sections))
-    return out
-
-
-def resolve_joint_presets(
-    values: Mapping[str, Any], joints: list[str], overrides: Mapping[str, Mapping[str, Any]]
-) -> list[Preset]:
-    """The plant preset of every joint, all at the node's ``control_period`` (one joint: the node's
-    preset with its sections, as without ``joints``). Errors name the per-joint parameter when the
-    joint has its own value (``plant.j2.gravity``), else say which joint. Pure."""
-    multi = bool(values.get("joints"))
-    layout = JointLayout(joints, PRESET_SECTIONS)
-    out = []
-    for joint, name, sections in joint_plant_configs(values, joints, overrides):
-        try:
-            out.append(resolve_preset(name, {**sections, "control_period": values["control_period"]}))
-        except ParameterError as exc:
-            if not multi:
-                raise
-            raise ParameterError(
-                name_joint_error(str(exc), layout, joint, overrides.get(joint, {}))
-            ) from None
-    return out
-
-
-def select_joint_commands(
-    msg, index: Mapping[str, int], limits: list[float]
-) -> tuple[dict[int, float], list[tuple[int | None, str, str]], int]:
-    """Efforts of a ``joint_commands`` message for several joints.
-
-    Returns ``(efforts, rejections, unknown)``: ``{joint index: effort}`` (an implausible effort
-    becomes 0.0 and is listed in ``rejections`` as ``(index, reason, detail)``), the rejections (a
-    whole-message one has index None: ``wrong_joint`` when it names none of the joints,
-    ``wrong_length`` for mismatched arrays or an unnamed message) and how many names are not joints
-    of this node (ignored). A name given twice counts once (the first). Pure.
-    """
-    names = list(msg.name)
-    n = len(names)
-    if not n:
-        return (
-            {},
-            [(None, "wrong_length", f"unnamed command with {len(msg.effort)} efforts: must name the joints")],
-            0,
-        )
-    hits = [(k, index[nm]) for k, nm in enumerate(names) if nm in index]
-    if not hits:
-        return (
-            {},
-            [(None, "wrong_joint", f"none of the joints {list(index)} is in name {names} (check joints)")],
-            n,
-        )
-    if len(msg.effort) != n:
-        return {}, [(None, "wrong_length", f"effort has {len(msg.effort)} values for {n} names")], 0
-    efforts: dict[int, float] = {}
-    rejections: list[tuple[int | None, str, str]] = []
-    for k, i in hits:
-        if i in efforts:
-            continue
-        e = float(msg.effort[k])
-        if not math.isfinite(e):
-            rejections.append(
-                (i, "not_finite", f"effort = {e} for {names[k]}: must be a finite torque [N*m]")
-            )
-            e = 0.0
-        elif abs(e) > limits[i]:
-            rejections.append(
-                (
-                    i,
-                    "out_of_range",
-                    f"effort = {e:g} for {names[k]}: must satisfy |effort| <= max_effort = {limits[i]:g} [N*m]",
-                )
-            )
-            e = 0.0
-        efforts[i] = e
-    return efforts, rejections, n - len(hits)
 
 
 class PlantSimulator(ParameterNode):
