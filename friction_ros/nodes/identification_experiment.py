@@ -73,7 +73,10 @@ from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import request_stop, run_node
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
-MATCH_GRACE = 0.5  # s of wall time the recorders must stay matched before the program starts
+# s of wall time the recorders must stay matched before the program starts: the plant's state
+# publisher discovers and matches them on its own time; with both cores loaded that took longer
+# than 0.5 s once in a CI run (the bag lacked the first state, so the fit of the same run differed)
+MATCH_GRACE = 2.0
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to excite (name in joint_states / joint_commands)", read_only=True),
