@@ -76,7 +76,7 @@ class Writer:
         self.buf += data
 
     def string(self, text: str) -> int:
-        raw = text.encode() + b"\0"  # string_bytes, inlined: a status array writes hundreds
+        raw = string_bytes(text)
         buf = self.buf
         off = len(buf) + (-(len(buf) - ORIGIN) % 4)
         buf += bytes(off - len(buf))
@@ -126,21 +126,32 @@ def compile_template(buf: bytes, slots: Iterable[tuple[int, str]]) -> tuple[stru
     ``st.pack(chunk0, *slot0_values, chunk1, ...)`` rebuilds the template with new values.
     The chunk before the first slot includes the encapsulation header.
     """
+    st, plan = compile_template_plan(buf, slots)
+    return st, tuple(p for p in plan if isinstance(p, bytes))
+
+
+def compile_template_plan(
+    buf: bytes, slots: Iterable[tuple[int, str]]
+) -> tuple[struct.Struct, list[bytes | int]]:
+    """:func:`compile_template` with the pack arguments in order: a constant chunk (bytes) or the
+    number of values of a slot, for a caller that packs values of several slots from one sequence."""
     fmt = ["<"]
-    chunks: list[bytes] = []
+    plan: list[bytes | int] = []
     pos = 0
     for off, f in sorted(slots):
         if off < pos:
             raise ValueError(f"overlapping slots at offset {off}")
         if off > pos:
-            chunks.append(bytes(buf[pos:off]))
+            plan.append(bytes(buf[pos:off]))
             fmt.append(f"{off - pos}s")
         fmt.append(f)
-        pos = off + struct.calcsize("<" + f)
+        slot = struct.Struct("<" + f)
+        plan.append(len(slot.unpack(bytes(slot.size))))
+        pos = off + slot.size
     if pos < len(buf):
-        chunks.append(bytes(buf[pos:]))
+        plan.append(bytes(buf[pos:]))
         fmt.append(f"{len(buf) - pos}s")
     st = struct.Struct("".join(fmt))
     if st.size != len(buf):
         raise ValueError("slots do not tile the template")
-    return st, tuple(chunks)
+    return st, plan

@@ -20,7 +20,7 @@ import operator
 import struct
 from collections.abc import Iterable
 
-from .cdr import CDR_LE, ORIGIN, U32, Writer, compile_template, padding
+from .cdr import CDR_LE, ORIGIN, U32, Writer, compile_template, compile_template_plan, padding
 
 # friction_msgs/ControllerState float64 fields in message order (the order ControllerStateEncoder.pack
 # expects); msg_defs/friction_msgs/msg/ControllerState.msg, checked against the generated class in tests
@@ -343,28 +343,13 @@ class FrictionEstimateEncoder:
         w.string(self.joint)
         w.string(model)
         slots.append((w.put("3d", 0.0, 0.0, 0.0), "3d"))
-        for count in (n_state,):
-            off = w.float64s([0.0] * count)
-            if count:
-                slots.append((off, f"{count}d"))
+        sequences = [w.float64s([0.0] * n_state)]
         w.strings(names)
-        for count in (len(names), n_std):
-            off = w.float64s([0.0] * count)
-            if count:
-                slots.append((off, f"{count}d"))
+        sequences += [w.float64s([0.0] * len(names)), w.float64s([0.0] * n_std)]
+        slots += [(off, f"{n}d") for off, n in zip(sequences, (n_state, len(names), n_std)) if n]
         slots.append((w.put("2?", False, False), "2?"))
-        st, chunks = compile_template(w.buf, slots)
-        # the pack arguments in template order: a constant chunk (bytes) or a number of values
-        plan: list[bytes | int] = []
-        pos, it = 0, iter(chunks)
-        for off, f in sorted(slots):
-            if off > pos:
-                plan.append(next(it))
-            plan.append(len(struct.unpack("<" + f, bytes(struct.calcsize("<" + f)))))
-            pos = off + struct.calcsize("<" + f)
-        plan.extend(it)
-        self._layouts[key] = (st, plan)
-        return st, plan
+        self._layouts[key] = compile_template_plan(w.buf, slots)
+        return self._layouts[key]
 
     def pack(
         self, sec, nanosec, model, friction_torque, model_torque, velocity, state, names, coefficients, std,
