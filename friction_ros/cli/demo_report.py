@@ -61,6 +61,8 @@ def plot_friction_map(fit_result, truth, path: Path) -> None:
     if truth is not None:
         ax.plot(grid, truth.joint_friction(grid), "k--", lw=1, label=f"truth ({truth.name})")
     for name, m in fit_result.models.items():
+        if m.status != "fitted":  # no curve of a model that failed or diverged
+            continue
         try:
             ax.plot(grid, m.steady_state(grid), lw=1, label=f"fit: {name}")
         except Exception:  # a learned model without a steady-state map

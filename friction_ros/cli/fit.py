@@ -154,7 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--seed", type=int, default=3, help="random seed (default 3)")
     p.add_argument(
-        "--eps", type=float, default=1e-3, help="linear-zone width of sgn(v) for static models [rad/s]"
+        "--eps",
+        type=float,
+        default=None,
+        help="linear-zone width of sgn(v) for static models [velocity unit] (default 1e-3 times the log's "
+        "speed scale: the decade of its 95th percentile speed)",
     )
     p.add_argument(
         "--high-threshold",
@@ -185,6 +189,20 @@ def build_parser() -> argparse.ArgumentParser:
         "--cross-validate",
         action="store_true",
         help="with several runs: also train on all but one run and validate on it, for each run",
+    )
+    p.add_argument(
+        "--validate-on",
+        nargs="+",
+        default=None,
+        metavar="LOG",
+        help="validate on these logs (bags or CSV, read like the inputs) and train on the whole of the inputs, "
+        "as published benchmarks split estimation and validation runs",
+    )
+    p.add_argument(
+        "--joint-type",
+        choices=["auto", "revolute", "prismatic"],
+        default="auto",
+        help="revolute (rad, N*m) or prismatic (m, N); auto: from the log's metadata or column names, else revolute",
     )
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -233,7 +251,7 @@ def check_outputs(args) -> None:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ParameterError(f"--out {args.out} is a file: must be a directory (created if missing)")
-    bags = [Path(b).resolve() for b in args.bags]
+    bags = [Path(b).resolve() for b in [*args.bags, *(getattr(args, "validate_on", None) or [])]]
     pf = Path(args.params_out) if args.params_out else out / "friction_params.yaml"
     for target, name in ((out.resolve(), "--out"), (pf.resolve(), "--params-out")):
         for b in bags:  # a bag directory, a .mcap/.db3 file or a .csv log: all inputs
@@ -278,6 +296,8 @@ def fit_options(args, columns) -> dict:
         ripple_period=args.ripple_period,
         residual=args.residual,
         cross_validate=args.cross_validate,
+        validate_on=args.validate_on,
+        joint_type=args.joint_type,
     )
 
 
@@ -416,13 +436,20 @@ def main(argv: list[str] | None = None) -> int:
     def pct(x) -> str:
         return "n/a" if x is None or x != x else f"{x:.4g}"
 
-    print(f"{'model':<16} {'NMSE %':>10} {'NMSE high %':>12} {'NMSE low %':>12} {'params':>7} {'BIC':>14}")
+    print(
+        f"{'model':<16} {'NMSE %':>10} {'rel.err %':>10} {'NMSE high %':>12} {'NMSE low %':>12} "
+        f"{'params':>7} {'BIC':>14}"
+    )
     for n, m in res.models.items():
         mt = m.metrics
+        if m.status != "fitted":  # no figure from a model that failed or diverged
+            print(f"{n:<16} {m.status}: {m.reason}")
+            continue
         mark = "  <- recommended" if n == res.recommended else ""
         print(
-            f"{n:<16} {pct(mt.get('nmse_percent')):>10} {pct(mt['nmse_high_percent']):>12} "
-            f"{pct(mt['nmse_low_percent']):>12} {mt['n_params']:>7d} {mt['bic']:>14.6g}{mark}"
+            f"{n:<16} {pct(mt.get('nmse_percent')):>10} {pct(mt.get('rel_error_percent')):>10} "
+            f"{pct(mt.get('nmse_high_percent')):>12} {pct(mt.get('nmse_low_percent')):>12} "
+            f"{mt.get('n_params', 0):>7d} {mt.get('bic', math.nan):>14.6g}{mark}"
         )
     rec = getattr(res, "recommendation", None) or {}
     if rec.get("rule"):

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from friction_ros.core.experiment.events import completed_segments, start_lag
+from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.records import JointData
 
 
@@ -59,7 +60,7 @@ def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> 
     torque of a rising ramp (``dwell`` seconds without sliding before) at the onset of gross
     sliding: more than 30 encoder counts within 50 ms, which the elastic creep under a preload
     (presliding, often tens of counts over the ramp) never reaches."""
-    q = data.resolution if data.resolution > 0 else 1e-4
+    q = data.resolution if data.resolution > 0 else 1e-4 * velocity_scale(data)
     thr = counts * q * 0.999
     pos, tau, dt = data.position, data.torque, data.dt
     out: list[Breakaway] = []

@@ -27,6 +27,7 @@ from scipy import signal
 from scipy.optimize import differential_evolution, minimize
 from scipy.signal import savgol_filter
 
+from friction_ros.core.identification.data_scale import torque_scale
 from friction_ros.core.identification.ga import run_ga
 from friction_ros.core.identification.linsolve import solve_grams
 from friction_ros.core.identification.models import FitSpec
@@ -201,6 +202,8 @@ def fit_time_domain(
             signals=signals,
         )
     bounds = spec.search_bounds()
+    # costs in the log's own effort unit squared: the same numbers (and tolerances) at any scale
+    tnorm = torque_scale(records[0]) ** 2
     lo = np.array([b[0] for b in bounds])
     hi = np.array([b[1] for b in bounds])
     xs0 = None if x0 is None else np.clip(spec.to_search(x0), lo, hi)
@@ -219,7 +222,7 @@ def fit_time_domain(
             return False
 
         res = differential_evolution(
-            lambda X: cost.batch_search(np.atleast_2d(X.T)),
+            lambda X: cost.batch_search(np.atleast_2d(X.T)) / tnorm,
             bounds,
             vectorized=True,
             updating="deferred",
@@ -241,7 +244,7 @@ def fit_time_domain(
         shift = lo - 0.01
 
         def ga_cost(P):
-            return cost.batch_search(np.clip(P + shift, lo - 1.0, hi + 1.0))
+            return cost.batch_search(np.clip(P + shift, lo - 1.0, hi + 1.0)) / tnorm
 
         ga_lo, ga_hi = lo - shift, hi - shift
         init = None
@@ -267,7 +270,7 @@ def fit_time_domain(
         check_choice("local", local, ["nelder-mead", "none"])
         maxfev = local_maxfev or 60 * (d + 1)
         r = minimize(
-            lambda x: float(cost.batch_search(np.clip(x, lo, hi)[None, :])[0]),
+            lambda x: float(cost.batch_search(np.clip(x, lo, hi)[None, :])[0]) / tnorm,
             np.clip(best_x, lo, hi),
             method="Nelder-Mead",
             bounds=bounds,

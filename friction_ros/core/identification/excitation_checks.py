@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.plateau_detection import Plateau
 from friction_ros.core.identification.records import ExcitationError, JointData
 from friction_ros.core.identification.velocity_regimes import motion_floor, moving_mask
@@ -40,7 +41,7 @@ def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
         float(max(-v.min(), 0.0)),
         rev,
         float(np.ptp(data.position)),
-        float(np.mean(np.abs(v[moving]) < 0.05)) if moving.any() else 0.0,
+        float(np.mean(np.abs(v[moving]) < 0.05 * velocity_scale(data))) if moving.any() else 0.0,
         sum(p.velocity > 0 for p in plateaus),
         sum(p.velocity < 0 for p in plateaus),
         dec,
@@ -50,7 +51,7 @@ def excitation(data: JointData, plateaus: list[Plateau]) -> Excitation:
 
 def check_motion(data: JointData, label: str) -> None:
     """Raise ExcitationError if the joint never moved."""
-    q = data.resolution if data.resolution > 0 else 1e-6
+    q = data.resolution if data.resolution > 0 else 1e-6 * velocity_scale(data)
     if np.ptp(data.position) < 3 * q or not np.any(moving_mask(data.velocity, data.resolution, data.dt)):
         raise ExcitationError(
             f"{label}: no motion (position range {np.ptp(data.position):.3g} rad, max |v| "

@@ -34,6 +34,14 @@ class ModelResult:
     predict: Callable[[JointData], np.ndarray]
     notes: list[str] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
+    #: "fitted", "not fitted" (the fit failed) or "diverged" (its prediction ran away on validation);
+    #: only fitted models have figures, a config and a chance of being recommended
+    status: str = "fitted"
+    reason: str = ""
+
+    @property
+    def fitted(self) -> bool:
+        return self.status == "fitted"
 
 
 @dataclass

@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from friction_ros.core.control.compensation_gate import MODES, Verdict, gate_modes
+from friction_ros.core.identification.data_scale import velocity_scale
 
 
 def _refuse_all(reason: str) -> dict[str, Verdict]:
@@ -53,7 +54,8 @@ def gate_fit(
         if not J > 0:
             verdicts = _refuse_all("the inertia was not identified (J = 0): the loop cannot be checked")
         else:
-            v = np.geomspace(1e-6, 1.0, 50)
+            vsc = velocity_scale(rec)
+            v = np.geomspace(1e-6, 1.0, 50) * vsc
             fb = float(max(np.max(np.abs(m.steady_state(v))), np.max(np.abs(m.steady_state(-v))), 1e-12))
             speeds = [abs(p.velocity) for p in res.plateaus] or [float(np.max(np.abs(rec.velocity)))]
             if scale is None:
@@ -66,7 +68,7 @@ def gate_fit(
                     torque_limit=10.0 * fb,
                     speed_limit=2.5 * max(speeds),
                     travel=1e3,
-                    resolution=resolution if resolution > 0 else 1e-7,
+                    resolution=resolution if resolution > 0 else 1e-7 * vsc,
                     period=rec.dt,
                     current_lag=lag,
                     delay=delay,

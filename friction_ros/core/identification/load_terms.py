@@ -41,6 +41,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.validation import ParameterError
 
 #: the load terms a user can name (``--load gravity,offset,ripple=4``)
@@ -207,7 +208,7 @@ class Selection:
         return rows
 
 
-#: Stribeck velocities [rad/s] of the backbone's bumps sgn(v) exp(-(v/vs_i)^2)
+#: Stribeck velocities of the backbone's bumps sgn(v) exp(-(v/vs_i)^2), times the log's velocity scale
 BACKBONE_STRIBECK = (0.003, 0.01, 0.03, 0.1, 0.3)
 
 
@@ -233,7 +234,9 @@ class BackboneFit:
 def _backbone_columns(terms: LoadTerms, r) -> np.ndarray:
     sg = np.clip(r.velocity / terms.eps, -1.0, 1.0)
     av = np.abs(r.velocity)
-    cols = [r.acceleration, r.velocity, sg] + [sg * np.exp(-((av / vs) ** 2)) for vs in BACKBONE_STRIBECK]
+    cols = [r.acceleration, r.velocity, sg] + [
+        sg * np.exp(-((av / (vs * velocity_scale(r))) ** 2)) for vs in BACKBONE_STRIBECK
+    ]
     return np.column_stack([*cols, terms.columns(r.position, r.velocity, r.transmitted)])
 
 

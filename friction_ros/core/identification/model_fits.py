@@ -10,6 +10,7 @@ from collections.abc import Callable
 import numpy as np
 
 from friction_ros.core.identification import export, identifiability
+from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.dynamic_fit import DynamicFit
 from friction_ros.core.identification.fit_results import ModelResult
 from friction_ros.core.identification.models import (
@@ -34,11 +35,12 @@ def learning_data(plateaus, train, J, eps):
             "plateau means",
         )
     r = concat_records(train)
-    m = np.abs(r.velocity) > max(20 * eps, 0.02)
+    slide = max(20 * eps, 0.02 * velocity_scale(train[0]))
+    m = np.abs(r.velocity) > slide
     return (
         r.velocity[m],
         (r.torque - J * r.acceleration)[m],
-        f"sliding samples (|v| > {max(20 * eps, 0.02):.3g} rad/s)",
+        f"sliding samples (|v| > {slide:.3g})",
     )
 
 

@@ -76,15 +76,21 @@ class FitSpec:
     linear_constraints: list[tuple[np.ndarray, float]] = field(default_factory=list)
     # load, gravity and position terms identified jointly (load_terms.LoadTerms); None = none
     load: LoadTerms | None = None
+    # the unit of each nonlinear coefficient in the search (velocity_scale^power, see spec_for): the
+    # optimiser sees the same numbers for a log re-expressed in other units; None = all 1
+    unit: np.ndarray | None = None
 
     # ------------------------------------------------------------------ search-space transforms
     def to_search(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=float)
+        if self.unit is not None:
+            theta = theta / self.unit
         return np.where(self.log, np.log10(np.maximum(theta, 1e-300)), theta)
 
     def from_search(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=float)
-        return np.where(self.log, 10.0**x, x)
+        theta = np.where(self.log, 10.0**x, x)
+        return theta if self.unit is None else theta * self.unit
 
     def search_bounds(self) -> list[tuple[float, float]]:
         lo = self.to_search(self.lower)
@@ -354,7 +360,7 @@ _MODEL_HELP = (
 LEARNED = ("anfis", "nusvr")
 
 
-def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
+def spec_for(name: str, eps: float = DEFAULT_EPS, velocity_scale: float = 1.0) -> FitSpec:
     """The FitSpec for a model name; ``gms<N>`` for a GMS with N elements (1..20), ``gms<N>d`` for
     the same with presliding micro-damping (the library GMS's ``sigma1``, stiffness-proportional).
 
@@ -366,7 +372,27 @@ def spec_for(name: str, eps: float = DEFAULT_EPS) -> FitSpec:
     Bounds of the dynamic models: fc/fs in [0.5, 1] (a static level at most twice the Coulomb
     level) and vs >= 1e-3 rad/s; without them the sparsely visited low-speed sliding region lets
     the fit grow an unphysical Stribeck spike that costs nothing in NMSE but ruins compensation.
+
+    ``velocity_scale`` (:mod:`~friction_ros.core.identification.data_scale`): the bounds above are
+    those of a unit-scale joint; a velocity or position bound is multiplied by it, an inverse
+    position bound (``sigma_n``, ``sigma0_n``) divided by it.
     """
+    spec = _unit_spec(name, eps)
+    if velocity_scale != 1.0:
+        p = np.array(
+            [VELOCITY_POWER.get(n[0] if n[0] == "x" and n[1:].isdigit() else n, 0) for n in spec.nonlinear]
+        )
+        f = float(velocity_scale) ** p if p.size else np.ones(0)
+        spec.lower, spec.upper, spec.unit = spec.lower * f, spec.upper * f, f
+    return spec
+
+
+#: the power of the velocity scale in each nonlinear coefficient's unit (x = presliding distances)
+VELOCITY_POWER = {"vs": 1, "eps": 1, "x": 1, "sigma_n": -1, "sigma0_n": -1}
+
+
+def _unit_spec(name: str, eps: float) -> FitSpec:
+    """The FitSpec of a unit-scale joint (see :func:`spec_for`)."""
     arr = np.array
     if name == "coulomb":
         return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=False, eps=eps)

@@ -20,7 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.core.identification import learned, metrics
+from friction_ros.core.identification.baseline import NAME as BASELINE
+from friction_ros.core.identification.baseline import fit_baseline
 from friction_ros.core.identification.breakaway_detection import find_breakaways
+from friction_ros.core.identification.data_scale import data_scale, velocity_scale, with_scale
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
     check_excitation,
@@ -45,6 +48,12 @@ from friction_ros.core.identification.model_fits import (
     static_predictor,
     with_direction_levels,
     wrap_dynamic,
+)
+from friction_ros.core.identification.model_status import (
+    beats_baseline,
+    failed_model,
+    judge_divergence,
+    unidentifiable,
 )
 from friction_ros.core.identification.models import (
     DEFAULT_EPS,
@@ -72,6 +81,8 @@ from friction_ros.core.identification.velocity_regimes import (
 )
 from friction_ros.core.validation import ParameterError, check_choice
 
+JOINT_TYPES = ("revolute", "prismatic")
+
 DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
 EXPLAINS_LITTLE_NMSE = 30.0  # [%] validation NMSE above which a recommendation comes with a warning
 
@@ -80,8 +91,9 @@ EXPLAINS_LITTLE_NMSE = 30.0  # [%] validation NMSE above which a recommendation 
 def _grid(records: list[JointData]) -> np.ndarray:
     v = np.concatenate([np.abs(r.velocity) for r in records])
     vmax = float(np.max(v))
-    moving = v[v > 1e-6]
-    vmin = max(float(np.percentile(moving, 1)) if moving.size else 1e-4, 1e-4, vmax * 1e-4)
+    vsc = velocity_scale(records[0])
+    moving = v[v > 1e-6 * vsc]
+    vmin = max(float(np.percentile(moving, 1)) if moving.size else 1e-4 * vsc, 1e-4 * vsc, vmax * 1e-4)
     g = np.geomspace(vmin, max(vmax, vmin * 10), 60)
     return np.concatenate([-g[::-1], g])
 
@@ -96,7 +108,7 @@ def fit_records(
     maxiter: int | dict | None = None,
     popsize: int = 12,
     seed: int = 3,
-    eps: float = DEFAULT_EPS,
+    eps: float | None = None,
     high_threshold: float | None = None,
     identifiability_check: bool = True,
     two_stage: bool = True,
@@ -107,6 +119,7 @@ def fit_records(
     load_eps: float | None = None,
     validation_records: list[JointData] | None = None,
     residual: str = "none",
+    joint_type: str = "revolute",
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -133,14 +146,24 @@ def fit_records(
     defaults to ``auto``), ``auto`` (for records without plateaus: mlp or rff by validation), ``mlp``
     or ``rff``); the combined model ``<physics>+residual`` competes in
     the recommendation like any other (its parameter count includes the network's).
+    ``joint_type``: ``revolute`` (rad, N*m) or ``prismatic`` (m, N); a prismatic joint has no
+    angle-dependent load terms (gravity is constant along the axis: the offset takes it).
+    Every model is compared with the inverse-dynamics baseline (:mod:`baseline`); a model that
+    cannot be fitted or diverges is listed with the reason (:mod:`model_status`).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
+    check_choice("joint_type", joint_type, list(JOINT_TYPES))
     call = dict(locals())  # the arguments as given: the load-term check below refits with them
     t_start = time.perf_counter()
     records = [records] if isinstance(records, JointData) else list(records)
     names = check_model_names(models)
     if not records:
         raise ParameterError("records = []: need at least one record")
+    scale = data_scale(records)  # every speed threshold and bound follows the log's own scales
+    records = with_scale(records, scale)
+    if validation_records:
+        validation_records = with_scale(validation_records, scale)
+    eps = DEFAULT_EPS * scale.velocity if eps is None else eps
     for r in records:
         check_motion(r, r.meta.get("source", label))
     offset, offset_note = load_offset([p for r in records for p in find_plateaus(r)])
@@ -216,7 +239,7 @@ def fit_records(
             # the plateaus still determine the static models: fit those, name what was skipped
             names = [n for n in names if n not in dynamic]
             warnings_pre.append(f"dynamic models skipped ({', '.join(dynamic)}): {why}")
-    terms, selection = _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps)
+    terms, selection = _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type)
     if terms.load_friction:  # the torque the gear transmits, from the selection backbone
         tr = (selection.inertia, selection.joint_load)
         train, val = with_transmitted(train, *tr), with_transmitted(val, *tr)
@@ -239,96 +262,124 @@ def fit_records(
     def prog(name):
         return (lambda f: progress(name, f)) if progress else None
 
+    baseline = _baseline(train, terms, predict_val, vall, hm, lm, scored)
+    results[baseline.name] = baseline
+
     for name in [n for n in names if n not in LEARNED]:
-        spec = spec_for(name, eps)
-        if not terms.empty:
-            spec.load = terms
-        if not spec.dynamic and static_from_plateaus and terms.empty:
-            res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
+        try:
+            spec = spec_for(name, eps, scale.velocity)
+            if not terms.empty:
+                spec.load = terms
+            if not spec.dynamic and static_from_plateaus and terms.empty:
+                res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
+                if progress:
+                    progress(name, 1.0)
+            else:
+                static0 = per = None
+                if (
+                    static_from_plateaus
+                    and "stribeck" in results
+                    and results["stribeck"].method == "plateaus"
+                ):
+                    static0 = results["stribeck"].coefficients
+                    per = results["stribeck"].extra.get("per_direction")
+                fit_train = train
+                x0 = spec.initial_theta(static0) if static0 else None
+                if static0 and two_stage and spec.dynamic and "r" in spec.nonlinear:
+                    # two-stage identification (anchors 3.3): the steady-state curve from the plateaus
+                    # is kept, only the presliding/dynamic coefficients are searched in the time domain
+                    spec.fix_steady_state(static0)
+                    x0 = spec.initial_theta(static0)
+                    if per:  # asymmetric joint: the symmetric dynamics fit the torque less d(v)
+                        d = direction_part(per, static0)
+                        fit_train = [dataclasses.replace(r, torque=r.torque - d(r.velocity)) for r in train]
+                else:
+                    per = None
+                if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
+                    smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
+                    if smaller:
+                        prev = smaller[-1]
+                        th = np.asarray(prev.extra["theta"])
+                        sp = spec_for(prev.name, eps, scale.velocity)
+                        xs = np.resize(th[4 : 4 + sp.n_elements], spec.n_elements)
+                        x0 = np.concatenate([th[:4], xs])
+                        if spec.damped:  # the smaller fit's damping, else the middle of its range
+                            sd = th[-1] if sp.damped else np.sqrt(spec.lower[-1] * spec.upper[-1])
+                            x0 = np.append(x0, sd)
+                mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
+                fit = fit_time_domain(
+                    spec,
+                    fit_train,
+                    optimizer=optimizer,
+                    maxiter=mi,
+                    popsize=popsize,
+                    seed=seed,
+                    x0=x0,
+                    progress=prog(name),
+                )
+                res = wrap_dynamic(name, fit, eps, grid, identifiability_check, fit_train)
+                if per:
+                    res = with_direction_levels(res, per, static0)
+                if not terms.empty:
+                    res.extra["load"] = terms.joint_load(fit.load_coefficients).to_config()
+                    res.extra["load_coefficients"] = fit.load_coefficients
+                    res.extra["load_part"] = _load_part(fit)
+            yhat = predict_val(res)
+            res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm, scored=scored)
+            res.extra["validation_prediction"] = yhat
+            results[name] = res
+        except Exception as exc:  # a model that cannot be fitted is listed with the reason; the rest proceed
+            results[name] = failed_model(name, "not fitted", f"{type(exc).__name__}: {exc}")
+            continue
+        judge_divergence(res, vall.torque)
+
+    for name in [n for n in names if n in LEARNED]:
+        try:
+            t0 = time.perf_counter()
+            ref = _best_parametric(results)
+            J = results[ref].coefficients.get("J", 0.0) if ref else 0.0
+            load_part = results[ref].extra.get("load_part") if ref else None
+            ltrain = train
+            if load_part is not None:  # learn the friction map on the torque less the reference's load terms
+                ltrain = [dataclasses.replace(r, torque=r.torque - load_part(r)) for r in train]
+            vx, fy, src = learning_data(plateaus, ltrain, J, eps)
+            dm = learned.fit_directional(name, vx, fy)
+            k = 8 if name == "anfis" else dm.positive.n_support + dm.negative.n_support + 2
+            pred = static_predictor(dm.steady_state, J)
+            if load_part is not None:
+                pred = (lambda p, lp: lambda r: p(r) + lp(r))(pred, load_part)
+            yhat = np.concatenate([pred(r) for r in val])
+            res = ModelResult(
+                name,
+                f"learned ({src})",
+                {"J": J, **dm.params()},
+                None,
+                metrics.compare(yhat, vall.torque, hm, k + 1, low_mask=lm, scored=scored),
+                {},
+                time.perf_counter() - t0,
+                dm.steady_state,
+                pred,
+                notes=[
+                    f"per-direction {name} map trained on {len(vx)} {src}; inertia J from {ref or 'none'}"
+                ],
+            )
+            res.extra["validation_prediction"] = yhat
+            results[name] = res
             if progress:
                 progress(name, 1.0)
-        else:
-            static0 = per = None
-            if static_from_plateaus and "stribeck" in results and results["stribeck"].method == "plateaus":
-                static0 = results["stribeck"].coefficients
-                per = results["stribeck"].extra.get("per_direction")
-            fit_train = train
-            x0 = spec.initial_theta(static0) if static0 else None
-            if static0 and two_stage and spec.dynamic and "r" in spec.nonlinear:
-                # two-stage identification (anchors 3.3): the steady-state curve from the plateaus
-                # is kept, only the presliding/dynamic coefficients are searched in the time domain
-                spec.fix_steady_state(static0)
-                x0 = spec.initial_theta(static0)
-                if per:  # asymmetric joint: the symmetric dynamics fit the torque less d(v)
-                    d = direction_part(per, static0)
-                    fit_train = [dataclasses.replace(r, torque=r.torque - d(r.velocity)) for r in train]
-            else:
-                per = None
-            if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
-                smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
-                if smaller:
-                    prev = smaller[-1]
-                    th = np.asarray(prev.extra["theta"])
-                    sp = spec_for(prev.name, eps)
-                    xs = np.resize(th[4 : 4 + sp.n_elements], spec.n_elements)
-                    x0 = np.concatenate([th[:4], xs])
-                    if spec.damped:  # the smaller fit's damping, else the middle of its range
-                        sd = th[-1] if sp.damped else np.sqrt(spec.lower[-1] * spec.upper[-1])
-                        x0 = np.append(x0, sd)
-            mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
-            fit = fit_time_domain(
-                spec,
-                fit_train,
-                optimizer=optimizer,
-                maxiter=mi,
-                popsize=popsize,
-                seed=seed,
-                x0=x0,
-                progress=prog(name),
-            )
-            res = wrap_dynamic(name, fit, eps, grid, identifiability_check, fit_train)
-            if per:
-                res = with_direction_levels(res, per, static0)
-            if not terms.empty:
-                res.extra["load"] = terms.joint_load(fit.load_coefficients).to_config()
-                res.extra["load_coefficients"] = fit.load_coefficients
-                res.extra["load_part"] = _load_part(fit)
-        yhat = predict_val(res)
-        res.metrics = metrics.compare(yhat, vall.torque, hm, spec.n_params, low_mask=lm, scored=scored)
-        res.extra["validation_prediction"] = yhat
-        results[name] = res
-    for name in [n for n in names if n in LEARNED]:
-        t0 = time.perf_counter()
-        ref = _best_parametric(results)
-        J = results[ref].coefficients.get("J", 0.0) if ref else 0.0
-        load_part = results[ref].extra.get("load_part") if ref else None
-        ltrain = train
-        if load_part is not None:  # learn the friction map on the torque less the reference's load terms
-            ltrain = [dataclasses.replace(r, torque=r.torque - load_part(r)) for r in train]
-        vx, fy, src = learning_data(plateaus, ltrain, J, eps)
-        dm = learned.fit_directional(name, vx, fy)
-        k = 8 if name == "anfis" else dm.positive.n_support + dm.negative.n_support + 2
-        pred = static_predictor(dm.steady_state, J)
-        if load_part is not None:
-            pred = (lambda p, lp: lambda r: p(r) + lp(r))(pred, load_part)
-        yhat = np.concatenate([pred(r) for r in val])
-        res = ModelResult(
-            name,
-            f"learned ({src})",
-            {"J": J, **dm.params()},
-            None,
-            metrics.compare(yhat, vall.torque, hm, k + 1, low_mask=lm, scored=scored),
-            {},
-            time.perf_counter() - t0,
-            dm.steady_state,
-            pred,
-            notes=[f"per-direction {name} map trained on {len(vx)} {src}; inertia J from {ref or 'none'}"],
+        except Exception as exc:  # listed with the reason; the other models proceed
+            results[name] = failed_model(name, "not fitted", f"{type(exc).__name__}: {exc}")
+            continue
+        judge_divergence(res, vall.torque)
+
+    if not any(r.fitted for r in results.values()):
+        raise ParameterError(
+            f"{label}: no model could be fitted: "
+            + "; ".join(f"{n} {r.status}: {r.reason}" for n, r in results.items())
         )
-        res.extra["validation_prediction"] = yhat
-        results[name] = res
-        if progress:
-            progress(name, 1.0)
-    candidates = {n: r for n, r in results.items() if r.config is not None}
+    candidates = {
+        n: r for n, r in results.items() if r.config is not None and r.fitted and n != baseline.name
+    }
     recommendation = metrics.recommend_with_rule({n: r.metrics for n, r in candidates.items()})
     rec0 = recommendation["model"]
     if load == "auto" and selection is not None and not terms.empty and rec0 is not None:
@@ -362,11 +413,13 @@ def fit_records(
         recommendation = metrics.recommend_by_plateaus(
             {n: (r.steady_state, r.metrics.get("n_params", 1)) for n, r in candidates.items()}, plateaus
         )
+    if recommendation["model"] is not None or baseline.fitted:
+        recommendation = _checked_recommendation(recommendation, candidates, baseline)
     rec = recommendation["model"]
     verdict = _verdict(results, rec, val, vall, terms, eps, tried=selection is not None and load == "auto")
     if verdict["explains_little"]:
         warnings.append(verdict["text"])
-    for r in results.values():
+    for r in [r for r in results.values() if r.fitted]:
         r.extra["steady_state_grid"] = {
             "velocity": grid.tolist(),
             "friction": np.asarray(r.steady_state(grid)).tolist(),
@@ -392,6 +445,8 @@ def fit_records(
             "optimizer": optimizer,
             "seed": seed,
             "eps": eps,
+            "data_scale": {"velocity": scale.velocity, "torque": scale.torque},
+            "joint_type": joint_type,
             "models": names,
         },
         warnings=warnings,
@@ -400,7 +455,7 @@ def fit_records(
     )
 
 
-def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
+def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type="revolute"):
     """(LoadTerms, Selection | None) for the ``load`` option of :func:`fit_records`."""
     if load_eps is None:  # sgn(v) must not flip on velocity noise: at least 3 sigma of it
         r = train[0]
@@ -413,9 +468,18 @@ def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps):
         if load == "auto" and len(plateaus) >= 3:
             terms = "none"  # an experiment with plateaus: its load offset is measured on them
         terms = parse_terms(terms, ripple_period=ripple_period, eps=load_eps)
+    angle_terms = ("gravity", "ripple")  # functions of an angle: a revolute joint's only
     if terms == "auto":
-        sel = select_terms(train, val, eps=load_eps, ripple_period=ripple_period)
+        cands = ("gravity", "offset", "spring", "load_friction", "ripple")
+        if joint_type == "prismatic":
+            cands = tuple(c for c in cands if c not in angle_terms)
+        sel = select_terms(train, val, eps=load_eps, ripple_period=ripple_period, candidates=cands)
         return sel.terms, sel
+    if joint_type == "prismatic" and isinstance(terms, LoadTerms) and (terms.gravity or terms.ripple):
+        raise ParameterError(
+            f"load = {load!r}: gravity and ripple terms are functions of an angle; a prismatic joint allows "
+            "offset, spring and load_friction"
+        )
     if not isinstance(terms, LoadTerms):
         raise ParameterError(f"load = {load!r} is not allowed: must be auto, none, a term list or LoadTerms")
     if terms.load_friction:  # the transmitted torque needs a first fit of the other terms
@@ -542,8 +606,57 @@ def _load_part(fit) -> Callable[[JointData], np.ndarray]:
     return part
 
 
+def _baseline(train, terms, predict_val, vall, hm, lm, scored) -> ModelResult:
+    """The inverse-dynamics baseline with its validation metrics (or why it could not be fitted)."""
+    try:
+        b = fit_baseline(train, terms)
+        yb = predict_val(b)
+        k = 3 + len(b.extra["load_coefficients"])
+        b.metrics = metrics.compare(yb, vall.torque, hm, k, low_mask=lm, scored=scored)
+        b.extra["validation_prediction"] = yb
+    except Exception as exc:  # never stops the fit: the models are still compared with each other
+        return failed_model(BASELINE, "not fitted", f"{type(exc).__name__}: {exc}")
+    judge_divergence(b, vall.torque)
+    return b
+
+
+def _checked_recommendation(recommendation: dict, candidates: dict, baseline: ModelResult) -> dict:
+    """The recommendation after two checks: a model with an unidentifiable friction coefficient
+    (standard error > value) gives way to the best simpler candidate; a model that does not beat
+    the inverse-dynamics baseline on validation gives way to the baseline."""
+    rec = recommendation["model"]
+    notes = []
+    pool = dict(candidates)
+    while rec is not None and (bad := unidentifiable(pool[rec])):
+        k = pool[rec].metrics.get("n_params", 0)
+        notes.append(
+            f"{rec} has coefficients the log does not determine (standard error > value: {', '.join(bad)})"
+        )
+        pool = {n: r for n, r in pool.items() if r.metrics.get("n_params", 0) < k}
+        rec = metrics.recommend_with_rule({n: r.metrics for n, r in pool.items()})["model"] if pool else None
+    plateau_rule = "plateau means" in recommendation.get("rule", "")
+    if rec is not None and not plateau_rule and not beats_baseline(pool[rec], baseline):
+        notes.append(
+            f"{rec} does not beat the inverse-dynamics baseline on validation "
+            f"(NMSE {pool[rec].metrics.get('nmse_percent', math.nan):.4g} % vs "
+            f"{baseline.metrics.get('nmse_percent', math.nan):.4g} %)"
+        )
+        rec = None
+    if rec is None and baseline.fitted and baseline.config is not None:
+        rec = baseline.name
+        notes.append("the baseline (Coulomb + viscous + inertia + load terms, least squares) is recommended")
+    elif rec is None:
+        notes.append(
+            "no model beats the inverse-dynamics baseline and the baseline is not exportable: nothing to recommend"
+        )
+    if not notes:
+        return recommendation
+    reason = "; ".join(filter(None, [recommendation.get("reason", "")] + notes))
+    return {**recommendation, "model": rec, "reason": reason}
+
+
 def _best_parametric(results: dict[str, ModelResult]) -> str | None:
-    ok = [n for n, r in results.items() if r.config is not None]
+    ok = [n for n, r in results.items() if r.config is not None and n != BASELINE]
     if not ok:
         return None
     return min(ok, key=lambda n: results[n].extra.get("train_mse", math.inf))
@@ -570,6 +683,8 @@ def fit_bag(
     columns: dict | None = None,
     time_scale: float = 1.0,
     cross_validate: bool = False,
+    validate_on=None,
+    joint_type: str = "auto",
     **options,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
@@ -582,29 +697,39 @@ def fit_bag(
     :func:`friction_ros.core.identification.gating.gate_fit`; the compensation modes of the
     parameter file are then checked in closed loop first (refused ones written disabled).
     ``cross_validate``: with several logs, also :func:`cross_validate_runs` (``options["cross_validation"]``).
+    ``validate_on``: logs read like ``bag_paths`` that only validate (the inputs then only train).
+    ``joint_type``: ``revolute``, ``prismatic`` or ``auto`` (:func:`log_joint_type`).
     """
     from friction_ros.core.identification import report
 
     if isinstance(bag_paths, (str, Path)):
         bag_paths = [bag_paths]
     check_model_names(models)
-    recs = [
-        load_log(
-            p,
-            topic,
-            joint,
-            columns=columns,
-            time_scale=time_scale,
-            events_topic=events_topic,
-            current_topic=current_topic,
-            current_field=current_field,
-            torque_constant=torque_constant,
-            gear_ratio=gear_ratio,
-            torque_delay=torque_delay,
-        )
-        for p in bag_paths
-    ]
-    res = fit_records(recs, models, label=", ".join(str(p) for p in bag_paths), **options)
+    read = dict(
+        columns=columns,
+        time_scale=time_scale,
+        events_topic=events_topic,
+        current_topic=current_topic,
+        current_field=current_field,
+        torque_constant=torque_constant,
+        gear_ratio=gear_ratio,
+        torque_delay=torque_delay,
+    )
+    recs = [load_log(p, topic, joint, **read) for p in bag_paths]
+    val_recs = [load_log(p, topic, joint, **read) for p in (validate_on or [])]
+    jt, jt_note = log_joint_type(joint_type, recs)
+    res = fit_records(
+        recs,
+        models,
+        label=", ".join(str(p) for p in bag_paths),
+        validation_records=val_recs or None,
+        joint_type=jt,
+        **options,
+    )
+    if jt_note:
+        res.warnings.append(jt_note)
+    if val_recs:
+        res.options["validated_on"] = [str(p) for p in validate_on]
     if cross_validate:
         if len(recs) < 2:
             res.warnings.append("--cross-validate needs two or more runs: skipped")
@@ -626,6 +751,18 @@ def fit_bag(
         joint=joint,
     )
     return res
+
+
+def log_joint_type(requested: str, records) -> tuple[str, str]:
+    """(joint type, note): ``requested`` unless ``auto``; then the records' ``joint_type`` metadata
+    (a bag's or a CSV header's, see the loaders), else revolute with a note saying so."""
+    check_choice("joint_type", requested, ["auto", *JOINT_TYPES])
+    if requested != "auto":
+        return requested, ""
+    found = {r.meta.get("joint_type") for r in records} - {None}
+    if len(found) == 1 and (jt := found.pop()) in JOINT_TYPES:
+        return jt, ""
+    return "revolute", ""
 
 
 def cross_validate_runs(records: list[JointData], models=DEFAULT_MODELS, **options) -> dict:

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from friction_ros.core.experiment.events import completed_segments, start_settle
+from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.records import JointData, quantization_velocity_noise
 from friction_ros.core.identification.velocity_regimes import mask_runs
 
@@ -98,7 +99,7 @@ def find_plateaus(
     dev = np.sqrt(np.convolve((v - vm) ** 2, k, mode="same"))
     noise = float(np.median(np.abs(np.diff(v)))) / math.sqrt(2) + 1e-12
     if min_speed is None:
-        min_speed = max(10 * noise, 1e-3)
+        min_speed = max(10 * noise, 1e-3 * velocity_scale(data))
     # the 0.25 s running mean must be steady; the samples may scatter (stick-slip at low speed)
     drift = np.abs(vm - np.convolve(vm, k, mode="same"))
     steady = (drift < np.maximum(rel_tol * np.abs(vm), 3 * noise)) & (

@@ -287,5 +287,6 @@ def concat_records(records: list[JointData]) -> JointData:
         records[0].dt,
         [],
         records[0].resolution,
+        meta={k: v for k, v in records[0].meta.items() if k in ("velocity_scale", "torque_scale")},
         transmitted=tr,
     )

@@ -76,6 +76,8 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
                     "identifiability": m.identifiability,
                     "fit_seconds": m.seconds,
                     "notes": m.notes,
+                    "status": m.status,
+                    "reason": m.reason,
                     "steady_state": m.extra.get("steady_state_grid"),
                     "load": m.extra.get("load"),
                     "residual": m.extra.get("residual_report"),
@@ -149,17 +151,28 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         "",
         "## Model comparison (validation data; seed 003 Table 1 analogue)",
         "",
-        "| model | method | NMSE high [%] (max err) | NMSE low [%] (max err) | NMSE all [%] | params | AIC | BIC | fit [s] |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| model | method | NMSE high [%] (max err) | NMSE low [%] (max err) | NMSE all [%] | rel. error [%] "
+        "| params | AIC | BIC | fit [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for n, m in res.models.items():
         mt = m.metrics
         star = " **(recommended)**" if n == res.recommended else ""
+        if m.status != "fitted":  # a model that failed or diverged has no figures
+            L.append(f"| {n} | **{m.status}**: {m.reason} | | | | | | | | |")
+            continue
         L.append(
             f"| {n}{star} | {m.method} | {_fmt(mt.get('nmse_high_percent'), 3)} ({_fmt(mt.get('max_error_high'), 3)}) | "
             f"{_fmt(mt.get('nmse_low_percent'), 3)} ({_fmt(mt.get('max_error_low'), 3)}) | {_fmt(mt.get('nmse_percent'), 3)} | "
+            f"{_fmt(mt.get('rel_error_percent'), 3)} | "
             f"{mt.get('n_params')} | {_fmt(mt.get('aic'), 6)} | {_fmt(mt.get('bic'), 6)} | {m.seconds:.2f} |"
         )
+    L += [
+        "",
+        "The baseline is the classical inverse-dynamics least-squares fit (inertia, viscous, Coulomb, offset and "
+        "the load terms chosen): a model is recommended only when it beats it on validation. Relative error = "
+        "100 ||y - y_hat|| / ||y||, as system-identification benchmarks report it.",
+    ]
     L += [
         "",
         "Seed 003 Table 1 (paper, ABB M19-S): Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
@@ -185,6 +198,9 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
     L += ["## Coefficients"]
     for n, m in res.models.items():
         L += ["", f"### {n}", ""]
+        if m.status != "fitted":
+            L += [f"{m.status}: {m.reason}"]
+            continue
         ci = m.identifiability.get("ci95", {}) if m.identifiability else {}
         L += ["| coefficient | value | 95 % CI |", "|---|---|---|"]
         for k, v in m.coefficients.items():
@@ -324,7 +340,7 @@ def make_plots(res, out: Path) -> dict:
 
     out.mkdir(parents=True, exist_ok=True)
     files = {}
-    names = list(res.models)
+    names = [n for n, m in res.models.items() if m.status == "fitted"]  # no curve of a failed model
     tr = concat_records(res.train)
     va = concat_records(res.validation)
     J = res.inertia

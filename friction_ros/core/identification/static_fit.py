@@ -12,7 +12,8 @@ jointly (|F| against |v|); per direction the levels (F_C, F_v, and F_S unless a 
 measured it) are re-solved by linear least squares on the joint fit's shape (v_S, delta), which
 stays well posed with two plateaus per direction. The model is flagged asymmetric when mirrored
 (+v, -v) plateau pairs differ by more than 2 % of the friction level and 3 standard errors of the
-pair differences (without pairs: when the per-direction F_C or F_S differ by as much).
+pair differences (without pairs: when the per-direction F_C or F_S differ by as much), and only
+when each direction's levels are determined (standard error below the value).
 Standard errors from the Jacobian: cov = s^2 (J^T J)^-1.
 """
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
+from friction_ros.core.identification.data_scale import decade
 from friction_ros.core.identification.plateau_detection import Plateau, mirrored_pairs
 from friction_ros.core.identification.records import ExcitationError
 
@@ -76,7 +78,7 @@ def _fit_magnitude(
         names = ["fc", "fv"]
     else:
         best = None
-        for vs in np.geomspace(max(av.min() / 3, 1e-5), av.max(), 40):
+        for vs in np.geomspace(max(av.min() / 3, 1e-5 * decade(av.max())), av.max(), 40):
             for delta in (0.5, 1.0, 1.5, 2.0, 3.0):
                 A = np.column_stack([np.ones_like(av), np.exp(-((av / vs) ** delta)), av])
                 x, rn = nnls(A, af)
@@ -88,8 +90,9 @@ def _fit_magnitude(
             fc, fs, vs, delta, fv = p
             return fc + (fs - fc) * np.exp(-((av / vs) ** delta)) + fv * av - af
 
-        lo = [0.0, 0.0, 1e-6, 0.2, 0.0]
-        hi = [np.inf, np.inf, 10.0, 5.0, np.inf]
+        vd = decade(av.max())  # vs bounds relative to the plateau speeds (data_scale)
+        lo = [0.0, 0.0, 1e-6 * vd, 0.2, 0.0]
+        hi = [np.inf, np.inf, 10.0 * vd, 5.0, np.inf]
         x0 = np.clip(x0, np.array(lo) + 1e-12, hi)
         r = least_squares(res, x0, bounds=(lo, hi), loss="soft_l1", f_scale=_scale(res(x0)), x_scale="jac")
         names = ["fc", "fs", "vs", "delta", "fv"]
@@ -111,7 +114,7 @@ def _fit_magnitude(
 def _fit_stribeck_fixed_peak(av: np.ndarray, af: np.ndarray, fs: float) -> tuple[dict, dict, float]:
     """Stribeck curve with F_S fixed: ``|F| - F_S e = F_C (1 - e) + F_v |v|``, ``e = exp(-|v/v_S|^delta)``."""
     best = None
-    for vs in np.geomspace(max(av.min() / 30, 1e-6), av.max(), 50):
+    for vs in np.geomspace(max(av.min() / 30, 1e-6 * decade(av.max())), av.max(), 50):
         for delta in (0.5, 1.0, 1.5, 2.0, 3.0):
             e = np.exp(-((av / vs) ** delta))
             A = np.column_stack([1.0 - e, av])
@@ -123,8 +126,9 @@ def _fit_stribeck_fixed_peak(av: np.ndarray, af: np.ndarray, fs: float) -> tuple
         fc, vs, delta, fv = p
         return fc + (fs - fc) * np.exp(-((av / vs) ** delta)) + fv * av - af
 
-    lo = [0.0, 1e-6, 0.2, 0.0]
-    hi = [np.inf, 10.0, 5.0, np.inf]
+    vd = decade(av.max())
+    lo = [0.0, 1e-6 * vd, 0.2, 0.0]
+    hi = [np.inf, 10.0 * vd, 5.0, np.inf]
     x0 = np.clip(np.array(best[1]), np.array(lo) + 1e-12, hi)
     r = least_squares(res, x0, bounds=(lo, hi), loss="soft_l1", f_scale=_scale(res(x0)), x_scale="jac")
     fc, vs, delta, fv = map(float, r.x)
@@ -183,7 +187,24 @@ def fit_plateaus(
                     diff = abs(cp[k] - cn[k])
                     tol = max(3 * np.hypot(sp.get(k, 0.0), sn.get(k, 0.0)), 0.02 * 0.5 * (cp[k] + cn[k]))
                     asym |= bool(diff > tol)
+        # each direction's own levels must be determined by its plateaus, or the difference is noise
+        asym = asym and _determined(cp, sp, av.max(), coefs) and _determined(cn, sn, av.max(), coefs)
     return StaticFit(model, coefs, se, per, asym, rms, len(v), time.perf_counter() - t0)
+
+
+def _determined(c: dict, se: dict, vmax: float, joint: dict) -> bool:
+    """No level of one direction's fit has a standard error above its value; a level near zero
+    passes when its uncertainty is within 2 % of the joint friction at the top speed (fv counts as
+    its torque at that speed)."""
+    level = abs(joint.get("fc", 0.0)) + abs(joint.get("fv", 0.0)) * vmax
+    for k in ("fc", "fs", "fv"):
+        if k not in c:
+            continue
+        w = vmax if k == "fv" else 1.0
+        s = float(se.get(k, 0.0)) * w
+        if not np.isfinite(s) or s > max(abs(c[k]) * w, 0.02 * level):
+            return False
+    return True
 
 
 def directions_differ(plateaus: list[Plateau], rel: float = 0.02) -> bool | None:

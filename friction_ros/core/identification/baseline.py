@@ -1,0 +1,116 @@
+"""The classical inverse-dynamics baseline that every recommended model must beat.
+
+The textbook identification of a joint (and the "physical model" row of the published system
+identification benchmarks) is one ordinary least-squares solve of the inverse dynamics::
+
+    tau = J a + F_v v + F_c sgn_eps(v) + offset [+ the load terms the log calls for]
+
+with ``sgn_eps(v) = clip(v / eps, -1, 1)`` and ``eps`` three standard deviations of the velocity
+noise (the load terms' linear zone). It has no search, cannot diverge, and its figures are the bar
+a richer model must clear on validation before the fitter recommends it. The standard error of
+each coefficient is ``sqrt(diag(s^2 (X'X)^-1))`` with ``s^2 = SSE / (N - p)``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+from friction_ros.core.identification import export
+from friction_ros.core.identification.fit_results import ModelResult
+from friction_ros.core.identification.load_terms import LoadTerms
+from friction_ros.core.identification.records import JointData
+
+NAME = "baseline"
+
+
+def _terms(terms: LoadTerms) -> LoadTerms:
+    # the offset always; the transmitted torque needs a load model the baseline does not have
+    return dataclasses.replace(terms, offset=True, load_friction=False)
+
+
+def _design(terms: LoadTerms, r: JointData) -> np.ndarray:
+    v = np.asarray(r.velocity, dtype=float)
+    sg = np.clip(v / terms.eps, -1.0, 1.0)
+    return np.column_stack([r.acceleration, v, sg, terms.columns(r.position, v, None)])
+
+
+def fit_baseline(train: list[JointData], terms: LoadTerms) -> ModelResult:
+    """The baseline fitted to the training records (metrics are filled in by the caller)."""
+    t0 = time.perf_counter()
+    lt = _terms(terms)
+    names = ["J", "fv", "fc", *lt.names]
+    X = np.vstack([_design(lt, r) for r in train])
+    y = np.concatenate([r.torque for r in train])
+    ok = np.all(np.isfinite(X), axis=1) & np.isfinite(y)
+    X, y = X[ok], y[ok]
+    scale = np.sqrt(np.maximum(np.sum(X**2, axis=0), 1e-300))
+    coef_s, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    coef = coef_s / scale
+    resid = y - X @ coef
+    dof = max(y.size - len(names), 1)
+    s2 = float(resid @ resid / dof)
+    cov_s = s2 * np.linalg.pinv((X / scale).T @ (X / scale))
+    se = np.sqrt(np.maximum(np.diag(cov_s), 0.0)) / scale
+    c = dict(zip(names, coef.tolist()))
+    stderr = dict(zip(names, se.tolist()))
+    load_c = {n: c[n] for n in lt.names}
+    coefs = {"fc": c["fc"], "fv": c["fv"], "J": c["J"]}
+    notes = [
+        "ordinary least squares of tau = J a + fv v + fc sgn(v) + "
+        + (lt.describe() if not lt.empty else "offset")
+        + f" on {y.size} training samples (sgn linear zone {lt.eps:.3g})"
+    ]
+    cfg = None
+    if c["fc"] >= 0 and c["fv"] >= 0:
+        cfg = export.library_config("coulomb_viscous", {"fc": c["fc"], "fv": c["fv"]}, eps=lt.eps)
+    else:
+        notes.append(
+            f"not exportable: fc = {c['fc']:.4g}, fv = {c['fv']:.4g} (friction must not push the joint)"
+        )
+    useless = [n for n in ("fc", "fv", "J") if not abs(c[n]) > stderr[n]]
+    if useless:
+        notes.append("standard error larger than the value (not identifiable): " + ", ".join(useless))
+
+    def predict(r: JointData, coef=coef) -> np.ndarray:
+        return _design(lt, r) @ coef
+
+    def steady_state(v, fc=c["fc"], fv=c["fv"], eps=lt.eps):
+        v = np.asarray(v, dtype=float)
+        return fc * np.clip(v / eps, -1.0, 1.0) + fv * v
+
+    ident = {
+        "stderr": stderr,
+        "ci95": {n: [c[n] - 1.96 * stderr[n], c[n] + 1.96 * stderr[n]] for n in names},
+        "not_identifiable": [],
+        "useless_ci": useless,
+    }
+    m = ModelResult(
+        NAME,
+        "inverse-dynamics least squares",
+        coefs,
+        cfg,
+        {},
+        ident,
+        time.perf_counter() - t0,
+        steady_state,
+        predict,
+        notes,
+    )
+    m.extra["train_mse"] = float(np.mean(resid**2))
+    m.extra["load"] = lt.joint_load(load_c).to_config()
+    m.extra["load_coefficients"] = load_c
+    b_load = np.array([c[n] for n in lt.names])
+
+    def load_part(r: JointData) -> np.ndarray:
+        return terms_columns(lt, r) @ b_load if lt.names else np.zeros(r.n)
+
+    m.extra["load_part"] = load_part
+    return m
+
+
+def terms_columns(lt: LoadTerms, r: JointData) -> np.ndarray:
+    """The load-term columns of a record for the baseline's terms."""
+    return lt.columns(r.position, r.velocity, None)
