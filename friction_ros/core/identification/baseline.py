@@ -5,8 +5,11 @@ identification benchmarks) is one ordinary least-squares solve of the inverse dy
 
     tau = J a + F_v v + F_c sgn_eps(v) + offset [+ the load terms the log calls for]
 
+(the offset is left to gravity's sin/cos columns when the log calls for gravity)
+
 with ``sgn_eps(v) = clip(v / eps, -1, 1)`` and ``eps`` three standard deviations of the velocity
-noise (the load terms' linear zone). It has no search, cannot diverge, and its figures are the bar
+noise (the load terms' linear zone), with ``J, F_v, F_c >= 0`` (bounded least squares; the load
+terms are free). It has no search, cannot diverge, and its figures are the bar
 a richer model must clear on validation before the fitter recommends it. The standard error of
 each coefficient is ``sqrt(diag(s^2 (X'X)^-1))`` with ``s^2 = SSE / (N - p)``.
 """
@@ -17,18 +20,23 @@ import dataclasses
 import time
 
 import numpy as np
+from scipy.optimize import lsq_linear
 
+from friction_ros.core.friction import model_from_config
 from friction_ros.core.identification import export
 from friction_ros.core.identification.fit_results import ModelResult
 from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.identification.records import JointData
+from friction_ros.core.validation import ParameterError
 
 NAME = "baseline"
 
 
 def _terms(terms: LoadTerms) -> LoadTerms:
-    # the offset always; the transmitted torque needs a load model the baseline does not have
-    return dataclasses.replace(terms, offset=True, load_friction=False)
+    # an offset unless gravity's sin/cos columns are in (over a short stroke cos q is nearly
+    # constant: both would trade against each other and extrapolate wildly); the transmitted torque
+    # needs a load model the baseline does not have
+    return dataclasses.replace(terms, offset=terms.offset or not terms.gravity, load_friction=False)
 
 
 def _design(terms: LoadTerms, r: JointData) -> np.ndarray:
@@ -47,7 +55,10 @@ def fit_baseline(train: list[JointData], terms: LoadTerms) -> ModelResult:
     ok = np.all(np.isfinite(X), axis=1) & np.isfinite(y)
     X, y = X[ok], y[ok]
     scale = np.sqrt(np.maximum(np.sum(X**2, axis=0), 1e-300))
-    coef_s, *_ = np.linalg.lstsq(X / scale, y, rcond=None)
+    # J, fv, fc >= 0 (a friction that pushes the joint, or a negative inertia, is no baseline: on
+    # coupled arm data an unbounded fit trades them against the other link's torque); load terms free
+    lo = np.array([0.0, 0.0, 0.0] + [-np.inf] * len(lt.names))
+    coef_s = lsq_linear(X / scale, y, bounds=(lo, np.inf), method="bvls").x
     coef = coef_s / scale
     resid = y - X @ coef
     dof = max(y.size - len(names), 1)
@@ -63,13 +74,12 @@ def fit_baseline(train: list[JointData], terms: LoadTerms) -> ModelResult:
         + (lt.describe() if not lt.empty else "offset")
         + f" on {y.size} training samples (sgn linear zone {lt.eps:.3g})"
     ]
-    cfg = None
-    if c["fc"] >= 0 and c["fv"] >= 0:
-        cfg = export.library_config("coulomb_viscous", {"fc": c["fc"], "fv": c["fv"]}, eps=lt.eps)
-    else:
-        notes.append(
-            f"not exportable: fc = {c['fc']:.4g}, fv = {c['fv']:.4g} (friction must not push the joint)"
-        )
+    cfg = export.library_config("coulomb_viscous", {"fc": c["fc"], "fv": c["fv"]}, eps=lt.eps)
+    try:
+        model_from_config(cfg)
+    except ParameterError as exc:
+        notes.append(f"not exportable: {exc}")
+        cfg = None
     useless = [n for n in ("fc", "fv", "J") if not abs(c[n]) > stderr[n]]
     if useless:
         notes.append("standard error larger than the value (not identifiable): " + ", ".join(useless))

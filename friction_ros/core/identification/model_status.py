@@ -2,9 +2,10 @@
 identifiability.
 
 * a model whose fit raised is ``not fitted`` (with the reason); the others proceed;
-* a model whose validation prediction is not finite, or whose validation error exceeds
-  ``DIVERGED_NMSE`` percent of the torque's variance (a simulation that ran away or a fit that
-  does not transfer), is ``diverged``: its figures and coefficients are withheld, never printed;
+* a model whose validation prediction is not finite, whose validation error exceeds
+  ``DIVERGED_NMSE`` percent of the torque's variance, or which does worse than a constant and
+  ``BASELINE_FACTOR`` times worse than the baseline (a simulation that ran away or a fit that does
+  not transfer), is ``diverged``: its figures and coefficients are withheld, never printed;
 * a model is recommended only when it beats the inverse-dynamics baseline
   (:mod:`~friction_ros.core.identification.baseline`) on validation;
 * a recommended model with a coefficient whose standard error exceeds its value is
@@ -23,6 +24,8 @@ from friction_ros.core.identification.metrics import nmse_percent
 #: validation NMSE [%] above which a model's prediction is called diverged (twice the variance of
 #: the measured torque: farther from the measurement than a constant is, by a wide margin)
 DIVERGED_NMSE = 200.0
+#: ... or worse than a constant and this many times the inverse-dynamics baseline's validation NMSE
+BASELINE_FACTOR = 1.5
 
 
 def failed_model(name: str, status: str, reason: str) -> ModelResult:
@@ -41,9 +44,10 @@ def _no_prediction(r):
     return np.full(r.n, np.nan)
 
 
-def judge_divergence(res: ModelResult, measured: np.ndarray) -> None:
+def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResult | None = None) -> None:
     """Mark ``res`` diverged (in place: figures, coefficients and config withheld) when its
-    validation prediction is not finite or its NMSE exceeds :data:`DIVERGED_NMSE`."""
+    validation prediction is not finite, its NMSE exceeds :data:`DIVERGED_NMSE`, or it is worse
+    than a constant (NMSE > 100 %) and :data:`BASELINE_FACTOR` times the baseline's NMSE."""
     yhat = np.asarray(res.extra.get("validation_prediction", []), dtype=float)
     y = np.asarray(measured, dtype=float)
     why = ""
@@ -51,10 +55,21 @@ def judge_divergence(res: ModelResult, measured: np.ndarray) -> None:
         why = "its prediction on the validation data is not finite"
     else:
         nm = nmse_percent(yhat, y)
+        nb = (
+            float(baseline.metrics.get("nmse_percent", math.nan))
+            if baseline and baseline.fitted
+            else math.nan
+        )
+        cause = (
+            "the fit does not carry over to the validation data (a simulation that ran away, or "
+            "coefficients the training data do not determine)"
+        )
         if math.isfinite(nm) and nm > DIVERGED_NMSE:
+            why = f"its validation error is more than {DIVERGED_NMSE / 100:g} times the variance of the measured torque: {cause}"
+        elif math.isfinite(nm) and math.isfinite(nb) and nm > 100.0 and nm > BASELINE_FACTOR * nb:
             why = (
-                f"its validation error is more than {DIVERGED_NMSE / 100:g} times the variance of the measured "
-                "torque (the simulated friction ran away from the measurement)"
+                f"its validation error is larger than the variance of the measured torque and {BASELINE_FACTOR:g} "
+                f"times the baseline's: {cause}"
             )
     if not why:
         return

@@ -270,6 +270,8 @@ def fit_records(
             spec = spec_for(name, eps, scale.velocity)
             if not terms.empty:
                 spec.load = terms
+                if not spec.dynamic:  # see _static_linear_zone
+                    _static_linear_zone(spec, terms.eps)
             if not spec.dynamic and static_from_plateaus and terms.empty:
                 res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
                 if progress:
@@ -331,7 +333,7 @@ def fit_records(
         except Exception as exc:  # a model that cannot be fitted is listed with the reason; the rest proceed
             results[name] = failed_model(name, "not fitted", f"{type(exc).__name__}: {exc}")
             continue
-        judge_divergence(res, vall.torque)
+        judge_divergence(res, vall.torque, baseline)
 
     for name in [n for n in names if n in LEARNED]:
         try:
@@ -370,7 +372,7 @@ def fit_records(
         except Exception as exc:  # listed with the reason; the other models proceed
             results[name] = failed_model(name, "not fitted", f"{type(exc).__name__}: {exc}")
             continue
-        judge_divergence(res, vall.torque)
+        judge_divergence(res, vall.torque, baseline)
 
     if not any(r.fitted for r in results.values()):
         raise ParameterError(
@@ -381,14 +383,16 @@ def fit_records(
         n: r for n, r in results.items() if r.config is not None and r.fitted and n != baseline.name
     }
     recommendation = metrics.recommend_with_rule({n: r.metrics for n, r in candidates.items()})
-    rec0 = recommendation["model"]
+    # the model the load terms must help: the recommended one, else the first parametric model asked
+    # for (its fit with the terms may have failed or diverged: then it counts as infinitely worse)
+    rec0 = recommendation["model"] or next((n for n in names if n not in LEARNED), None)
     if load == "auto" and selection is not None and not terms.empty and rec0 is not None:
         # the terms were ranked on a linear backbone: they must also help the recommended model
         alt = fit_records(
             **{**call, "models": [rec0], "load": "none", "residual": "none", "progress": None},
         )
         without = float(alt.models[rec0].metrics.get("nmse_percent", math.inf))
-        with_terms = float(results[rec0].metrics.get("nmse_percent", math.nan))
+        with_terms = float(results[rec0].metrics.get("nmse_percent", math.inf))
         if without <= with_terms:
             res = fit_records(**{**call, "load": "none"})
             res.warnings.insert(
@@ -416,6 +420,11 @@ def fit_records(
     if recommendation["model"] is not None or baseline.fitted:
         recommendation = _checked_recommendation(recommendation, candidates, baseline)
     rec = recommendation["model"]
+    if rec is None:
+        warnings.append(
+            "no model is recommended and no parameter file is written: "
+            + (recommendation.get("reason") or recommendation.get("rule") or "no model could be exported")
+        )
     verdict = _verdict(results, rec, val, vall, terms, eps, tried=selection is not None and load == "auto")
     if verdict["explains_little"]:
         warnings.append(verdict["text"])
@@ -604,6 +613,18 @@ def _load_part(fit) -> Callable[[JointData], np.ndarray]:
         return spec.load_matrix(r, v) @ b
 
     return part
+
+
+def _static_linear_zone(spec, load_eps: float) -> None:
+    """With load terms a static map is fitted without the samples slower than the terms' sign zone
+    (``FitSpec.grams``), so those samples cannot determine a narrower linear zone of sgn(v): the
+    zone is at least ``load_eps`` (a fitted ``eps`` is bounded below by it). Without this the zone
+    lands anywhere below it and the map mispredicts every reversal it is scored on."""
+    spec.eps = max(spec.eps, load_eps)
+    if "eps" in spec.nonlinear:
+        i = spec.nonlinear.index("eps")
+        spec.lower[i] = max(spec.lower[i], load_eps)
+        spec.upper[i] = max(spec.upper[i], spec.lower[i] * 1.001)
 
 
 def _baseline(train, terms, predict_val, vall, hm, lm, scored) -> ModelResult:
