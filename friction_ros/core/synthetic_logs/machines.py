@@ -30,6 +30,8 @@ def _min_jerk_moves(rng, n: int, dt: float, lo: float, hi: float, vmax: float):
         dwell = int(rng.uniform(0.2, 0.6) / dt)
         q[k : k + dwell] = x
         k += dwell
+        if k >= n:
+            break
         target = rng.uniform(lo, hi)
         d = target - x
         T = max(1.875 * abs(d) / (vmax * rng.uniform(0.4, 1.0)), 0.1)
