@@ -102,8 +102,8 @@ def prismatic_ballscrew(seed: int = 0, seconds: float = 30.0, validation_seconds
 def hobby_servo(seed: int = 0, seconds: float = 30.0) -> GauntletLog:
     """Hobby servo at 0.01-0.1 N*m: J = 2e-4 kg*m^2, Stribeck friction Fc = 0.02, Fs = 0.03 N*m,
     vs = 0.4 rad/s, Fv = 0.004 N*m*s/rad, on the project plant with a P-D loop (torque limit
-    0.1 N*m) at 1 kHz. Logged like a microcontroller does: 100 Hz with 0-2 ms loop jitter, integer
-    ``millis`` stamps, a 10-bit potentiometer over 270 deg (4.6 mrad), the current-sense torque
+    0.1 N*m, D on a 50 Hz filtered velocity) at 1 kHz. Logged like a microcontroller does: 100 Hz
+    with 0-2 ms loop jitter, integer ``millis`` stamps, a 10-bit potentiometer over 270 deg (4.6 mrad), the current-sense torque
     estimate (+- 3 mN*m noise), no velocity column.
     """
     from friction_ros.core.plant.params import PlantParams
@@ -120,6 +120,7 @@ def hobby_servo(seed: int = 0, seconds: float = 30.0) -> GauntletLog:
         encoder_cpr=cpr,
         encoder_location="joint",
         current_noise_std=0.003,
+        velocity_filter_hz=50.0,
         seed=seed,
     )
     n = int(round(seconds / dt)) + 3
