@@ -10,8 +10,8 @@ worst model NMSE (a diverged model shows there), the verdict, the warning count,
 truth has them, the recommended model's Coulomb and viscous levels against it. A log the fitter
 refuses gives its one-line error instead.
 
-    .venv/bin/python bench/real_data.py --gauntlet          # this section alone (~1-2 min)
-    .venv/bin/python bench/real_data.py --gauntlet --quick  # coulomb_viscous and stribeck, no residual
+    .venv/bin/python bench/real_data.py --gauntlet          # this section alone (~4 min CPU)
+    .venv/bin/python bench/real_data.py --gauntlet --quick  # coulomb_viscous and stribeck, no residual (~10 s)
 """
 
 from __future__ import annotations

@@ -28,7 +28,7 @@
 
 4. Gauntlet (bench/_gauntlet.py): the fitter with friction-fit's defaults on every class of log users
    bring (friction_ros.core.synthetic_logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
-   creep, coarse encoder, jittered/missing samples, saturation) and both joints of the real DFKI
+   creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints of the real DFKI
    double pendulum: recommended model, validation NMSE, verdict and warning count per log.
 """
 

@@ -49,6 +49,21 @@ DIVERGED_TODAY = {
     "any sample's speed is unbounded",
 }
 
+#: valid logs friction-fit refuses today (exit 2), case -> its error line
+REFUSED_TODAY = {
+    "one_direction": "exit 2: friction-fit: error: <log>.csv: too little excitation: missing motion in the "
+    "negative direction (run 'plateaus' in both directions); Fc and Fv of the direction it turns are "
+    "identifiable",
+}
+
+
+def _xfail(cases: list[str], known: dict[str, str]) -> list:
+    return [
+        pytest.param(c, marks=pytest.mark.xfail(strict=False, reason=known[c])) if c in known else c
+        for c in cases
+    ]
+
+
 _FITS: dict[str, tuple[int, str, dict | None]] = {}
 
 
@@ -78,7 +93,7 @@ def _fit(case: str, tmp_path_factory) -> tuple[int, str, dict | None]:
 
 
 # ------------------------------------------------------------------------------------------ the fitter
-@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize("case", _xfail(CASES, REFUSED_TODAY))
 def test_every_log_fits_with_finite_figures(case, tmp_path_factory):
     rc, err, s = _fit(case, tmp_path_factory)
     assert rc == 0, err
@@ -92,15 +107,7 @@ def test_every_log_fits_with_finite_figures(case, tmp_path_factory):
     assert math.isfinite(s["models"][rec]["metrics"]["nmse_percent"])
 
 
-@pytest.mark.parametrize(
-    "case",
-    [
-        pytest.param(c, marks=pytest.mark.xfail(strict=False, reason=DIVERGED_TODAY[c]))
-        if c in DIVERGED_TODAY
-        else c
-        for c in CASES
-    ],
-)
+@pytest.mark.parametrize("case", _xfail(CASES, {**DIVERGED_TODAY, **REFUSED_TODAY}))
 def test_no_diverged_model_is_reported(case, tmp_path_factory):
     rc, err, s = _fit(case, tmp_path_factory)
     assert rc == 0, err
@@ -223,3 +230,13 @@ def test_double_pendulum_excerpt_is_small_licensed_and_unchanged():
     idx = [rows[0].index(h) for h in lines[0].split(",")]
     for ln, row in zip(lines[1:], rows[1:], strict=False):
         assert ln == ",".join(row[i] for i in idx)
+
+
+def test_one_direction_never_reverses_and_its_friction_is_identifiable():
+    log = make_log("one_direction")
+    c, tr = log.columns, log.truth
+    assert c["velocity"].min() > 0.3
+    a = savgol_filter(c["velocity"], 41, 3, deriv=1, delta=1e-3)
+    J, fc, fv = _ls([a, np.ones(a.size), c["velocity"]], c["effort"])
+    assert J == pytest.approx(tr["inertia"], rel=0.03)
+    assert fc == pytest.approx(tr["fc"], rel=0.03) and fv == pytest.approx(tr["fv"], rel=0.03)

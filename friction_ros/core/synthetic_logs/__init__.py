@@ -14,12 +14,19 @@ lugre_creep            LuGre joint creeping under a dithered torque near breakaw
 coarse_encoder         2^10 counts per revolution at the joint
 jitter_gaps            jittered 500 Hz stamps, dropped rows, gaps, empty cells, epoch stamps
 saturation             drive torque clipped at its limit for half the run
+one_direction          a joint that never reverses (conveyor roller, wheel): 0.5-4 rad/s
 =====================  =======================================================================
 """
 
 from __future__ import annotations
 
-from friction_ros.core.synthetic_logs.artifacts import coarse_encoder, jitter_gaps, lugre_creep, saturation
+from friction_ros.core.synthetic_logs.artifacts import (
+    coarse_encoder,
+    jitter_gaps,
+    lugre_creep,
+    one_direction,
+    saturation,
+)
 from friction_ros.core.synthetic_logs.machines import coupled_arm, hobby_servo, prismatic_ballscrew
 from friction_ros.core.synthetic_logs.tables import GauntletLog
 
@@ -32,6 +39,7 @@ GENERATORS = {
     "coarse_encoder": coarse_encoder,
     "jitter_gaps": jitter_gaps,
     "saturation": saturation,
+    "one_direction": one_direction,
 }
 
 

@@ -193,3 +193,27 @@ def saturation(seed: int = 0, seconds: float = 20.0) -> GauntletLog:
         "command",
         truth,
     )
+
+
+def one_direction(seed: int = 0, seconds: float = 20.0) -> GauntletLog:
+    """A joint that only turns one way (a conveyor roller, a wheel, a spindle) at 1 kHz: speed
+    0.5-4 rad/s, never reversing; tau = J a + Fc sgn(v) + Fv v (J = 0.05 kg*m^2, Fc = 0.4 N*m,
+    Fv = 0.15 N*m*s/rad) + 0.01 N*m noise. Fc and Fv of the positive direction are identifiable;
+    the negative direction is not in the log.
+    """
+    rng = np.random.default_rng(seed)
+    dt, J, fc, fv = 1e-3, 0.05, 0.4, 0.15
+    fric = make_model("coulomb_viscous", fc=fc, fv=fv)
+    n = int(round(seconds / dt))
+    t = np.arange(n) * dt
+    _, s, ds, _ = scaled_sines(rng, t, 0.05, 1.0, 1.0, 1.0, n=5)  # the speed follows a multisine
+    lo, hi = float(s.min()), float(s.max())
+    v = 0.5 + 3.5 * (s - lo) / (hi - lo)
+    a = 3.5 * ds / (hi - lo)
+    q = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    tau = J * a + fric.torque(v) + 0.01 * rng.standard_normal(n)
+    cols = {"time": t, "position": q, "velocity": v + 0.005 * rng.standard_normal(n), "effort": tau}
+    truth = {"inertia": J, "fc": fc, "fv": fv, "friction": fric.to_config(), "speed_range": [0.5, 4.0]}
+    return GauntletLog(
+        "one_direction", "joint turning one way only (conveyor, wheel)", cols, dict(JOINT_UNITS), truth
+    )
