@@ -21,15 +21,14 @@
    into test/data/dfki_pendulum (a user's clone): the printed notes and the JSON say which.
 3. Learned residual inference time: per residual candidate the report's step() time, and for every
    exported residual the median of 10,000 single ``LearnedResidual.step`` calls (goal < 20 us).
-
-    .venv/bin/python bench/real_data.py            # full (~100 s CPU; ~3 min wall on a busy 2-core machine)
-    .venv/bin/python bench/real_data.py --quick    # 20 s runs, no lugre/nusvr (smoke test)
-    .venv/bin/python bench/real_data.py --gauntlet # section 4 alone (bench/_gauntlet.py)
-
 4. Gauntlet (bench/_gauntlet.py): the fitter with friction-fit's defaults on every class of log users
    bring (friction_ros.core.synthetic_logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
-   creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints of the real DFKI
-   double pendulum: recommended model, validation NMSE, verdict and warning count per log.
+   creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints
+   of the real DFKI double pendulum: recommended model, validation NMSE, verdict and warnings per log.
+
+    .venv/bin/python bench/real_data.py            # full (~100 s CPU + the gauntlet's ~4 min CPU)
+    .venv/bin/python bench/real_data.py --quick    # 20 s runs, no lugre/nusvr (smoke test)
+    .venv/bin/python bench/real_data.py --gauntlet # section 4 alone (bench/_gauntlet.py)
 """
 
 from __future__ import annotations
