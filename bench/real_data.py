@@ -21,9 +21,14 @@
    into test/data/dfki_pendulum (a user's clone): the printed notes and the JSON say which.
 3. Learned residual inference time: per residual candidate the report's step() time, and for every
    exported residual the median of 10,000 single ``LearnedResidual.step`` calls (goal < 20 us).
+4. Gauntlet (bench/_gauntlet.py): the fitter with friction-fit's defaults on every class of log users
+   bring (friction_ros.core.synthetic_logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
+   creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints
+   of the real DFKI double pendulum: recommended model, validation NMSE, verdict and warnings per log.
 
-    .venv/bin/python bench/real_data.py            # full (~100 s CPU; ~3 min wall on a busy 2-core machine)
+    .venv/bin/python bench/real_data.py            # full (~100 s CPU + the gauntlet's ~4 min CPU)
     .venv/bin/python bench/real_data.py --quick    # 20 s runs, no lugre/nusvr (smoke test)
+    .venv/bin/python bench/real_data.py --gauntlet # section 4 alone (bench/_gauntlet.py)
 """
 
 from __future__ import annotations
@@ -42,6 +47,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must not shadow python-can
 
 from _common import print_table, write_results  # noqa: E402
+from _gauntlet import gauntlet  # noqa: E402
 
 from friction_ros.core.friction.learned_residual import LearnedResidual  # noqa: E402
 from friction_ros.core.identification.csv_loading import load_csv  # noqa: E402
@@ -775,12 +781,27 @@ def main() -> None:
     ap.add_argument(
         "--quick", action="store_true", help="20 s synthetic runs, coulomb_viscous and stribeck only"
     )
+    ap.add_argument("--gauntlet", action="store_true", help="run the gauntlet section alone")
     args = ap.parse_args()
     t_wall, t_cpu = time.perf_counter(), time.process_time()
+    if args.gauntlet:
+        figures = {
+            "gauntlet": gauntlet(args.quick),
+            "quick": args.quick,
+            "wall_s": time.perf_counter() - t_wall,
+        }
+        name = "real_data_gauntlet" + ("_quick" if args.quick else "")
+        write_results(
+            name,
+            figures,
+            ".venv/bin/python bench/real_data.py --gauntlet" + (" --quick" if args.quick else ""),
+        )
+        return
     load_start = os.getloadavg()[0]  # other processes on the machine slow the step() timings
     syn, syn_res = synthetic(args.quick)
     pend, pend_fits = pendulum(args.quick)
     resid = residual_timing(syn_res, pend_fits)
+    gaunt = gauntlet(args.quick)
     gl = goals(syn, pend, resid)
     notes = syn["notes"] + pend["findings"]
     print("\nNotes (measured on this run):")
@@ -790,6 +811,7 @@ def main() -> None:
         "synthetic": syn,
         "pendulum": pend,
         "residual": resid,
+        "gauntlet": gaunt,
         "goals": gl,
         "notes": notes,
         "load_average_1min": {"start": load_start, "end": os.getloadavg()[0]},
