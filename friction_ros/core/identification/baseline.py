@@ -32,11 +32,13 @@ from friction_ros.core.validation import ParameterError
 NAME = "baseline"
 
 
-def _terms(terms: LoadTerms) -> LoadTerms:
+def _terms(terms: LoadTerms, both_ways: bool) -> LoadTerms:
     # an offset unless gravity's sin/cos columns are in (over a short stroke cos q is nearly
-    # constant: both would trade against each other and extrapolate wildly); the transmitted torque
-    # needs a load model the baseline does not have
-    return dataclasses.replace(terms, offset=terms.offset or not terms.gravity, load_friction=False)
+    # constant: both would trade against each other and extrapolate wildly) or the joint moved one
+    # way only (sgn(v) is then a constant too); the transmitted torque needs a load model the
+    # baseline does not have
+    offset = (terms.offset or not terms.gravity) and both_ways
+    return dataclasses.replace(terms, offset=offset, load_friction=False)
 
 
 def _design(terms: LoadTerms, r: JointData) -> np.ndarray:
@@ -48,7 +50,8 @@ def _design(terms: LoadTerms, r: JointData) -> np.ndarray:
 def fit_baseline(train: list[JointData], terms: LoadTerms) -> ModelResult:
     """The baseline fitted to the training records (metrics are filled in by the caller)."""
     t0 = time.perf_counter()
-    lt = _terms(terms)
+    v = np.concatenate([r.velocity for r in train])
+    lt = _terms(terms, bool(np.any(v > terms.eps) and np.any(v < -terms.eps)))
     names = ["J", "fv", "fc", *lt.names]
     X = np.vstack([_design(lt, r) for r in train])
     y = np.concatenate([r.torque for r in train])

@@ -61,6 +61,20 @@ def check_motion(data: JointData, label: str) -> None:
         )
 
 
+def one_direction_note(ex: Excitation) -> str:
+    """A warning when the joint moved in one direction only (a conveyor, a wheel): the fit then
+    gives that direction's friction, and Coulomb friction cannot be told from a constant load."""
+    floor = 2.0 * ex.motion_floor  # above what the encoder resolves, in the record's own units
+    if ex.max_speed_pos >= floor and ex.max_speed_neg >= floor:
+        return ""
+    d, other = ("positive", "negative") if ex.max_speed_pos >= floor else ("negative", "positive")
+    return (
+        f"the joint moved in the {d} direction only: the fitted friction is that direction's (the {other} "
+        "direction is assumed the same) and a constant load adds to its Coulomb level; record motion in both "
+        "directions ('plateaus' in both directions) to measure them apart"
+    )
+
+
 def check_excitation(ex: Excitation, *, dynamic: bool, static_from_plateaus: bool, label: str) -> None:
     """Raise ExcitationError naming what is missing and the experiment that provides it."""
     missing = []

@@ -19,7 +19,7 @@ import math
 import numpy as np
 
 from friction_ros.core.identification.fit_results import ModelResult
-from friction_ros.core.identification.metrics import nmse_percent
+from friction_ros.core.identification.metrics import nmse_percent, relative_error_percent
 
 #: validation NMSE [%] above which a model's prediction is called diverged (twice the variance of
 #: the measured torque: farther from the measurement than a constant is, by a wide margin)
@@ -47,7 +47,9 @@ def _no_prediction(r):
 def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResult | None = None) -> None:
     """Mark ``res`` diverged (in place: figures, coefficients and config withheld) when its
     validation prediction is not finite, its NMSE exceeds :data:`DIVERGED_NMSE`, or it is worse
-    than a constant (NMSE > 100 %) and :data:`BASELINE_FACTOR` times the baseline's NMSE."""
+    than a constant (NMSE > 100 %) and :data:`BASELINE_FACTOR` times the baseline's NMSE; in both
+    cases only when its error is also larger than the torque itself (relative error > 100 %: a
+    torque without variance makes any NMSE large)."""
     yhat = np.asarray(res.extra.get("validation_prediction", []), dtype=float)
     y = np.asarray(measured, dtype=float)
     why = ""
@@ -55,6 +57,8 @@ def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResu
         why = "its prediction on the validation data is not finite"
     else:
         nm = nmse_percent(yhat, y)
+        if not relative_error_percent(yhat, y) > 100.0:
+            nm = math.nan  # nearer the measurement than zero is: not diverged (a torque without variance)
         nb = (
             float(baseline.metrics.get("nmse_percent", math.nan))
             if baseline and baseline.fitted

@@ -26,9 +26,9 @@ from friction_ros.core.identification.breakaway_detection import find_breakaways
 from friction_ros.core.identification.data_scale import data_scale, velocity_scale, with_scale
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
-    check_excitation,
     check_motion,
     excitation,
+    one_direction_note,
 )
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
 from friction_ros.core.identification.load_terms import (
@@ -67,7 +67,6 @@ from friction_ros.core.identification.plateau_detection import (
     load_offset,
 )
 from friction_ros.core.identification.records import (
-    ExcitationError,
     JointData,
     concat_records,
     quantization_velocity_noise,
@@ -76,6 +75,7 @@ from friction_ros.core.identification.training_split import split, training_segm
 from friction_ros.core.identification.velocity_regimes import (
     high_velocity_mask,
     mask_runs,
+    motion_floor,
     moving_mask,
     standstill_mask,
 )
@@ -224,7 +224,9 @@ def fit_records(
     ex = excitation(records[0] if len(records) == 1 else concat_records(records), plateaus)
     dynamic_wanted = any(spec_for(n).dynamic for n in names if n not in LEARNED)
     static_from_plateaus = len(plateaus) >= 3
-    check_excitation(ex, dynamic=dynamic_wanted, static_from_plateaus=False, label=label)
+    skipped: dict[str, str] = {}  # model -> why the log cannot determine it (listed as not fitted)
+    if note := one_direction_note(ex):
+        warnings_pre.append(note)
     if dynamic_wanted:
         ex_train = excitation(concat_records(train), [])
         if ex_train.reversals < 4:
@@ -234,11 +236,9 @@ def fit_records(
                 "'random' excitation, or lower/raise --train-seconds)"
             )
             dynamic = [n for n in names if n not in LEARNED and spec_for(n).dynamic]
-            if not static_from_plateaus or len(dynamic) == len(names):
-                raise ExcitationError(f"{label}: {why}")
-            # the plateaus still determine the static models: fit those, name what was skipped
+            skipped.update(dict.fromkeys(dynamic, why))
             names = [n for n in names if n not in dynamic]
-            warnings_pre.append(f"dynamic models skipped ({', '.join(dynamic)}): {why}")
+            warnings_pre.append(f"dynamic models not fitted ({', '.join(dynamic)}): {why}")
     terms, selection = _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type)
     if terms.load_friction:  # the torque the gear transmits, from the selection backbone
         tr = (selection.inertia, selection.joint_load)
@@ -264,6 +264,8 @@ def fit_records(
 
     baseline = _baseline(train, terms, predict_val, vall, hm, lm, scored)
     results[baseline.name] = baseline
+    for name, why in skipped.items():
+        results[name] = failed_model(name, "not fitted", why)
 
     for name in [n for n in names if n not in LEARNED]:
         try:
@@ -272,6 +274,7 @@ def fit_records(
                 spec.load = terms
                 if not spec.dynamic:  # see _static_linear_zone
                     _static_linear_zone(spec, terms.eps)
+            _slowest_stribeck_velocity(spec, train)
             if not spec.dynamic and static_from_plateaus and terms.empty:
                 res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
                 if progress:
@@ -613,6 +616,21 @@ def _load_part(fit) -> Callable[[JointData], np.ndarray]:
         return spec.load_matrix(r, v) @ b
 
     return part
+
+
+def _slowest_stribeck_velocity(spec, train) -> None:
+    """A Stribeck velocity ``vs`` is searched no lower than the slowest 1 % of the moving training
+    samples: a Stribeck peak narrower than almost every sample's speed is fitted to a handful of
+    samples and its level ``fs`` runs away (1e24 N on a ball-screw log)."""
+    if "vs" not in spec.nonlinear:
+        return
+    v = np.abs(np.concatenate([r.velocity for r in train]))
+    moving = v[v > motion_floor(v, train[0].resolution)]
+    if moving.size < 10:
+        return
+    i = spec.nonlinear.index("vs")
+    spec.lower[i] = max(spec.lower[i], float(np.percentile(moving, 1)))
+    spec.upper[i] = max(spec.upper[i], spec.lower[i] * 10.0)
 
 
 def _static_linear_zone(spec, load_eps: float) -> None:

@@ -65,6 +65,7 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
             "breakaways": [vars(b) for b in res.breakaways],
             "options": {k: v for k, v in res.options.items() if k != "gate_options"},
             "recommended": res.recommended,
+            "warnings": list(res.warnings),
             "recommendation": getattr(res, "recommendation", {}),
             "gate": {m: v.as_dict() for m, v in (getattr(res, "gate", None) or {}).items()},
             "models": {
