@@ -1,6 +1,7 @@
 """friction-bag: inspect, check and repair MCAP bags without ROS tools.
 
-    friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems
+    friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems;
+                                            status complete, TRUNCATED or DAMAGED (messages lost)
     friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording as a
                                             finished bag (summary, statistics, metadata.yaml)
 
@@ -34,8 +35,20 @@ def _info(path: str) -> int:
         print(f"metadata {name}: " + ", ".join(f"{k}={v}" for k, v in keys.items()))
     for w in bag.warnings:
         print(f"warning: {w}")
-    print("status:   " + ("TRUNCATED (recovered complete chunks)" if bag.truncated else "complete"))
+    print(f"status:   {_status(bag)}")
     return 0
+
+
+def _status(bag) -> str:
+    """``complete``, ``TRUNCATED ...`` and/or ``DAMAGED: <messages lost per topic>``."""
+    from friction_ros.core.bag.damage import describe_loss
+
+    parts = []
+    if bag.damaged:
+        parts.append(f"DAMAGED: {describe_loss(bag.lost)}")
+    if bag.truncated:
+        parts.append("TRUNCATED (recovered complete chunks)")
+    return "; ".join(parts) or "complete"
 
 
 def _recover(path: str, out: str, overwrite: bool) -> int:

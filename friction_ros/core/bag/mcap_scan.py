@@ -1,43 +1,55 @@
 """Low-level scan of one MCAP file: schemas, channels, metadata and where each message lies.
 
-Chunks are decompressed (zstd, lz4 or none) and their message records located; a file cut off
-before its summary is scanned up to the last complete record (``truncated``, ``warnings``).
+The data section is read record by record (a linear scan); chunks are decompressed (zstd, lz4 or
+none), checked against their CRC and their message records located through the message indexes
+that follow them (checked against the chunk) or, when those are missing or damaged, by a scan of
+the chunk's records. An intact summary (:mod:`.mcap_summary`) gives the expected message counts and
+the chunk starts. Damage never stops the scan: a chunk that fails its CRC or cannot be read is
+skipped, a record whose length is impossible is stepped over to the next chunk (found through the
+chunk index, else by searching for a well-formed chunk record), and each is recorded as a
+:class:`~.damage.Problem`. A file cut off before its summary is scanned up to the last complete
+record (``truncated``, ``warnings``).
 """
 
 from __future__ import annotations
 
-import struct
 import zlib
 from pathlib import Path
 
 import numpy as np
 
+from .damage import Problem
 from .errors import BagError, NotMcapError, TruncatedBagError, UnsupportedBagError
+from .mcap_records import (
+    CHANNEL,
+    CHUNK,
+    COMPRESSIONS,
+    DATA_END,
+    FOOTER,
+    HEADER,
+    KNOWN_OPCODES,
+    MAGIC,
+    MESSAGE,
+    MESSAGE_INDEX,
+    METADATA,
+    OPHDR,
+    SCHEMA,
+    U64,
+    RecordError,
+    read_channel,
+    read_map,
+    read_schema,
+    read_str,
+    unpack,
+)
+from .mcap_summary import has_footer, read_summary
 
-MAGIC = b"\x89MCAP0\r\n"
-_U64 = struct.Struct("<Q")
-_OPHDR = struct.Struct("<BQ")
-
-
-def _read_str(buf, pos: int) -> tuple[str, int]:
-    (n,) = struct.unpack_from("<I", buf, pos)
-    return bytes(buf[pos + 4 : pos + 4 + n]).decode("utf-8", "replace"), pos + 4 + n
-
-
-def _read_map(buf, pos: int) -> tuple[dict[str, str], int]:
-    (total,) = struct.unpack_from("<I", buf, pos)
-    end = pos + 4 + total
-    pos += 4
-    out = {}
-    while pos < end:
-        k, pos = _read_str(buf, pos)
-        v, pos = _read_str(buf, pos)
-        out[k] = v
-    return out, end
+#: a record of the data section holds at least its opcode and length; a chunk at least its fixed fields
+_CHUNK_MIN = 8 + 8 + 8 + 4 + 4 + 8
 
 
 class McapScan:
-    """Schemas, channels, metadata and message locations of one MCAP file."""
+    """Schemas, channels, metadata, message locations and damage of one MCAP file."""
 
     def __init__(self, path: Path):
         self.path = path
@@ -48,13 +60,24 @@ class McapScan:
         self.locs: dict[int, list[tuple[int, np.ndarray]]] = {}
         self.truncated = False
         self.warnings: list[str] = []
-        self.stats_count: int | None = None
+        self.problems: list[Problem] = []
+        self.expected: dict[int, int] | None = None  # messages per channel (intact summary statistics)
+        self.profile = ""
+        self._unsupported: list[str] = []
         try:
             data = path.read_bytes()
         except OSError as exc:
             raise BagError(f"{path}: cannot read: {exc.strerror}") from None
         self._check_magic(data)
         self._scan(data)
+
+    @property
+    def stats_count(self) -> int | None:
+        return None if self.expected is None else sum(self.expected.values())
+
+    def found(self) -> dict[int, int]:
+        """Messages read per channel id."""
+        return {c: sum(len(o) for _, o in v) for c, v in self.locs.items()}
 
     def _check_magic(self, data: bytes) -> None:
         p = self.path
@@ -75,158 +98,302 @@ class McapScan:
             )
         raise NotMcapError(f"{p}: not an MCAP file: starts with {data[:8]!r}, expected {MAGIC!r}")
 
+    def _problem(self, offset: int | None, text: str, loses: bool = True) -> Problem:
+        p = Problem(offset, text, loses)
+        self.problems.append(p)
+        return p
+
+    # ------------------------------------------------------------------------------ data section
     def _scan(self, data: bytes) -> None:
         n = len(data)
         if n < 17:
             raise TruncatedBagError(f"{self.path}: MCAP header record is truncated (file has only {n} bytes)")
-        op, ln = _OPHDR.unpack_from(data, 8)
-        if op != 0x01 or 17 + ln > n:
-            raise TruncatedBagError(
-                f"{self.path}: MCAP header record is truncated or missing (not a complete MCAP file)"
-            )
-        self.profile, _ = _read_str(data, 17)
-        if self.profile not in ("ros2", ""):
-            raise UnsupportedBagError(f"{self.path}: MCAP profile {self.profile!r} is not 'ros2'")
-        footer_ok = n >= 8 + 37 and data[-8:] == MAGIC and data[-37] == 0x02
-        use_index = False
-        if footer_ok:
-            (summary_start,) = _U64.unpack_from(data, n - 37 + 9)
-            if 0 < summary_start < n - 37:
-                self._scan_summary(data, summary_start, n - 37)
-                use_index = bool(self.channels)
-        pos = 17 + ln
-        pending: tuple[int, dict[int, np.ndarray]] | None = None
+        summary, why = read_summary(data)
+        footer = has_footer(data)
+        if why:
+            self._problem(n - 37, f"{why}: the file was read by a linear scan of its records", False)
+        chunk_starts: list[int] = []
+        if summary is not None:
+            self.schemas.update(summary.schemas)
+            self.channels.update(summary.channels)
+            self.expected = summary.counts
+            chunk_starts = sorted(summary.chunks)
+        end = summary.data_end if summary is not None else n
+        pos = self._header(data, end, footer)
+        if pos is None:
+            pos = self._resync(data, 8, end, chunk_starts)
+            if pos is None:
+                pos = end
+        pending: tuple[int, dict[int, np.ndarray], int] | None = None
+        orphan: Problem | None = None  # damaged part whose message indexes may follow
         finished = False
         view = memoryview(data)
-        while True:
-            if pos + 9 > n:
-                break
-            op, ln = _OPHDR.unpack_from(data, pos)
-            body = pos + 9
-            if body + ln > n:
-                break
-            if op == 0x07 and pending is not None:
-                (ch,) = struct.unpack_from("<H", data, body)
-                (nbytes,) = struct.unpack_from("<I", data, body + 2)
-                entries = np.frombuffer(data, "<u8", nbytes // 8, body + 6).reshape(-1, 2)
-                pending[1][ch] = entries[:, 1].astype(np.int64)
+        while pos < end:
+            if pos + 9 > end:
+                bad = "ends inside a record"
             else:
+                op, ln = OPHDR.unpack_from(data, pos)
+                body = pos + 9
+                bad = "" if body + ln <= end else f"has a record (type 0x{op:02x}) running past the end"
+            if bad:
+                nxt = self._resync(data, pos, end, chunk_starts)
+                if nxt is None and not footer:
+                    break  # a cut-off recording: reported as truncated below
                 if pending is not None:
-                    self._finish_chunk(*pending, use_index)
+                    self._finish_chunk(*pending)
                     pending = None
-                if op == 0x06:
-                    seg = self._chunk(view, body, ln)
-                    if seg is not None:
-                        pending = (seg, {})
-                elif op == 0x03:
-                    self._schema(data, body)
-                elif op == 0x04:
-                    self._channel(data, body)
-                elif op == 0x05:
-                    if not self.segments or self.segments[0] is not data:
-                        self.segments.insert(0, data)
-                        self.locs = {c: [(s + 1, o) for s, o in v] for c, v in self.locs.items()}
-                    (ch,) = struct.unpack_from("<H", data, body)
-                    self.locs.setdefault(ch, []).append((0, np.array([pos], dtype=np.int64)))
-                elif op == 0x0C:
-                    name, p2 = _read_str(data, body)
-                    self.metadata[name], _ = _read_map(data, p2)
-                elif op in (0x0F, 0x02):
+                stop = end if nxt is None else nxt
+                what = "to the end of the data section" if nxt is None else f"up to the chunk at byte {stop}"
+                orphan = self._problem(pos, f"the file {bad} at byte {pos}: skipped {what}")
+                if nxt is None:
                     finished = True
                     break
+                pos = nxt
+                continue
+            if op == MESSAGE_INDEX and (pending is not None or orphan is not None):
+                self._message_index(data, body, ln, pending, orphan)
+                pos = body + ln
+                continue
+            if pending is not None:
+                self._finish_chunk(*pending)
+                pending = None
+            orphan = None
+            if op == CHUNK:
+                seg, orphan = self._chunk(view, body, ln)
+                if seg is not None:
+                    pending = (seg, {}, pos)
+                elif not _chunk_framed(data, pos, end):  # its length is damaged too: find the next chunk
+                    nxt = self._resync(data, pos, end, chunk_starts)
+                    if nxt is None:
+                        finished = footer
+                        break
+                    pos = nxt
+                    continue
+            elif op == MESSAGE:
+                self._unchunked(data, pos, ln)
+            elif op in (SCHEMA, CHANNEL, METADATA):
+                self._plain(data, op, body, body + ln)
+            elif op == DATA_END or op == FOOTER:
+                if summary is None or body + ln == end or op == FOOTER:
+                    finished = True
+                    break
+                self._problem(pos, f"a misplaced data-end record at byte {pos} was skipped", False)
+            elif op not in KNOWN_OPCODES and op < 0x80:
+                orphan = self._problem(pos, f"a record of unknown type 0x{op:02x} at byte {pos} was skipped")
+                orphan.counts = {}
             pos = body + ln
         if pending is not None:
-            self._finish_chunk(*pending, use_index and finished)
+            self._finish_chunk(*pending)
+        if summary is not None:
+            finished = True
+        self._close(pos, n, finished, footer)
+
+    def _close(self, pos: int, n: int, finished: bool, footer: bool) -> None:
         if not finished:
             self.truncated = True
             self.warnings.append(
                 f"{self.path}: file is truncated at byte {pos} of {n} (recording was killed?): recovered "
                 "all complete chunks; messages of the last, incomplete chunk are lost"
             )
-        elif not footer_ok:
+        elif not footer:
             self.truncated = True
             self.warnings.append(
                 f"{self.path}: file is truncated after the data section (summary/footer missing): all "
                 "messages recovered"
             )
+        if self._unsupported and not self.segments:
+            raise UnsupportedBagError(f"{self.path}: {self._unsupported[0]}")
+        for p in self.problems:
+            if p.loses and p.counts is not None and not p.counts and self.expected is None:
+                p.loses = False  # an unknown record not followed by message indexes: no chunk was lost
+        known = set(self.channels)
+        orphans = {c: k for c, k in self.found().items() if c not in known}
+        if orphans:
+            p = self._problem(None, "messages of channels whose definition was lost cannot be read")
+            p.counts = orphans
 
-    def _scan_summary(self, data: bytes, start: int, end: int) -> None:
-        pos = start
-        while pos + 9 <= end:
-            op, ln = _OPHDR.unpack_from(data, pos)
-            body = pos + 9
-            if op == 0x03:
-                self._schema(data, body)
-            elif op == 0x04:
-                self._channel(data, body)
-            elif op == 0x0B:
-                (self.stats_count,) = _U64.unpack_from(data, body)
-            pos = body + ln
-
-    def _schema(self, buf, pos: int) -> None:
-        (sid,) = struct.unpack_from("<H", buf, pos)
-        name, pos = _read_str(buf, pos + 2)
-        enc, pos = _read_str(buf, pos)
-        (ln,) = struct.unpack_from("<I", buf, pos)
-        self.schemas[sid] = (name, enc, bytes(buf[pos + 4 : pos + 4 + ln]))
-
-    def _channel(self, buf, pos: int) -> None:
-        cid, sid = struct.unpack_from("<HH", buf, pos)
-        topic, pos = _read_str(buf, pos + 4)
-        enc, pos = _read_str(buf, pos)
-        meta, _ = _read_map(buf, pos)
-        self.channels[cid] = (topic, sid, enc, meta)
-
-    def _chunk(self, view: memoryview, body: int, ln: int) -> int | None:
-        _, _, usize, crc = struct.unpack_from("<QQQI", view, body)
-        comp, p = _read_str(view, body + 28)
-        (rlen,) = _U64.unpack_from(view, p)
-        raw = view[p + 8 : p + 8 + rlen]
-        try:
-            if comp == "":
-                out = bytes(raw)
-            elif comp == "zstd":
-                import zstandard
-
-                out = zstandard.ZstdDecompressor().decompress(raw, max_output_size=usize)
-            elif comp == "lz4":
-                import lz4.frame
-
-                out = lz4.frame.decompress(raw)
-            else:
-                raise UnsupportedBagError(
-                    f"{self.path}: chunk compression {comp!r} is not supported (zstd, lz4, none)"
+    def _header(self, data: bytes, end: int, footer: bool) -> int | None:
+        op, ln = OPHDR.unpack_from(data, 8)
+        if op == HEADER and 17 + ln <= end:
+            try:
+                self.profile, _ = read_str(data, 17, 17 + ln)
+            except RecordError:
+                self._problem(8, "the header record is damaged", False)
+            if self.profile not in ("ros2", ""):
+                self.warnings.append(
+                    f"{self.path}: MCAP profile {self.profile!r} is not 'ros2': read as ros2 (cdr messages)"
                 )
-        except UnsupportedBagError:
-            raise
-        except Exception as exc:  # noqa: BLE001 - corrupt compressed data
-            self.warnings.append(f"{self.path}: skipped a corrupt chunk at byte {body - 9}: {exc}")
-            return None
-        if len(out) != usize or (crc and zlib.crc32(out) != crc):
-            self.warnings.append(f"{self.path}: skipped a chunk with bad size/CRC at byte {body - 9}")
-            return None
-        self.segments.append(out)
-        return len(self.segments) - 1
+            return 17 + ln
+        if not footer:
+            raise TruncatedBagError(
+                f"{self.path}: MCAP header record is truncated or missing (not a complete MCAP file)"
+            )
+        self._problem(8, "the header record is damaged", False)
+        return None
 
-    def _finish_chunk(self, seg: int, index: dict[int, np.ndarray], use_index: bool) -> None:
-        if use_index and index:
-            for ch, offs in index.items():
-                self.locs.setdefault(ch, []).append((seg, offs))
+    def _resync(self, data: bytes, pos: int, end: int, chunk_starts: list[int]) -> int | None:
+        """Start of the next chunk after ``pos``: from the chunk index, else the next well-formed chunk."""
+        if chunk_starts:
+            return next((s for s in chunk_starts if s > pos), None)
+        p = pos
+        while True:
+            p = data.find(b"\x06", p + 1, end)
+            if p < 0:
+                return None
+            if _chunk_framed(data, p, end):
+                return p
+
+    # ------------------------------------------------------------------------------ records
+    def _plain(self, data: bytes, op: int, body: int, stop: int) -> None:
+        try:
+            if op == SCHEMA:
+                sid, schema = read_schema(data, body, stop)
+                self.schemas.setdefault(sid, schema)
+            elif op == CHANNEL:
+                cid, channel = read_channel(data, body, stop)
+                self.channels.setdefault(cid, channel)
+            else:
+                name, p2 = read_str(data, body, stop)
+                self.metadata[name], _ = read_map(data, p2, stop)
+        except RecordError as exc:
+            kind = {SCHEMA: "schema", CHANNEL: "channel", METADATA: "metadata"}[op]
+            self._problem(body - 9, f"a damaged {kind} record at byte {body - 9} was skipped ({exc})", False)
+
+    def _unchunked(self, data: bytes, pos: int, ln: int) -> None:
+        if ln < 22:
+            self._problem(pos, f"a damaged message record at byte {pos} was skipped").counts = {}
             return
+        if not self.segments or self.segments[0] is not data:
+            self.segments.insert(0, data)
+            self.locs = {c: [(s + 1, o) for s, o in v] for c, v in self.locs.items()}
+        ch = data[pos + 9] | (data[pos + 10] << 8)
+        self.locs.setdefault(ch, []).append((0, np.array([pos], dtype=np.int64)))
+
+    def _message_index(self, data, body: int, ln: int, pending, orphan: Problem | None) -> None:
+        try:
+            ch, nbytes = unpack("<HI", data, body, body + ln)
+            if nbytes % 16 or 6 + nbytes != ln:
+                raise RecordError(f"{nbytes} bytes of entries in a record of {ln}")
+        except RecordError:
+            if pending is not None:
+                pending[1][-1] = np.zeros((0, 2), np.int64)  # marks the index as damaged
+            return
+        entries = np.frombuffer(data, "<u8", nbytes // 8, body + 6).reshape(-1, 2).astype(np.int64)
+        if pending is not None:
+            pending[1][ch] = entries
+        else:
+            orphan.add_index(ch, len(entries))
+
+    def _chunk(self, view: memoryview, body: int, ln: int) -> tuple[int | None, Problem | None]:
+        at = body - 9
+        stop = body + ln
+        try:
+            _, _, usize, crc = unpack("<QQQI", view, body, stop)
+            comp, p = read_str(view, body + 28, stop)
+            (rlen,) = unpack(U64, view, p, stop)
+            if p + 8 + rlen > stop:
+                raise RecordError(f"its records ({rlen} bytes) run past its end")
+            raw = view[p + 8 : p + 8 + rlen]
+            if comp not in COMPRESSIONS:
+                self._unsupported.append(f"chunk compression {comp!r} is not supported (zstd, lz4, none)")
+                raise RecordError(f"unknown compression {comp!r}")
+            out = _decompress(comp, raw, usize)
+        except Exception as exc:  # noqa: BLE001 - damaged fields or compressed data
+            why = str(exc).strip() or type(exc).__name__
+            return None, self._problem(at, f"a chunk at byte {at} cannot be read ({why}): skipped")
+        if crc and zlib.crc32(out) != crc:
+            return None, self._problem(at, f"a chunk at byte {at} fails its CRC check: skipped")
+        if not crc and len(out) != usize:
+            return None, self._problem(at, f"a chunk at byte {at} has the wrong size: skipped")
+        self.segments.append(out)
+        return len(self.segments) - 1, None
+
+    def _finish_chunk(self, seg: int, index: dict[int, np.ndarray], at: int) -> None:
         buf = self.segments[seg]
+        if index and self._index_matches(buf, index):
+            if not set(index) <= set(self.channels):  # no summary: the definitions are in the chunks
+                self._scan_chunk(seg, buf, definitions_only=True)
+            for ch, entries in index.items():
+                self.locs.setdefault(ch, []).append((seg, entries[:, 1].copy()))
+            return
+        if index:
+            self._problem(
+                at,
+                f"the message index of the chunk at byte {at} is damaged: the chunk was read by a linear scan "
+                "of its records",
+                False,
+            )
+        self._scan_chunk(seg, buf)
+
+    def _index_matches(self, buf: bytes, index: dict[int, np.ndarray]) -> bool:
+        """Every index entry points to a message record of its channel with its log time, once."""
+        arr = np.frombuffer(buf, np.uint8)
+        n = len(buf)
+        if -1 in index:
+            return False
+        for ch, e in index.items():
+            if not len(e):
+                continue
+            offs = e[:, 1]
+            if offs.min() < 0 or offs.max() + 31 > n or len(np.unique(offs)) != len(offs):
+                return False
+            if np.any(arr[offs] != MESSAGE) or np.any(
+                (arr[offs + 9] | (arr[offs + 10].astype(int) << 8)) != ch
+            ):
+                return False
+            win = np.lib.stride_tricks.sliding_window_view(arr, 8)
+            ln = np.ascontiguousarray(win[offs + 1]).view("<u8")[:, 0].astype(np.int64)
+            log = np.ascontiguousarray(win[offs + 15]).view("<u8")[:, 0].astype(np.int64)
+            if np.any(ln < 22) or np.any(offs + 9 + ln > n) or np.any(log != e[:, 0]):
+                return False
+        return True
+
+    def _scan_chunk(self, seg: int, buf: bytes, definitions_only: bool = False) -> None:
         n = len(buf)
         pos = 0
         found: dict[int, list[int]] = {}
         while pos + 9 <= n:
-            op, ln = _OPHDR.unpack_from(buf, pos)
+            op, ln = OPHDR.unpack_from(buf, pos)
             if pos + 9 + ln > n:
+                self._problem(
+                    None, f"a chunk's records are damaged after {len(found)} messages: the rest was skipped"
+                )
                 break
-            if op == 0x05:
+            if op == MESSAGE and ln >= 22 and not definitions_only:
                 found.setdefault(buf[pos + 9] | (buf[pos + 10] << 8), []).append(pos)
-            elif op == 0x03:
-                self._schema(buf, pos + 9)
-            elif op == 0x04:
-                self._channel(buf, pos + 9)
+            elif op in (SCHEMA, CHANNEL):
+                self._plain(buf, op, pos + 9, pos + 9 + ln)
             pos += 9 + ln
         for ch, offs in found.items():
             self.locs.setdefault(ch, []).append((seg, np.array(offs, dtype=np.int64)))
+
+
+def _decompress(comp: str, raw, usize: int) -> bytes:
+    if comp == "":
+        return bytes(raw)
+    if comp == "zstd":
+        import zstandard
+
+        # a damaged size field must not make the decompressor reserve gigabytes
+        return zstandard.ZstdDecompressor().decompress(
+            raw, max_output_size=min(usize, 256 * len(raw) + (1 << 20))
+        )
+    import lz4.frame
+
+    return lz4.frame.decompress(raw)
+
+
+def _chunk_framed(data: bytes, p: int, end: int) -> bool:
+    """A chunk record starts at ``p``: its length equals the sum of its fields and it ends in the data."""
+    if p + 9 + _CHUNK_MIN > end:
+        return False
+    _, ln = OPHDR.unpack_from(data, p)
+    body = p + 9
+    if ln < _CHUNK_MIN or body + ln > end:
+        return False
+    try:
+        comp, q = read_str(data, body + 28, body + ln)
+        (rlen,) = unpack(U64, data, q, body + ln)
+    except RecordError:
+        return False
+    return comp in COMPRESSIONS and q + 8 + rlen == body + ln
