@@ -20,6 +20,7 @@ import numpy as np
 
 from .damage import Problem
 from .errors import BagError, NotMcapError, TruncatedBagError, UnsupportedBagError
+from .mcap_index import index_matches
 from .mcap_records import (
     CHANNEL,
     CHUNK,
@@ -64,6 +65,9 @@ class McapScan:
         self.expected: dict[int, int] | None = None  # messages per channel (intact summary statistics)
         self.profile = ""
         self._unsupported: list[str] = []
+        self._loose: list[int] = []  # message records outside chunks
+        self._chunks_seen = False
+        self._last_chunk = 8  # start of the last chunk record read (resynchronisation starts after it)
         try:
             data = path.read_bytes()
         except OSError as exc:
@@ -129,28 +133,36 @@ class McapScan:
         finished = False
         view = memoryview(data)
         while pos < end:
-            if pos + 9 > end:
-                bad = "ends inside a record"
-            else:
-                op, ln = OPHDR.unpack_from(data, pos)
-                body = pos + 9
-                bad = "" if body + ln <= end else f"has a record (type 0x{op:02x}) running past the end"
+            op, ln, bad = _frame(data, pos, end)
+            body = pos + 9
+            if op == CHUNK:
+                ln, bad = self._chunk_length(data, pos, ln, bad, end)
             if bad:
                 nxt = self._resync(data, pos, end, chunk_starts)
                 if nxt is None and not footer:
+                    if pending is not None:  # its message indexes may be cut off: read it by a scan
+                        pending = (pending[0], {}, pending[2])
                     break  # a cut-off recording: reported as truncated below
                 if pending is not None:
+                    pending[1][-1] = np.zeros((0, 2), np.int64)  # its message indexes may be incomplete
                     self._finish_chunk(*pending)
                     pending = None
-                stop = end if nxt is None else nxt
-                what = "to the end of the data section" if nxt is None else f"up to the chunk at byte {stop}"
-                orphan = self._problem(pos, f"the file {bad} at byte {pos}: skipped {what}")
+                what = (
+                    "the rest was skipped" if nxt is None else f"reading resumed at the chunk at byte {nxt}"
+                )
+                orphan = self._problem(pos, f"the file {bad} at byte {pos}: {what}")
+                if op in (MESSAGE_INDEX, METADATA, SCHEMA, CHANNEL):
+                    orphan.counts = {}  # no messages in this record; a skipped chunk is counted by its indexes
                 if nxt is None:
                     finished = True
                     break
                 pos = nxt
                 continue
-            if op == MESSAGE_INDEX and (pending is not None or orphan is not None):
+            if op == MESSAGE_INDEX:
+                if pending is None and orphan is None:
+                    orphan = self._problem(
+                        pos, f"message indexes at byte {pos} follow no readable chunk: it is lost"
+                    )
                 self._message_index(data, body, ln, pending, orphan)
                 pos = body + ln
                 continue
@@ -159,10 +171,12 @@ class McapScan:
                 pending = None
             orphan = None
             if op == CHUNK:
+                self._last_chunk = pos
+                self._chunks_seen = True
                 seg, orphan = self._chunk(view, body, ln)
                 if seg is not None:
                     pending = (seg, {}, pos)
-                elif not _chunk_framed(data, pos, end):  # its length is damaged too: find the next chunk
+                elif not _record_follows(data, body + ln, end):  # its length is damaged too
                     nxt = self._resync(data, pos, end, chunk_starts)
                     if nxt is None:
                         finished = footer
@@ -184,6 +198,7 @@ class McapScan:
             pos = body + ln
         if pending is not None:
             self._finish_chunk(*pending)
+        self._add_unchunked(data, bool(chunk_starts) or self._chunks_seen)
         if summary is not None:
             finished = True
         self._close(pos, n, finished, footer)
@@ -231,11 +246,26 @@ class McapScan:
         self._problem(8, "the header record is damaged", False)
         return None
 
+    def _chunk_length(self, data: bytes, pos: int, ln: int, bad: str, end: int) -> tuple[int, str]:
+        """(length, framing problem) of the chunk record at ``pos``: when its length field disagrees with
+        the lengths inside it and those end where the next record starts, the length field was damaged."""
+        inner = _chunk_inner_end(data, pos, end)
+        if inner is None or inner == pos + 9 + ln or not _record_follows(data, inner, end):
+            return ln, bad
+        self._problem(
+            pos,
+            f"the length of the chunk at byte {pos} is damaged: its end was found from its contents",
+            False,
+        )
+        return inner - pos - 9, ""
+
     def _resync(self, data: bytes, pos: int, end: int, chunk_starts: list[int]) -> int | None:
-        """Start of the next chunk after ``pos``: from the chunk index, else the next well-formed chunk."""
+        """Start of the next chunk after the last chunk read (a damaged length may have stepped over
+        chunks before ``pos``): from the chunk index, else the next well-formed chunk record."""
+        after = self._last_chunk
         if chunk_starts:
-            return next((s for s in chunk_starts if s > pos), None)
-        p = pos
+            return next((s for s in chunk_starts if s > after), None)
+        p = after
         while True:
             p = data.find(b"\x06", p + 1, end)
             if p < 0:
@@ -262,12 +292,28 @@ class McapScan:
     def _unchunked(self, data: bytes, pos: int, ln: int) -> None:
         if ln < 22:
             self._problem(pos, f"a damaged message record at byte {pos} was skipped").counts = {}
+        else:
+            self._loose.append(pos)
+
+    def _add_unchunked(self, data: bytes, chunked: bool) -> None:
+        """Messages outside chunks: read in a file without chunks; in a chunked file (every ROS 2 bag)
+        such a record is a damaged one (a message index or chunk whose type byte changed) and skipped."""
+        if not self._loose:
             return
-        if not self.segments or self.segments[0] is not data:
-            self.segments.insert(0, data)
-            self.locs = {c: [(s + 1, o) for s, o in v] for c, v in self.locs.items()}
-        ch = data[pos + 9] | (data[pos + 10] << 8)
-        self.locs.setdefault(ch, []).append((0, np.array([pos], dtype=np.int64)))
+        if chunked:
+            for pos in self._loose:
+                self._problem(
+                    pos, f"a message record outside the chunks at byte {pos} (damaged?) was skipped", False
+                )
+            return
+        self.segments.insert(0, data)
+        self.locs = {c: [(s + 1, o) for s, o in v] for c, v in self.locs.items()}
+        offs = np.array(self._loose, dtype=np.int64)
+        chans = np.frombuffer(data, np.uint8)[offs + 9] | (
+            np.frombuffer(data, np.uint8)[offs + 10].astype(np.int64) << 8
+        )
+        for ch in np.unique(chans):
+            self.locs.setdefault(int(ch), []).append((0, offs[chans == ch]))
 
     def _message_index(self, data, body: int, ln: int, pending, orphan: Problem | None) -> None:
         try:
@@ -310,7 +356,7 @@ class McapScan:
 
     def _finish_chunk(self, seg: int, index: dict[int, np.ndarray], at: int) -> None:
         buf = self.segments[seg]
-        if index and self._index_matches(buf, index):
+        if index and index_matches(buf, index):
             if not set(index) <= set(self.channels):  # no summary: the definitions are in the chunks
                 self._scan_chunk(seg, buf, definitions_only=True)
             for ch, entries in index.items():
@@ -324,29 +370,6 @@ class McapScan:
                 False,
             )
         self._scan_chunk(seg, buf)
-
-    def _index_matches(self, buf: bytes, index: dict[int, np.ndarray]) -> bool:
-        """Every index entry points to a message record of its channel with its log time, once."""
-        arr = np.frombuffer(buf, np.uint8)
-        n = len(buf)
-        if -1 in index:
-            return False
-        for ch, e in index.items():
-            if not len(e):
-                continue
-            offs = e[:, 1]
-            if offs.min() < 0 or offs.max() + 31 > n or len(np.unique(offs)) != len(offs):
-                return False
-            if np.any(arr[offs] != MESSAGE) or np.any(
-                (arr[offs + 9] | (arr[offs + 10].astype(int) << 8)) != ch
-            ):
-                return False
-            win = np.lib.stride_tricks.sliding_window_view(arr, 8)
-            ln = np.ascontiguousarray(win[offs + 1]).view("<u8")[:, 0].astype(np.int64)
-            log = np.ascontiguousarray(win[offs + 15]).view("<u8")[:, 0].astype(np.int64)
-            if np.any(ln < 22) or np.any(offs + 9 + ln > n) or np.any(log != e[:, 0]):
-                return False
-        return True
 
     def _scan_chunk(self, seg: int, buf: bytes, definitions_only: bool = False) -> None:
         n = len(buf)
@@ -383,17 +406,37 @@ def _decompress(comp: str, raw, usize: int) -> bytes:
     return lz4.frame.decompress(raw)
 
 
+def _frame(data: bytes, pos: int, end: int) -> tuple[int, int, str]:
+    """(opcode, length, problem) of the record at ``pos``; the problem is "" when it fits before ``end``."""
+    if pos + 9 > end:
+        return -1, 0, "ends inside a record"
+    op, ln = OPHDR.unpack_from(data, pos)
+    return op, ln, "" if pos + 9 + ln <= end else f"has a record (type 0x{op:02x}) running past the end"
+
+
+def _record_follows(data: bytes, p: int, end: int) -> bool:
+    """A record of a known type that fits before ``end`` starts at ``p`` (or the data section ends there)."""
+    if p == end:
+        return True
+    op, ln, bad = _frame(data, p, end)
+    return not bad and op in KNOWN_OPCODES
+
+
+def _chunk_inner_end(data: bytes, p: int, end: int) -> int | None:
+    """Where the chunk record at ``p`` ends by the lengths inside it (None when they do not fit)."""
+    body = p + 9
+    try:
+        comp, q = read_str(data, body + 28, end)
+        (rlen,) = unpack(U64, data, q, end)
+    except RecordError:
+        return None
+    stop = q + 8 + rlen
+    return stop if comp in COMPRESSIONS and stop - body >= _CHUNK_MIN and stop <= end else None
+
+
 def _chunk_framed(data: bytes, p: int, end: int) -> bool:
     """A chunk record starts at ``p``: its length equals the sum of its fields and it ends in the data."""
-    if p + 9 + _CHUNK_MIN > end:
+    if p + 9 + _CHUNK_MIN > end or data[p] != CHUNK:
         return False
     _, ln = OPHDR.unpack_from(data, p)
-    body = p + 9
-    if ln < _CHUNK_MIN or body + ln > end:
-        return False
-    try:
-        comp, q = read_str(data, body + 28, body + ln)
-        (rlen,) = unpack(U64, data, q, body + ln)
-    except RecordError:
-        return False
-    return comp in COMPRESSIONS and q + 8 + rlen == body + ln
+    return _chunk_inner_end(data, p, end) == p + 9 + ln
