@@ -2,8 +2,9 @@
 
     friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems;
                                             status complete, TRUNCATED or DAMAGED (messages lost)
-    friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording as a
-                                            finished bag (summary, statistics, metadata.yaml)
+    friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording (or of
+                                            a damaged bag) as a finished bag (summary, statistics,
+                                            metadata.yaml)
 
 Unreadable input prints one line ``error: ...`` and exits with code 2 (no traceback).
 """
@@ -97,7 +98,12 @@ def _recover(path: str, out: str, overwrite: bool) -> int:
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    print(f"wrote {n} messages to {out}" + (" (input was truncated)" if bag.truncated else ""))
+    notes = ["input was truncated"] if bag.truncated else []
+    if bag.damaged:
+        from friction_ros.core.bag.damage import describe_loss
+
+        notes.append(f"input was damaged: {describe_loss(bag.lost)}")
+    print(f"wrote {n} messages to {out}" + (f" ({'; '.join(notes)})" if notes else ""))
     return 0
 
 
