@@ -68,6 +68,7 @@ class McapScan:
         self._loose: list[int] = []  # message records outside chunks
         self._chunks_seen = False
         self._last_chunk = 8  # start of the last chunk record read (resynchronisation starts after it)
+        self._last_resync = 8  # where the last resynchronisation went
         try:
             data = path.read_bytes()
         except OSError as exc:
@@ -88,6 +89,9 @@ class McapScan:
         if not data:
             raise NotMcapError(f"{p}: file is empty (0 bytes): not an MCAP bag")
         if data[:8] == MAGIC:
+            return
+        if has_footer(data):  # an MCAP file whose first bytes were damaged: read what follows them
+            self._problem(0, "the magic bytes at the start of the file are damaged", False)
             return
         if len(data) < 8 and MAGIC.startswith(data):
             raise TruncatedBagError(f"{p}: file is truncated inside the MCAP magic bytes ({len(data)} bytes)")
@@ -193,8 +197,7 @@ class McapScan:
                     break
                 self._problem(pos, f"a misplaced data-end record at byte {pos} was skipped", False)
             elif op not in KNOWN_OPCODES and op < 0x80:
-                orphan = self._problem(pos, f"a record of unknown type 0x{op:02x} at byte {pos} was skipped")
-                orphan.counts = {}
+                orphan = self._unknown_record(orphan_at=pos, op=op, stop=body + ln)
             pos = body + ln
         if pending is not None:
             self._finish_chunk(*pending)
@@ -246,6 +249,20 @@ class McapScan:
         self._problem(8, "the header record is damaged", False)
         return None
 
+    def _unknown_record(self, orphan_at: int, op: int, stop: int) -> Problem:
+        """A record of a type the specification does not define (a damaged type byte, or zeroed bytes):
+        skipped; a run of them (e.g. a zeroed block) is one problem."""
+        last = self.problems[-1] if self.problems else None
+        if last is not None and last.end == orphan_at:
+            last.text = f"records of unknown type from byte {last.offset} to {stop} were skipped"
+        else:
+            last = self._problem(
+                orphan_at, f"a record of unknown type 0x{op:02x} at byte {orphan_at} was skipped"
+            )
+            last.counts = {}
+        last.end = stop
+        return last
+
     def _chunk_length(self, data: bytes, pos: int, ln: int, bad: str, end: int) -> tuple[int, str]:
         """(length, framing problem) of the chunk record at ``pos``: when its length field disagrees with
         the lengths inside it and those end where the next record starts, the length field was damaged."""
@@ -262,7 +279,14 @@ class McapScan:
     def _resync(self, data: bytes, pos: int, end: int, chunk_starts: list[int]) -> int | None:
         """Start of the next chunk after the last chunk read (a damaged length may have stepped over
         chunks before ``pos``): from the chunk index, else the next well-formed chunk record."""
-        after = self._last_chunk
+        after = max(self._last_chunk, self._last_resync)  # strictly forward: the scan always ends
+        nxt = self._next_chunk(data, after, end, chunk_starts)
+        if nxt is not None:
+            self._last_resync = nxt
+        return nxt
+
+    @staticmethod
+    def _next_chunk(data: bytes, after: int, end: int, chunk_starts: list[int]) -> int | None:
         if chunk_starts:
             return next((s for s in chunk_starts if s > after), None)
         p = after
