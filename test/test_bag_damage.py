@@ -233,3 +233,19 @@ def test_fuzz_flips_and_truncations(pendulum, tmp_path):
         assert f.read_bytes() == bytes(b)  # the input is never changed
     print(f"200 damaged copies: {tally}")
     assert sum(tally.values()) == 200 and tally["warned"] > 150
+
+
+def test_zeroed_blocks(pendulum, tmp_path):
+    """A disk or copy error zeroes whole 512-byte blocks: every block of the file, one at a time."""
+    data = pendulum.read_bytes()
+    full = len(read_bag(pendulum)["/joint_states"])
+    f = tmp_path / "zeroed.mcap"
+    for start in range(0, len(data), 512):
+        b = bytearray(data)
+        b[start : start + 512] = bytes(len(b[start : start + 512]))
+        f.write_bytes(bytes(b))
+        bag = read_bag(f)
+        n = len(bag["/joint_states"]) if "/joint_states" in bag else 0
+        assert bag.damaged or (bag.truncated and n == full), start  # the last block holds the footer
+        if n < full:
+            assert bag.lost_count is None or n + bag.lost_count == full, start

@@ -216,8 +216,8 @@ class McapScan:
         elif not footer:
             self.truncated = True
             self.warnings.append(
-                f"{self.path}: file is truncated after the data section (summary/footer missing): all "
-                "messages recovered"
+                f"{self.path}: file is truncated or damaged after the data section (no valid summary/footer): "
+                "all messages recovered"
             )
         if self._unsupported and not self.segments:
             raise UnsupportedBagError(f"{self.path}: {self._unsupported[0]}")
