@@ -154,7 +154,7 @@ class McapScan:
                 what = (
                     "the rest was skipped" if nxt is None else f"reading resumed at the chunk at byte {nxt}"
                 )
-                orphan = self._problem(pos, f"the file {bad} at byte {pos}: {what}")
+                orphan = self._problem(pos, f"{bad}: {what}")
                 if op in (MESSAGE_INDEX, METADATA, SCHEMA, CHANNEL):
                     orphan.counts = {}  # no messages in this record; a skipped chunk is counted by its indexes
                 if nxt is None:
@@ -165,7 +165,8 @@ class McapScan:
             if op == MESSAGE_INDEX:
                 if pending is None and orphan is None:
                     orphan = self._problem(
-                        pos, f"message indexes at byte {pos} follow no readable chunk: it is lost"
+                        pos,
+                        f"message indexes at byte {pos} follow no readable chunk: the chunk before them is lost",
                     )
                 self._message_index(data, body, ln, pending, orphan)
                 pos = body + ln
@@ -433,9 +434,15 @@ def _decompress(comp: str, raw, usize: int) -> bytes:
 def _frame(data: bytes, pos: int, end: int) -> tuple[int, int, str]:
     """(opcode, length, problem) of the record at ``pos``; the problem is "" when it fits before ``end``."""
     if pos + 9 > end:
-        return -1, 0, "ends inside a record"
+        return -1, 0, f"the data ends inside a record at byte {pos}"
     op, ln = OPHDR.unpack_from(data, pos)
-    return op, ln, "" if pos + 9 + ln <= end else f"has a record (type 0x{op:02x}) running past the end"
+    return (
+        op,
+        ln,
+        ""
+        if pos + 9 + ln <= end
+        else f"a record (type 0x{op:02x}) at byte {pos} runs past the end of the data",
+    )
 
 
 def _record_follows(data: bytes, p: int, end: int) -> bool:
