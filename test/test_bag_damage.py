@@ -105,6 +105,9 @@ def test_chunk_failing_its_crc_is_counted_in_info_and_fit(pendulum, tmp_path):
     assert bag.damaged and bag.lost == {"/joint_states": n_lost} and bag.lost_count == n_lost
     assert len(bag["/joint_states"]) == 1170 - n_lost
     assert any(f"chunk at byte {ch.chunk_start_offset} fails its CRC check" in w for w in bag.warnings)
+    t0 = int(read_bag(pendulum)["/joint_states"].log_time[0])  # when the lost messages were logged
+    a, b = (ch.message_start_time - t0) * 1e-9, (ch.message_end_time - t0) * 1e-9
+    assert any(f"messages logged {a:.3f} s to {b:.3f} s after the start" in w for w in bag.warnings)
     rc, out, _ = _run(bag_cli.main, ["info", str(f)])
     assert rc == 0 and f"status:   DAMAGED: {n_lost} messages lost (/joint_states {n_lost})" in out
     data = load_log(f)

@@ -22,6 +22,7 @@ class Problem:
     loses: bool  # messages may have been lost with it
     counts: dict[int, int] | None = None  # channel id -> messages it held (message indexes); None = unknown
     end: int | None = None  # byte where a run of unknown records ends (to merge the next one into it)
+    span: tuple[int, int] | None = None  # log times of the first and last message it held [ns]
 
     def add_index(self, channel: int, n: int) -> None:
         """A message index record that followed the damaged part: it held ``n`` messages of ``channel``."""

@@ -69,6 +69,8 @@ class McapScan:
         self._chunks_seen = False
         self._last_chunk = 8  # start of the last chunk record read (resynchronisation starts after it)
         self._last_resync = 8  # where the last resynchronisation went
+        self._chunk_index: dict[int, tuple[int, list[int], int, int]] = {}  # of an intact summary
+        self._start_time: int | None = None  # log time of the file's first message [ns]
         try:
             data = path.read_bytes()
         except OSError as exc:
@@ -122,6 +124,8 @@ class McapScan:
             self._problem(n - 37, f"{why}: the file was read by a linear scan of its records", False)
         chunk_starts: list[int] = []
         if summary is not None:
+            self._chunk_index = summary.chunks
+            self._start_time = summary.start_time
             self.schemas.update(summary.schemas)
             self.channels.update(summary.channels)
             self.expected = summary.counts
@@ -225,11 +229,23 @@ class McapScan:
         for p in self.problems:
             if p.loses and p.counts is not None and not p.counts and self.expected is None:
                 p.loses = False  # an unknown record not followed by message indexes: no chunk was lost
+        self._say_when()
         known = set(self.channels)
         orphans = {c: k for c, k in self.found().items() if c not in known}
         if orphans:
             p = self._problem(None, "messages of channels whose definition was lost cannot be read")
             p.counts = orphans
+
+    def _say_when(self) -> None:
+        """Add to each lost chunk's problem when its messages were logged, in s after the file's start."""
+        spans = [p for p in self.problems if p.span]
+        if not spans:
+            return
+        start = self._start_time if self._start_time is not None else min(p.span[0] for p in spans)
+        for p in spans:
+            a, b = ((t - start) * 1e-9 for t in p.span)
+            if 0 <= a <= b < 1e7:  # plausible (the chunk header's times are not covered by its CRC)
+                p.text += f" (messages logged {a:.3f} s to {b:.3f} s after the start of the file)"
 
     def _header(self, data: bytes, end: int, footer: bool) -> int | None:
         op, ln = OPHDR.unpack_from(data, 8)
@@ -358,8 +374,10 @@ class McapScan:
     def _chunk(self, view: memoryview, body: int, ln: int) -> tuple[int | None, Problem | None]:
         at = body - 9
         stop = body + ln
+        span = self._chunk_index[at][2:] if at in self._chunk_index else None
         try:
-            _, _, usize, crc = unpack("<QQQI", view, body, stop)
+            t0, t1, usize, crc = unpack("<QQQI", view, body, stop)
+            span = span or (t0, t1)
             comp, p = read_str(view, body + 28, stop)
             (rlen,) = unpack(U64, view, p, stop)
             if p + 8 + rlen > stop:
@@ -371,13 +389,20 @@ class McapScan:
             out = _decompress(comp, raw, usize)
         except Exception as exc:  # noqa: BLE001 - damaged fields or compressed data
             why = str(exc).strip() or type(exc).__name__
-            return None, self._problem(at, f"a chunk at byte {at} cannot be read ({why}): skipped")
+            return None, self._lost_chunk(at, f"cannot be read ({why})", span)
         if crc and zlib.crc32(out) != crc:
-            return None, self._problem(at, f"a chunk at byte {at} fails its CRC check: skipped")
+            return None, self._lost_chunk(at, "fails its CRC check", span)
         if not crc and len(out) != usize:
-            return None, self._problem(at, f"a chunk at byte {at} has the wrong size: skipped")
+            return None, self._lost_chunk(at, "has the wrong size", span)
+        if self._start_time is None or (not self._chunk_index and t0 < self._start_time):
+            self._start_time = t0  # no statistics: the earliest readable chunk
         self.segments.append(out)
         return len(self.segments) - 1, None
+
+    def _lost_chunk(self, at: int, why: str, span: tuple[int, int] | None) -> Problem:
+        p = self._problem(at, f"a chunk at byte {at} {why}: skipped")
+        p.span = span if span and span[0] <= span[1] else None
+        return p
 
     def _finish_chunk(self, seg: int, index: dict[int, np.ndarray], at: int) -> None:
         buf = self.segments[seg]

@@ -42,7 +42,9 @@ class Summary:
     channels: dict[int, tuple[str, int, str, dict]] = field(default_factory=dict)
     counts: dict[int, int] | None = None  # messages per channel id (statistics record)
     total: int | None = None  # message count of the statistics record
-    chunks: dict[int, tuple[int, list[int]]] = field(default_factory=dict)  # start -> (length, channel ids)
+    start_time: int | None = None  # log time of the first message [ns] (statistics record)
+    #: chunk start -> (length, channel ids, log time of its first and of its last message [ns])
+    chunks: dict[int, tuple[int, list[int], int, int]] = field(default_factory=dict)
 
 
 def has_footer(data: bytes) -> bool:
@@ -95,13 +97,14 @@ def _parse(data: bytes, pos: int, end: int, out: Summary) -> None:
             out.channels[cid] = channel
         elif op == STATISTICS:
             (out.total,) = unpack("<Q", data, body, stop)
+            (out.start_time,) = unpack("<Q", data, body + 26, stop)
             out.counts, _ = read_id_counts(data, body + 42, stop)
         elif op == CHUNK_INDEX:
-            _, _, cstart, clen = unpack("<QQQQ", data, body, stop)
+            t0, t1, cstart, clen = unpack("<QQQQ", data, body, stop)
             channels, p = read_id_counts(data, body + 32, stop)
             _, p = read_str(data, p + 8, stop)  # message index length, compression
             unpack("<QQ", data, p, stop)  # compressed and uncompressed size
             if not 8 < cstart or cstart + clen > out.data_end:
                 raise RecordError(f"chunk index points to byte {cstart}, outside the data section")
-            out.chunks[cstart] = (clen, sorted(channels))
+            out.chunks[cstart] = (clen, sorted(channels), t0, t1)
         pos = stop
