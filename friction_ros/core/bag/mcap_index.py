@@ -43,9 +43,10 @@ def index_matches(buf: bytes, index: dict[int, np.ndarray]) -> bool:
         ends_all.append(offs + 9 + ln)
     if not offs_all:
         return _no_message_between(buf, 0, n)
-    offs = np.concatenate(offs_all)
-    order = np.argsort(offs, kind="stable")
-    offs, ends = offs[order], np.concatenate(ends_all)[order]
+    offs, ends = np.concatenate(offs_all), np.concatenate(ends_all)
+    if len(offs_all) > 1 or np.any(offs[1:] < offs[:-1]):  # one channel in write order needs no sort
+        order = np.argsort(offs, kind="stable")
+        offs, ends = offs[order], ends[order]
     nxt = np.append(offs[1:], n)
     if np.any(ends > nxt):  # overlapping or repeated entries
         return False
