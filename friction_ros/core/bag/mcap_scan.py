@@ -78,10 +78,6 @@ class McapScan:
         self._check_magic(data)
         self._scan(data)
 
-    @property
-    def stats_count(self) -> int | None:
-        return None if self.expected is None else sum(self.expected.values())
-
     def found(self) -> dict[int, int]:
         """Messages read per channel id."""
         return {c: sum(len(o) for _, o in v) for c, v in self.locs.items()}
