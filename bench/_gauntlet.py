@@ -90,13 +90,19 @@ def _fit_one(label, files, load, truth, models, residual) -> dict:
     row["fit_s"] = time.perf_counter() - t0
     rec = res.recommended
     nmse = {n: float(m.metrics.get("nmse_percent", math.nan)) for n, m in res.models.items()}
+    base = res.models.get("baseline")
     row.update(
         recommended=rec,
         nmse_percent=nmse.get(rec, math.nan) if rec else math.nan,
+        rel_error_percent=float(res.models[rec].metrics.get("rel_error_percent", math.nan))
+        if rec
+        else math.nan,
+        baseline_nmse_percent=nmse.get("baseline", math.nan),
+        beats_baseline=None if rec in (None, "baseline") else nmse[rec] < nmse.get("baseline", math.inf),
+        baseline_fitted=bool(base and base.fitted),
+        status={n: m.status for n, m in res.models.items()},
+        reason=(res.recommendation or {}).get("reason", ""),
         nmse_all=nmse,
-        worst_model=max(nmse, key=lambda n: nmse[n] if math.isfinite(nmse[n]) else math.inf)
-        if nmse
-        else None,
         verdict="explains little" if (res.options.get("verdict") or {}).get("explains_little") else "ok",
         warnings=list(res.warnings),
         load_terms=res.options.get("load_terms"),
@@ -142,6 +148,9 @@ def gauntlet(quick: bool) -> dict:
                     "-",
                     "-",
                     "-",
+                    "-",
+                    "-",
+                    "-",
                     "fails",
                     "-",
                     "-",
@@ -149,7 +158,12 @@ def gauntlet(quick: bool) -> dict:
                 ]
             )
             continue
-        worst = r["worst_model"]
+        withheld = [f"{n} {st}" for n, st in r["status"].items() if st != "fitted"]
+        vs_base = (
+            "is baseline"
+            if r["recommended"] == "baseline"
+            else ("none" if r["recommended"] is None else ("beats" if r["beats_baseline"] else "NO"))
+        )
         table.append(
             [
                 r["log"],
@@ -157,7 +171,10 @@ def gauntlet(quick: bool) -> dict:
                 f"{r['seconds']:.1f}",
                 r["recommended"] or "-",
                 _cell(r["nmse_percent"]),
-                f"{worst} {_cell(r['nmse_all'][worst])}" if worst else "-",
+                _cell(r["rel_error_percent"]),
+                _cell(r["baseline_nmse_percent"]),
+                vs_base,
+                ", ".join(withheld) or "-",
                 r["verdict"],
                 str(len(r["warnings"])),
                 " / ".join(
@@ -171,7 +188,8 @@ def gauntlet(quick: bool) -> dict:
         )
     print_table(
         f"Gauntlet: fit_records ({', '.join(models)}; residual {residual}) on every class of log, "
-        "validation NMSE %; worst = the model with the highest NMSE (a diverged fit shows there); "
+        "validation NMSE % and relative error %; the inverse-dynamics baseline's NMSE and whether the "
+        "recommendation beats it; models withheld (not fitted / diverged: no figures); "
         "Coulomb/viscous of the recommended model vs the truth (the log's own units)",
         [
             "log",
@@ -179,7 +197,10 @@ def gauntlet(quick: bool) -> dict:
             "seconds",
             "recommended",
             "NMSE %",
-            "worst model NMSE %",
+            "rel.err %",
+            "baseline NMSE %",
+            "vs baseline",
+            "withheld",
             "verdict",
             "warnings",
             "fc / fv fit vs truth",

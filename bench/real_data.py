@@ -51,8 +51,9 @@ from _gauntlet import gauntlet  # noqa: E402
 
 from friction_ros.core.friction.learned_residual import LearnedResidual  # noqa: E402
 from friction_ros.core.identification.csv_loading import load_csv  # noqa: E402
+from friction_ros.core.identification.fit_logs import cross_validate_runs  # noqa: E402
 from friction_ros.core.identification.models import spec_for  # noqa: E402
-from friction_ros.core.identification.pipeline import cross_validate_runs, fit_records  # noqa: E402
+from friction_ros.core.identification.pipeline import fit_records  # noqa: E402
 from friction_ros.core.identification.realistic_joint import (  # noqa: E402
     JointTruth,
     pooled_measured_input_nmse_percent,

@@ -220,7 +220,7 @@ def test_cli_refuses_gravity_on_a_prismatic_joint(tmp_path, capsys):
 def test_scaled_record_keeps_units_metadata():
     r = record(1, 1)
     r2 = dataclasses.replace(r, meta={**r.meta, "joint_type": "prismatic"})
-    from friction_ros.core.identification.pipeline import log_joint_type
+    from friction_ros.core.identification.fit_logs import log_joint_type
 
     assert log_joint_type("auto", [r2]) == ("prismatic", "")
     assert log_joint_type("revolute", [r2])[0] == "revolute"

@@ -14,7 +14,8 @@ from friction_ros.core.experiment.experiment_sizing import experiment_config
 from friction_ros.core.experiment.joint_scale import JointScale
 from friction_ros.core.identification import metrics
 from friction_ros.core.identification.breakaway_detection import find_breakaways
-from friction_ros.core.identification.pipeline import fit_bag, fit_records
+from friction_ros.core.identification.fit_logs import fit_bag
+from friction_ros.core.identification.pipeline import fit_records
 from friction_ros.core.identification.plateau_detection import Plateau, chattering_plateaus, find_plateaus
 from friction_ros.core.identification.records import prepare, quantization_velocity_noise
 from friction_ros.core.identification.training_split import training_segments

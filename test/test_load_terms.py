@@ -13,9 +13,10 @@ from scipy.optimize import lsq_linear
 
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.identification.csv_loading import load_csv
+from friction_ros.core.identification.fit_logs import cross_validate_runs
 from friction_ros.core.identification.linsolve import solve_grams
 from friction_ros.core.identification.load_terms import LoadTerms, parse_terms
-from friction_ros.core.identification.pipeline import cross_validate_runs, fit_records
+from friction_ros.core.identification.pipeline import fit_records
 from friction_ros.core.identification.realistic_joint import (
     JointTruth,
     pooled_measured_input_nmse_percent,

@@ -1,8 +1,10 @@
 """friction-bag: inspect, check and repair MCAP bags without ROS tools.
 
-    friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems
-    friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording as a
-                                            finished bag (summary, statistics, metadata.yaml)
+    friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems;
+                                            status complete, TRUNCATED or DAMAGED (messages lost)
+    friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording (or of
+                                            a damaged bag) as a finished bag (summary, statistics,
+                                            metadata.yaml)
 
 Unreadable input prints one line ``error: ...`` and exits with code 2 (no traceback).
 """
@@ -34,8 +36,20 @@ def _info(path: str) -> int:
         print(f"metadata {name}: " + ", ".join(f"{k}={v}" for k, v in keys.items()))
     for w in bag.warnings:
         print(f"warning: {w}")
-    print("status:   " + ("TRUNCATED (recovered complete chunks)" if bag.truncated else "complete"))
+    print(f"status:   {_status(bag)}")
     return 0
+
+
+def _status(bag) -> str:
+    """``complete``, ``TRUNCATED ...`` and/or ``DAMAGED: <messages lost per topic>``."""
+    from friction_ros.core.bag.damage import describe_loss
+
+    parts = []
+    if bag.damaged:
+        parts.append(f"DAMAGED: {describe_loss(bag.lost)}")
+    if bag.truncated:
+        parts.append("TRUNCATED (recovered complete chunks)")
+    return "; ".join(parts) or "complete"
 
 
 def _recover(path: str, out: str, overwrite: bool) -> int:
@@ -84,7 +98,12 @@ def _recover(path: str, out: str, overwrite: bool) -> int:
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    print(f"wrote {n} messages to {out}" + (" (input was truncated)" if bag.truncated else ""))
+    notes = ["input was truncated"] if bag.truncated else []
+    if bag.damaged:
+        from friction_ros.core.bag.damage import describe_loss
+
+        notes.append(f"input was damaged: {describe_loss(bag.lost)}")
+    print(f"wrote {n} messages to {out}" + (f" ({'; '.join(notes)})" if notes else ""))
     return 0
 
 

@@ -148,6 +148,13 @@ class Bag:
     truncated: bool = False
     warnings: list[str] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
+    damaged: bool = False  # a part of a file failed its check (see core.bag.damage)
+    lost: dict[str, int | None] = field(default_factory=dict)  # messages lost per topic, None = unknown
+
+    @property
+    def lost_count(self) -> int | None:
+        """Messages lost to damage (0 when none, None when the number is unknown)."""
+        return None if any(v is None for v in self.lost.values()) else sum(self.lost.values())
 
     def __getitem__(self, topic: str) -> TopicData:
         return self.topic(topic)

@@ -11,6 +11,10 @@ schemas embedded in the file (``ros2msg``); when a schema is empty or ``ros2idl`
 
 Recovery: a file cut off by SIGKILL/power loss has no summary; every complete chunk (and unchunked
 message) before the cut is recovered, ``Bag.truncated`` is set and ``Bag.warnings`` says what was lost.
+A damaged file (a chunk failing its CRC, a corrupt record, index or summary: see
+:mod:`~friction_ros.core.bag.damage`) is read past the damage: ``Bag.damaged`` is set, ``Bag.lost``
+holds the messages lost per topic (None where the number is unknown) and ``Bag.warnings`` starts with
+a line saying so.
 
 Unreadable input raises a :class:`~friction_ros.core.bag.errors.BagError` (a ``ValueError``) naming the
 file and the problem: empty file, not MCAP, header truncated, unsupported storage, topic not found,
@@ -28,6 +32,7 @@ import yaml
 
 from .cdr import decode_batch
 from .contents import Bag, JointSeries, RawMessage, TopicData, TopicInfo
+from .damage import channel_loss, describe_loss, merge_loss
 from .errors import (
     BagError,
     CdrError,
@@ -124,6 +129,12 @@ def _definitions(topic: str, name: str, enc: str, text: bytes) -> dict[str, MsgD
         raise SchemaError(f"topic {topic}: schema of {name} {why} and {exc}") from None
 
 
+def _topic_of(scan: McapScan, channel: int | None) -> str:
+    if channel is None:
+        return "topics unknown"
+    return scan.channels[channel][0] if channel in scan.channels else f"channel {channel}"
+
+
 class _Loaded:
     """All files of a bag scanned: per topic (info, list of (big buffer, record offsets))."""
 
@@ -137,9 +148,12 @@ class _Loaded:
         self.warnings: list[str] = []
         self.skipped: dict[str, str] = {}
         self.truncated = False
+        self.damaged = False
+        self.lost: dict[str, int | None] = {}
         for f in self.files:
             scan = McapScan(f)
             self.truncated |= scan.truncated
+            self._damage(f, scan)
             self.warnings += scan.warnings
             self.metadata.update(scan.metadata)
             big = (
@@ -186,13 +200,30 @@ class _Loaded:
                 if locs:
                     offs = np.concatenate([base[s] + o for s, o in locs])
                     self.parts.setdefault(topic, []).append((big, offs))
-            if scan.stats_count is not None and not scan.truncated:
-                got = sum(len(o) for v in scan.locs.values() for _, o in v)
-                if got != scan.stats_count:
-                    self.warnings.append(
-                        f"{f}: found {got} messages, the summary statistics say {scan.stats_count}"
-                    )
         check_wanted(self.path, want, self.skipped, self.info)
+
+    def _damage(self, f: Path, scan: McapScan) -> None:
+        """Damage of one file: a warning saying how many messages (per topic) were lost, then each problem."""
+        found = {c: k for c, k in scan.found().items() if c in scan.channels}
+        loss = channel_loss(scan.problems, scan.expected, found)
+        if not scan.problems and not loss:
+            extra = {c: k for c, k in found.items() if scan.expected and k > scan.expected.get(c, 0)}
+            if extra:
+                self.warnings.append(f"{f}: found more messages than the summary statistics say")
+            return
+        lost = {_topic_of(scan, c): k for c, k in loss.items()}
+        self.damaged = True
+        self.lost = merge_loss(self.lost, lost)
+        self.warnings.append(f"{f}: file is damaged: {describe_loss(lost)}")
+        if loss and not scan.problems:
+            self.warnings.append(f"{f}: fewer messages than its summary statistics say")
+        self.warnings += [f"{f}: {p.text}" for p in scan.problems]
+
+    def bag(self, topics: dict[str, TopicData]) -> Bag:
+        return Bag(
+            self.path, self.files, self.info, topics, self.metadata, self.truncated, self.warnings,
+            self.skipped, self.damaged, self.lost,
+        )  # fmt: skip
 
     def records(self, topic: str):
         """(big, log_time, publish_time, data_start, data_len) sorted by log time, per file part."""
@@ -277,7 +308,7 @@ def read_bag(path: str | os.PathLike, topics: Iterable[str] | str | None = None)
         out[topic] = TopicData(info, log, pub, fields)
     for t, why in ld.skipped.items():
         ld.warnings.append(f"{ld.path}: topic {t} skipped: {why}")
-    return Bag(ld.path, ld.files, ld.info, out, ld.metadata, ld.truncated, ld.warnings, ld.skipped)
+    return ld.bag(out)
 
 
 def read_joint_states(path: str | os.PathLike, joint: str, topic: str = "/joint_states") -> JointSeries:
@@ -292,7 +323,7 @@ def bag_info(path: str | os.PathLike) -> Bag:
 
         return sqlite_bag_info(path)
     ld = _Loaded(path, [])
-    return Bag(ld.path, ld.files, ld.info, {}, ld.metadata, ld.truncated, ld.warnings, ld.skipped)
+    return ld.bag({})
 
 
 def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:

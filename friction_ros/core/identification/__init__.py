@@ -13,18 +13,14 @@ validation), ``diagnosis`` (what a poor fit's residual follows), ``residual_lear
 residual on a physics backbone), ``csv_loading``/``log_loading`` (CSV logs, any bag),
 ``realistic_joint`` (a realistic synthetic robot joint with known truth).
 
-Entry points: :func:`fit_bag` and :func:`fit_records` (``pipeline``, which compares the models;
+Entry points: :func:`fit_bag` (``fit_logs``: logs in, files out) and :func:`fit_records` (``pipeline``, which compares the models;
 ``model_fits`` turns each family's fit into a ``ModelResult`` of ``fit_results``).
 """
 
 from friction_ros.core.identification.bag_loading import load_bag
+from friction_ros.core.identification.fit_logs import cross_validate_runs, fit_bag
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
-from friction_ros.core.identification.pipeline import (
-    DEFAULT_MODELS,
-    cross_validate_runs,
-    fit_bag,
-    fit_records,
-)
+from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_records
 from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 __all__ = [

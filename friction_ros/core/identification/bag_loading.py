@@ -35,7 +35,9 @@ def load_bag(
         bag = read_bag(path, topics=None)
     except BagError as exc:
         raise ExcitationError(f"bag {path}: {exc}") from None
-    bag_warnings = [str(w) for w in getattr(bag, "warnings", [])]
+    # the fitter names the source before each warning: a warning about the file itself need not repeat it
+    own = f"{path}: "
+    bag_warnings = [str(w).removeprefix(own) for w in getattr(bag, "warnings", [])]
     if getattr(bag, "truncated", False) and not bag_warnings:
         bag_warnings.append(f"bag {path} is truncated: the messages after the cut are lost")
     if topic not in bag:

@@ -23,9 +23,10 @@ import numpy as np
 from scipy.optimize import lsq_linear
 
 from friction_ros.core.friction import model_from_config
-from friction_ros.core.identification import export
+from friction_ros.core.identification import export, metrics
 from friction_ros.core.identification.fit_results import ModelResult
 from friction_ros.core.identification.load_terms import LoadTerms
+from friction_ros.core.identification.model_status import failed_model, judge_divergence
 from friction_ros.core.identification.records import JointData
 from friction_ros.core.validation import ParameterError
 
@@ -127,3 +128,17 @@ def fit_baseline(train: list[JointData], terms: LoadTerms) -> ModelResult:
 def terms_columns(lt: LoadTerms, r: JointData) -> np.ndarray:
     """The load-term columns of a record for the baseline's terms."""
     return lt.columns(r.position, r.velocity, None)
+
+
+def validated_baseline(train, terms, predict_val, vall, hm, lm, scored) -> ModelResult:
+    """The inverse-dynamics baseline with its validation metrics (or why it could not be fitted)."""
+    try:
+        b = fit_baseline(train, terms)
+        yb = predict_val(b)
+        k = 3 + len(b.extra["load_coefficients"])
+        b.metrics = metrics.compare(yb, vall.torque, hm, k, low_mask=lm, scored=scored)
+        b.extra["validation_prediction"] = yb
+    except Exception as exc:  # never stops the fit: the models are still compared with each other
+        return failed_model(NAME, "not fitted", f"{type(exc).__name__}: {exc}")
+    judge_divergence(b, vall.torque)
+    return b

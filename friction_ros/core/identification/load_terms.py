@@ -35,6 +35,7 @@ ripple grows one harmonic at a time the same way, up to :data:`MAX_RIPPLE`.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, replace
 
@@ -42,6 +43,7 @@ import numpy as np
 
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.identification.data_scale import velocity_scale
+from friction_ros.core.identification.records import quantization_velocity_noise
 from friction_ros.core.validation import ParameterError
 
 #: the load terms a user can name (``--load gravity,offset,ripple=4``)
@@ -315,3 +317,39 @@ def select_terms(
         if c != "ripple" or terms.ripple >= max_ripple:
             remaining.remove(c)
     return Selection(terms, steps, base, max(fit.inertia, 0.0), terms.joint_load(fit.load_coefficients))
+
+
+def terms_for_fit(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type="revolute"):
+    """(LoadTerms, Selection | None) for the ``load`` option of :func:`~friction_ros.core.identification.pipeline.fit_records`."""
+    if load_eps is None:  # sgn(v) must not flip on velocity noise: at least 3 sigma of it
+        r = train[0]
+        noise = (
+            float(np.median(np.abs(np.diff(r.velocity, 2)))) / (0.6745 * math.sqrt(6.0)) if r.n > 3 else 0.0
+        )
+        load_eps = max(eps, 3.0 * noise, 3.0 * quantization_velocity_noise(r))
+    terms = load
+    if isinstance(load, str):
+        if load == "auto" and len(plateaus) >= 3:
+            terms = "none"  # an experiment with plateaus: its load offset is measured on them
+        terms = parse_terms(terms, ripple_period=ripple_period, eps=load_eps)
+    angle_terms = ("gravity", "ripple")  # functions of an angle: a revolute joint's only
+    if terms == "auto":
+        cands = ("gravity", "offset", "spring", "load_friction", "ripple")
+        if joint_type == "prismatic":
+            cands = tuple(c for c in cands if c not in angle_terms)
+        sel = select_terms(train, val, eps=load_eps, ripple_period=ripple_period, candidates=cands)
+        return sel.terms, sel
+    if joint_type == "prismatic" and isinstance(terms, LoadTerms) and (terms.gravity or terms.ripple):
+        raise ParameterError(
+            f"load = {load!r}: gravity and ripple terms are functions of an angle; a prismatic joint allows "
+            "offset, spring and load_friction"
+        )
+    if not isinstance(terms, LoadTerms):
+        raise ParameterError(f"load = {load!r} is not allowed: must be auto, none, a term list or LoadTerms")
+    if terms.load_friction:  # the transmitted torque needs a first fit of the other terms
+        base = dataclasses.replace(terms, load_friction=False)
+        _, fit = backbone_fit(base, train, val)
+        return terms, Selection(
+            terms, [], math.nan, max(fit.inertia, 0.0), base.joint_load(fit.load_coefficients)
+        )
+    return terms, None

@@ -1,7 +1,7 @@
 """Every joint of a bag (``friction-fit BAG --joint all`` or ``--joint j1,j3``): one fit per joint,
 one parameter file for the multi-joint nodes.
 
-Each joint is fitted by :func:`~friction_ros.core.identification.pipeline.fit_bag` exactly as
+Each joint is fitted by :func:`~friction_ros.core.identification.fit_logs.fit_bag` exactly as
 ``friction-fit BAG --joint J --out OUT/J`` fits it (same options; its report, summary, plots and
 single-joint parameter file go to ``OUT/J/``). The fits are independent: with ``jobs > 1`` they run
 in a process pool; results are gathered in joint order, so every file is the same for any ``jobs``.
@@ -129,7 +129,7 @@ def fit_one_joint(task: dict) -> JointFit:
     """Fit one joint (``task``: fit_bag's arguments with ``joint`` and ``out_dir``); module level so
     a process pool can run it. A fit the data refuse (ParameterError, ValueError) is a failed joint."""
     from friction_ros.core.identification import metrics
-    from friction_ros.core.identification.pipeline import fit_bag
+    from friction_ros.core.identification.fit_logs import fit_bag
     from friction_ros.core.identification.report import _clean
 
     t0 = time.perf_counter()

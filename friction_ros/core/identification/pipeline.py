@@ -15,15 +15,14 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
 from friction_ros.core.identification import learned, metrics
 from friction_ros.core.identification.baseline import NAME as BASELINE
-from friction_ros.core.identification.baseline import fit_baseline
+from friction_ros.core.identification.baseline import validated_baseline
 from friction_ros.core.identification.breakaway_detection import find_breakaways
-from friction_ros.core.identification.data_scale import data_scale, velocity_scale, with_scale
+from friction_ros.core.identification.data_scale import data_scale, with_scale
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
     check_motion,
@@ -32,14 +31,9 @@ from friction_ros.core.identification.excitation_checks import (
 )
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
 from friction_ros.core.identification.load_terms import (
-    LoadTerms,
-    Selection,
-    backbone_fit,
-    parse_terms,
-    select_terms,
+    terms_for_fit,
     with_transmitted,
 )
-from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.model_fits import (
     direction_part,
     fit_static_plateaus,
@@ -50,10 +44,8 @@ from friction_ros.core.identification.model_fits import (
     wrap_dynamic,
 )
 from friction_ros.core.identification.model_status import (
-    beats_baseline,
     failed_model,
     judge_divergence,
-    unidentifiable,
 )
 from friction_ros.core.identification.models import (
     DEFAULT_EPS,
@@ -66,16 +58,21 @@ from friction_ros.core.identification.plateau_detection import (
     find_plateaus,
     load_offset,
 )
+from friction_ros.core.identification.recommendation import checked_recommendation, verdict
 from friction_ros.core.identification.records import (
     JointData,
     concat_records,
-    quantization_velocity_noise,
+)
+from friction_ros.core.identification.residual_learning import with_residual
+from friction_ros.core.identification.search_space import (
+    slowest_stribeck_velocity,
+    static_linear_zone,
+    velocity_grid,
 )
 from friction_ros.core.identification.training_split import split, training_segments, training_window
 from friction_ros.core.identification.velocity_regimes import (
     high_velocity_mask,
     mask_runs,
-    motion_floor,
     moving_mask,
     standstill_mask,
 )
@@ -88,14 +85,6 @@ EXPLAINS_LITTLE_NMSE = 30.0  # [%] validation NMSE above which a recommendation 
 
 
 # ------------------------------------------------------------------------------------ fitting
-def _grid(records: list[JointData]) -> np.ndarray:
-    v = np.concatenate([np.abs(r.velocity) for r in records])
-    vmax = float(np.max(v))
-    vsc = velocity_scale(records[0])
-    moving = v[v > 1e-6 * vsc]
-    vmin = max(float(np.percentile(moving, 1)) if moving.size else 1e-4 * vsc, 1e-4 * vsc, vmax * 1e-4)
-    g = np.geomspace(vmin, max(vmax, vmin * 10), 60)
-    return np.concatenate([-g[::-1], g])
 
 
 def fit_records(
@@ -239,7 +228,7 @@ def fit_records(
             skipped.update(dict.fromkeys(dynamic, why))
             names = [n for n in names if n not in dynamic]
             warnings_pre.append(f"dynamic models not fitted ({', '.join(dynamic)}): {why}")
-    terms, selection = _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type)
+    terms, selection = terms_for_fit(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type)
     if terms.load_friction:  # the torque the gear transmits, from the selection backbone
         tr = (selection.inertia, selection.joint_load)
         train, val = with_transmitted(train, *tr), with_transmitted(val, *tr)
@@ -257,12 +246,12 @@ def fit_records(
     )
     results: dict[str, ModelResult] = {}
     warnings: list[str] = list(warnings_pre)
-    grid = _grid(records)
+    grid = velocity_grid(records)
 
     def prog(name):
         return (lambda f: progress(name, f)) if progress else None
 
-    baseline = _baseline(train, terms, predict_val, vall, hm, lm, scored)
+    baseline = validated_baseline(train, terms, predict_val, vall, hm, lm, scored)
     results[baseline.name] = baseline
     for name, why in skipped.items():
         results[name] = failed_model(name, "not fitted", why)
@@ -272,9 +261,9 @@ def fit_records(
             spec = spec_for(name, eps, scale.velocity)
             if not terms.empty:
                 spec.load = terms
-                if not spec.dynamic:  # see _static_linear_zone
-                    _static_linear_zone(spec, terms.eps)
-            _slowest_stribeck_velocity(spec, train)
+                if not spec.dynamic:  # see static_linear_zone
+                    static_linear_zone(spec, terms.eps)
+            slowest_stribeck_velocity(spec, train)
             if not spec.dynamic and static_from_plateaus and terms.empty:
                 res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
                 if progress:
@@ -409,7 +398,7 @@ def fit_records(
     if residual == "auto":
         residual = "none" if len(plateaus) >= 3 else "auto"
     if residual != "none" and recommendation["model"] is not None:
-        combined = _with_residual(
+        combined = with_residual(
             results[recommendation["model"]], train, val, vall, residual, seed, hm, lm, scored, warnings
         )
         if combined is not None:
@@ -421,16 +410,16 @@ def fit_records(
             {n: (r.steady_state, r.metrics.get("n_params", 1)) for n, r in candidates.items()}, plateaus
         )
     if recommendation["model"] is not None or baseline.fitted:
-        recommendation = _checked_recommendation(recommendation, candidates, baseline)
+        recommendation = checked_recommendation(recommendation, candidates, baseline)
     rec = recommendation["model"]
     if rec is None:
         warnings.append(
             "no model is recommended and no parameter file is written: "
             + (recommendation.get("reason") or recommendation.get("rule") or "no model could be exported")
         )
-    verdict = _verdict(results, rec, val, vall, terms, eps, tried=selection is not None and load == "auto")
-    if verdict["explains_little"]:
-        warnings.append(verdict["text"])
+    judged = verdict(results, rec, val, vall, terms, eps, tried=selection is not None and load == "auto")
+    if judged["explains_little"]:
+        warnings.append(judged["text"])
     for r in [r for r in results.values() if r.fitted]:
         r.extra["steady_state_grid"] = {
             "velocity": grid.tolist(),
@@ -453,7 +442,7 @@ def fit_records(
             "load_terms": terms.describe(),
             "load_selection": selection.table() if selection is not None else [],
             "validation_records": len(validation_records or []),
-            "verdict": verdict,
+            "verdict": judged,
             "optimizer": optimizer,
             "seed": seed,
             "eps": eps,
@@ -465,142 +454,6 @@ def fit_records(
         seconds=time.perf_counter() - t_start,
         recommendation=recommendation,
     )
-
-
-def _load_terms(load, plateaus, train, val, ripple_period, load_eps, eps, joint_type="revolute"):
-    """(LoadTerms, Selection | None) for the ``load`` option of :func:`fit_records`."""
-    if load_eps is None:  # sgn(v) must not flip on velocity noise: at least 3 sigma of it
-        r = train[0]
-        noise = (
-            float(np.median(np.abs(np.diff(r.velocity, 2)))) / (0.6745 * math.sqrt(6.0)) if r.n > 3 else 0.0
-        )
-        load_eps = max(eps, 3.0 * noise, 3.0 * quantization_velocity_noise(r))
-    terms = load
-    if isinstance(load, str):
-        if load == "auto" and len(plateaus) >= 3:
-            terms = "none"  # an experiment with plateaus: its load offset is measured on them
-        terms = parse_terms(terms, ripple_period=ripple_period, eps=load_eps)
-    angle_terms = ("gravity", "ripple")  # functions of an angle: a revolute joint's only
-    if terms == "auto":
-        cands = ("gravity", "offset", "spring", "load_friction", "ripple")
-        if joint_type == "prismatic":
-            cands = tuple(c for c in cands if c not in angle_terms)
-        sel = select_terms(train, val, eps=load_eps, ripple_period=ripple_period, candidates=cands)
-        return sel.terms, sel
-    if joint_type == "prismatic" and isinstance(terms, LoadTerms) and (terms.gravity or terms.ripple):
-        raise ParameterError(
-            f"load = {load!r}: gravity and ripple terms are functions of an angle; a prismatic joint allows "
-            "offset, spring and load_friction"
-        )
-    if not isinstance(terms, LoadTerms):
-        raise ParameterError(f"load = {load!r} is not allowed: must be auto, none, a term list or LoadTerms")
-    if terms.load_friction:  # the transmitted torque needs a first fit of the other terms
-        base = dataclasses.replace(terms, load_friction=False)
-        _, fit = backbone_fit(base, train, val)
-        return terms, Selection(
-            terms, [], math.nan, max(fit.inertia, 0.0), base.joint_load(fit.load_coefficients)
-        )
-    return terms, None
-
-
-def _verdict(results, rec, val, vall, terms, eps, tried: bool = False) -> dict:
-    """Does the recommended model explain the torque? If not, what the residual follows (diagnosis;
-    ``tried``: the automatic load-term selection ran, so its terms are not suggested again)."""
-    from friction_ros.core.identification import diagnosis
-
-    out = {"explains_little": False, "text": "", "suggestions": []}
-    if rec is None:
-        return out
-    nm = float(results[rec].metrics.get("nmse_percent", math.nan))
-    if not (math.isfinite(nm) and nm > EXPLAINS_LITTLE_NMSE):
-        return out
-    used = {"load-dependent friction" if t == "load_friction" else t for t in terms.describe().split(", ")}
-    if terms.ripple:
-        used.add("position-dependent friction")
-    if tried:  # the automatic selection tried every load term on these data: not suggested again
-        used |= {"gravity", "offset", "spring", "load-dependent friction", "position-dependent friction"}
-    resid = vall.torque - np.asarray(results[rec].extra["validation_prediction"])
-    tips = diagnosis.suggestions(val, resid, used, max(eps, terms.eps))
-    what = ", no better than a constant: it explains nothing" if nm >= metrics.NO_SIGNAL_NMSE else ""
-    text = (
-        f"the recommended model {rec} explains little of the measured torque (validation NMSE {nm:.1f} % > "
-        f"{EXPLAINS_LITTLE_NMSE:g} %{what}): do not compensate with it before checking; "
-        + (
-            "; ".join(tips)
-            if tips
-            else "a load or gravity term, more excitation or a sensor problem is missing"
-        )
-    )
-    return {"explains_little": True, "text": text, "suggestions": tips, "nmse_percent": nm}
-
-
-def _with_residual(
-    base: ModelResult, train, val, vall, kind, seed, hm, lm, scored, warnings
-) -> ModelResult | None:
-    """``<base>+residual``: a learned map of what ``base`` leaves (fit_residual), or None."""
-    from friction_ros.core.identification.residual_learning import fit_residual
-
-    t0 = time.perf_counter()
-    dt = float(train[0].dt)
-    rt = [r.torque - base.predict(r) for r in train]
-    yv = np.asarray(base.extra["validation_prediction"])
-    rv, i = [], 0
-    for r in val:
-        rv.append(r.torque - yv[i : i + r.n])
-        i += r.n
-    try:
-        model, rep = fit_residual(
-            [r.position for r in train],
-            [r.velocity for r in train],
-            None,
-            rt,
-            dt,
-            kind=kind,
-            seed=seed,
-            validation=([r.position for r in val], [r.velocity for r in val], None, rv),
-        )
-    except ParameterError as exc:
-        warnings.append(f"learned residual not fitted: {exc}")
-        return None
-    if model is None:
-        warnings.append(
-            f"learned residual: no candidate beat the {base.name} residual on validation; not used"
-        )
-        return None
-    extra = np.concatenate([model.predict_batch(r.position, r.velocity) for r in val])
-    yhat = yv + extra
-    chosen = rep.get("chosen")
-    k = int(base.metrics.get("n_params", 1)) + int(rep["candidates"][chosen].get("n_params", 0))
-    res = ModelResult(
-        f"{base.name}+residual",
-        f"{base.method} + learned residual ({chosen})",
-        dict(base.coefficients),
-        base.config,
-        metrics.compare(yhat, vall.torque, hm, k, low_mask=lm, scored=scored),
-        {},
-        time.perf_counter() - t0,
-        base.steady_state,
-        lambda r, b=base.predict, m=model: b(r) + m.predict_batch(r.position, r.velocity),
-        notes=[
-            f"learned residual ({chosen}, {rep['candidates'][chosen].get('n_params', 0)} parameters, "
-            f"step {rep['candidates'][chosen].get('step_us', float('nan')):.1f} us) on the {base.name} residual; "
-            f"features: {', '.join(rep['features'])}"
-        ],
-    )
-    res.extra.update(
-        {
-            k: v
-            for k, v in base.extra.items()
-            if k in ("load", "load_coefficients", "load_part", "per_direction")
-        }
-    )
-    res.extra["residual"] = model.to_config()
-    res.extra["residual_report"] = {
-        c: {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
-        for c, info in rep["candidates"].items()
-    }
-    res.extra["validation_prediction"] = yhat
-    return res
 
 
 def _load_part(fit) -> Callable[[JointData], np.ndarray]:
@@ -618,82 +471,6 @@ def _load_part(fit) -> Callable[[JointData], np.ndarray]:
     return part
 
 
-def _slowest_stribeck_velocity(spec, train) -> None:
-    """A Stribeck velocity ``vs`` is searched no lower than the slowest 1 % of the moving training
-    samples: a Stribeck peak narrower than almost every sample's speed is fitted to a handful of
-    samples and its level ``fs`` runs away (1e24 N on a ball-screw log)."""
-    if "vs" not in spec.nonlinear:
-        return
-    v = np.abs(np.concatenate([r.velocity for r in train]))
-    moving = v[v > motion_floor(v, train[0].resolution)]
-    if moving.size < 10:
-        return
-    i = spec.nonlinear.index("vs")
-    spec.lower[i] = max(spec.lower[i], float(np.percentile(moving, 1)))
-    spec.upper[i] = max(spec.upper[i], spec.lower[i] * 10.0)
-
-
-def _static_linear_zone(spec, load_eps: float) -> None:
-    """With load terms a static map is fitted without the samples slower than the terms' sign zone
-    (``FitSpec.grams``), so those samples cannot determine a narrower linear zone of sgn(v): the
-    zone is at least ``load_eps`` (a fitted ``eps`` is bounded below by it). Without this the zone
-    lands anywhere below it and the map mispredicts every reversal it is scored on."""
-    spec.eps = max(spec.eps, load_eps)
-    if "eps" in spec.nonlinear:
-        i = spec.nonlinear.index("eps")
-        spec.lower[i] = max(spec.lower[i], load_eps)
-        spec.upper[i] = max(spec.upper[i], spec.lower[i] * 1.001)
-
-
-def _baseline(train, terms, predict_val, vall, hm, lm, scored) -> ModelResult:
-    """The inverse-dynamics baseline with its validation metrics (or why it could not be fitted)."""
-    try:
-        b = fit_baseline(train, terms)
-        yb = predict_val(b)
-        k = 3 + len(b.extra["load_coefficients"])
-        b.metrics = metrics.compare(yb, vall.torque, hm, k, low_mask=lm, scored=scored)
-        b.extra["validation_prediction"] = yb
-    except Exception as exc:  # never stops the fit: the models are still compared with each other
-        return failed_model(BASELINE, "not fitted", f"{type(exc).__name__}: {exc}")
-    judge_divergence(b, vall.torque)
-    return b
-
-
-def _checked_recommendation(recommendation: dict, candidates: dict, baseline: ModelResult) -> dict:
-    """The recommendation after two checks: a model with an unidentifiable friction coefficient
-    (standard error > value) gives way to the best simpler candidate; a model that does not beat
-    the inverse-dynamics baseline on validation gives way to the baseline."""
-    rec = recommendation["model"]
-    notes = []
-    pool = dict(candidates)
-    while rec is not None and (bad := unidentifiable(pool[rec])):
-        k = pool[rec].metrics.get("n_params", 0)
-        notes.append(
-            f"{rec} has coefficients the log does not determine (standard error > value: {', '.join(bad)})"
-        )
-        pool = {n: r for n, r in pool.items() if r.metrics.get("n_params", 0) < k}
-        rec = metrics.recommend_with_rule({n: r.metrics for n, r in pool.items()})["model"] if pool else None
-    plateau_rule = "plateau means" in recommendation.get("rule", "")
-    if rec is not None and not plateau_rule and not beats_baseline(pool[rec], baseline):
-        notes.append(
-            f"{rec} does not beat the inverse-dynamics baseline on validation "
-            f"(NMSE {pool[rec].metrics.get('nmse_percent', math.nan):.4g} % vs "
-            f"{baseline.metrics.get('nmse_percent', math.nan):.4g} %)"
-        )
-        rec = None
-    if rec is None and baseline.fitted and baseline.config is not None:
-        rec = baseline.name
-        notes.append("the baseline (Coulomb + viscous + inertia + load terms, least squares) is recommended")
-    elif rec is None:
-        notes.append(
-            "no model beats the inverse-dynamics baseline and the baseline is not exportable: nothing to recommend"
-        )
-    if not notes:
-        return recommendation
-    reason = "; ".join(filter(None, [recommendation.get("reason", "")] + notes))
-    return {**recommendation, "model": rec, "reason": reason}
-
-
 def _best_parametric(results: dict[str, ModelResult]) -> str | None:
     ok = [n for n, r in results.items() if r.config is not None and n != BASELINE]
     if not ok:
@@ -702,133 +479,3 @@ def _best_parametric(results: dict[str, ModelResult]) -> str | None:
 
 
 # ------------------------------------------------------------------------------------ bag -> files
-def fit_bag(
-    bag_paths,
-    topic: str = "/joint_states",
-    joint: str | None = None,
-    models=DEFAULT_MODELS,
-    out_dir="friction_fit",
-    *,
-    events_topic: str | None = "/experiment_events",
-    current_topic: str | None = None,
-    current_field: str | None = None,
-    torque_constant: float | None = None,
-    gear_ratio: float = 1.0,
-    params_file: str | None = None,
-    plots: bool = True,
-    torque_delay: float = 0.0,
-    plant_preset: str | None = None,
-    gate: dict | None = None,
-    columns: dict | None = None,
-    time_scale: float = 1.0,
-    cross_validate: bool = False,
-    validate_on=None,
-    joint_type: str = "auto",
-    **options,
-) -> FitResult:
-    """Read bags, fit ``models`` and write into ``out_dir``:
-
-    ``report.md`` (Markdown report), ``summary.json`` (every model's coefficients, metrics and
-    steady-state map), ``friction_params.yaml`` (or ``params_file``: ROS parameters of the
-    recommended model for compensating_controller, friction_estimator, plant_simulator),
-    ``plots/*.png`` (friction-velocity map, presliding hysteresis, time-domain validation,
-    residuals). ``gate``: keyword arguments of
-    :func:`friction_ros.core.identification.gating.gate_fit`; the compensation modes of the
-    parameter file are then checked in closed loop first (refused ones written disabled).
-    ``cross_validate``: with several logs, also :func:`cross_validate_runs` (``options["cross_validation"]``).
-    ``validate_on``: logs read like ``bag_paths`` that only validate (the inputs then only train).
-    ``joint_type``: ``revolute``, ``prismatic`` or ``auto`` (:func:`log_joint_type`).
-    """
-    from friction_ros.core.identification import report
-
-    if isinstance(bag_paths, (str, Path)):
-        bag_paths = [bag_paths]
-    check_model_names(models)
-    read = dict(
-        columns=columns,
-        time_scale=time_scale,
-        events_topic=events_topic,
-        current_topic=current_topic,
-        current_field=current_field,
-        torque_constant=torque_constant,
-        gear_ratio=gear_ratio,
-        torque_delay=torque_delay,
-    )
-    recs = [load_log(p, topic, joint, **read) for p in bag_paths]
-    val_recs = [load_log(p, topic, joint, **read) for p in (validate_on or [])]
-    jt, jt_note = log_joint_type(joint_type, recs)
-    res = fit_records(
-        recs,
-        models,
-        label=", ".join(str(p) for p in bag_paths),
-        validation_records=val_recs or None,
-        joint_type=jt,
-        **options,
-    )
-    if jt_note:
-        res.warnings.append(jt_note)
-    if val_recs:
-        res.options["validated_on"] = [str(p) for p in validate_on]
-    if cross_validate:
-        if len(recs) < 2:
-            res.warnings.append("--cross-validate needs two or more runs: skipped")
-        else:
-            cv_opts = {k: v for k, v in options.items() if k not in ("progress", "identifiability_check")}
-            res.options["cross_validation"] = cross_validate_runs(recs, models, **cv_opts)
-    res.options["plant_preset"] = plant_preset
-    if gate is not None:  # the safety gate before the parameter file enables a mode
-        from friction_ros.core.identification.gating import gate_fit
-
-        gate_fit(res, **gate)
-    report.write_outputs(
-        res,
-        Path(out_dir),
-        params_file=params_file,
-        plots=plots,
-        sources=[str(p) for p in bag_paths],
-        topic=topic,
-        joint=joint,
-    )
-    return res
-
-
-def log_joint_type(requested: str, records) -> tuple[str, str]:
-    """(joint type, note): ``requested`` unless ``auto``; then the records' ``joint_type`` metadata
-    (a bag's or a CSV header's, see the loaders), else revolute with a note saying so."""
-    check_choice("joint_type", requested, ["auto", *JOINT_TYPES])
-    if requested != "auto":
-        return requested, ""
-    found = {r.meta.get("joint_type") for r in records} - {None}
-    if len(found) == 1 and (jt := found.pop()) in JOINT_TYPES:
-        return jt, ""
-    return "revolute", ""
-
-
-def cross_validate_runs(records: list[JointData], models=DEFAULT_MODELS, **options) -> dict:
-    """Cross-validation over runs: for each record, train on all the others and validate on it.
-
-    What a user deploying a model needs to know: how it does on a run it has not seen. Returns
-    ``{"folds": [{"validation": source, "recommended": name, "nmse_percent": {model: NMSE}}, ...],
-    "mean_nmse_percent": {model: mean over folds}}``; needs at least two records. ``options`` are
-    :func:`fit_records`'s.
-    """
-    records = [records] if isinstance(records, JointData) else list(records)
-    if len(records) < 2:
-        raise ParameterError(f"cross-validation over runs needs >= 2 runs: got {len(records)}")
-    options = {**options, "identifiability_check": False}
-    folds = []
-    for k, held in enumerate(records):
-        rest = records[:k] + records[k + 1 :]
-        res = fit_records(rest, models, validation_records=[held], **options)
-        folds.append(
-            {
-                "validation": held.meta.get("source", f"run {k}"),
-                "recommended": res.recommended,
-                "nmse_percent": {
-                    n: float(m.metrics.get("nmse_percent", math.nan)) for n, m in res.models.items()
-                },
-            }
-        )
-    names = sorted({n for f in folds for n in f["nmse_percent"]})
-    mean = {n: float(np.mean([f["nmse_percent"].get(n, math.nan) for f in folds])) for n in names}
-    return {"folds": folds, "mean_nmse_percent": mean}

@@ -52,6 +52,8 @@ from friction_ros.core.friction.learned_residual import (
     feature_names,
     feature_settings,
 )
+from friction_ros.core.identification import metrics
+from friction_ros.core.identification.fit_results import ModelResult
 from friction_ros.core.validation import ParameterError
 
 EXPORTED = ("mlp", "rff")
@@ -327,3 +329,70 @@ def fit_residual(
         return None, report
     report["chosen"] = best
     return report["models"][best], report
+
+
+def with_residual(
+    base: ModelResult, train, val, vall, kind, seed, hm, lm, scored, warnings
+) -> ModelResult | None:
+    """``<base>+residual``: a learned map of what ``base`` leaves (fit_residual), or None."""
+    t0 = time.perf_counter()
+    dt = float(train[0].dt)
+    rt = [r.torque - base.predict(r) for r in train]
+    yv = np.asarray(base.extra["validation_prediction"])
+    rv, i = [], 0
+    for r in val:
+        rv.append(r.torque - yv[i : i + r.n])
+        i += r.n
+    try:
+        model, rep = fit_residual(
+            [r.position for r in train],
+            [r.velocity for r in train],
+            None,
+            rt,
+            dt,
+            kind=kind,
+            seed=seed,
+            validation=([r.position for r in val], [r.velocity for r in val], None, rv),
+        )
+    except ParameterError as exc:
+        warnings.append(f"learned residual not fitted: {exc}")
+        return None
+    if model is None:
+        warnings.append(
+            f"learned residual: no candidate beat the {base.name} residual on validation; not used"
+        )
+        return None
+    extra = np.concatenate([model.predict_batch(r.position, r.velocity) for r in val])
+    yhat = yv + extra
+    chosen = rep.get("chosen")
+    k = int(base.metrics.get("n_params", 1)) + int(rep["candidates"][chosen].get("n_params", 0))
+    res = ModelResult(
+        f"{base.name}+residual",
+        f"{base.method} + learned residual ({chosen})",
+        dict(base.coefficients),
+        base.config,
+        metrics.compare(yhat, vall.torque, hm, k, low_mask=lm, scored=scored),
+        {},
+        time.perf_counter() - t0,
+        base.steady_state,
+        lambda r, b=base.predict, m=model: b(r) + m.predict_batch(r.position, r.velocity),
+        notes=[
+            f"learned residual ({chosen}, {rep['candidates'][chosen].get('n_params', 0)} parameters, "
+            f"step {rep['candidates'][chosen].get('step_us', float('nan')):.1f} us) on the {base.name} residual; "
+            f"features: {', '.join(rep['features'])}"
+        ],
+    )
+    res.extra.update(
+        {
+            k: v
+            for k, v in base.extra.items()
+            if k in ("load", "load_coefficients", "load_part", "per_direction")
+        }
+    )
+    res.extra["residual"] = model.to_config()
+    res.extra["residual_report"] = {
+        c: {k: v for k, v in info.items() if isinstance(v, (int, float, str, bool))}
+        for c, info in rep["candidates"].items()
+    }
+    res.extra["validation_prediction"] = yhat
+    return res

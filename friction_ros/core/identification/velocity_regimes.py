@@ -16,7 +16,8 @@ def mask_runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarray:
     """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of seed 003's envelope."""
-    w = max(int(round(window / dt)), 1)
+    # a record shorter than the window (e.g. the part of a cut-off bag that survived): the whole record
+    w = min(max(int(round(window / dt)), 1), max(len(v), 1))
     k = np.ones(w) / w
     return np.sqrt(np.convolve(np.asarray(v) ** 2, k, mode="same"))
 
