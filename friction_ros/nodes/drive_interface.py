@@ -9,7 +9,7 @@ subset (a drive left out is zeroed by its own watchdog), ``drive_state`` comes o
 every drive has its own safety state; ``~/enable``, faults of the bus, Ctrl-C and shutdown act on all.
 
 Publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort = joint
-torque N*m) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
+torque N*m; m, m/s and force N with ``joint_type: prismatic`` and ``lead``, the travel per motor turn) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
 ``joint_commands`` (sensor_msgs/JointState effort = joint torque command) with keep-last 1, and
 publishes ``diagnostics``. Service ``~/enable`` (std_srvs/SetBool) enables (clearing latched faults)
 or disables the drive.
@@ -61,6 +61,7 @@ from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
+from friction_ros.core.joint_type import joint_schema
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
@@ -118,16 +119,19 @@ NODE_FIELDS = [
 ]
 
 
-def parameter_schema() -> Schema:
+def parameter_schema(joint_type: str = "revolute") -> Schema:
     """The node's parameters: the bus and loop, one drive (:data:`~friction_ros.core.can.axis.AXIS_SCHEMA`;
-    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling."""
-    return Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING])
+    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling, in the units of
+    ``joint_type``."""
+    return joint_schema(Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING]), joint_type)
 
 
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
     "node_id",
     "mit.master_id",
+    "joint_type",
+    "lead",
     "gear_ratio",
     "torque_constant",
     "direction",
@@ -164,9 +168,9 @@ def declare_joints(node: Node) -> list[str]:
     return joints
 
 
-def axis_param_specs(joints: list[str], v: dict) -> list[Field]:
+def axis_param_specs(joints: list[str], v: dict, joint_type: str = "revolute") -> list[Field]:
     """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
-    by = dict(parameter_schema().fields())
+    by = dict(parameter_schema(joint_type).fields())
     return [
         dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
         for j in joints
@@ -192,7 +196,7 @@ class DriveInterface(ParameterNode):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
         self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
-        self.axis_specs = axis_param_specs(joints, v)
+        self.axis_specs = axis_param_specs(joints, v, v["joint_type"])
         per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
         self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint, AXIS_KEYS)]
