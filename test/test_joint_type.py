@@ -312,3 +312,34 @@ def test_multi_joint_document_keeps_each_joints_type():
     assert cc["gains"]["z"]["joint_type"] == "prismatic"
     same = joint_parameter_document(fits[:1] + fits[2:])["compensating_controller"]["ros__parameters"]
     assert same["joint_type"] == "prismatic"
+
+
+def test_detect_joint_type_from_embedded_parameter_files_and_urdf():
+    params = "plant_simulator:\n  ros__parameters:\n    joint_type: prismatic\n    preset: seed002_x\n"
+    meta = {"friction_ros": {"preset": "seed002_x", "parameter_file:/p/plant.yaml": params}}
+    found, why = detect_joint_type(metadata=meta)
+    assert found == "prismatic" and "parameter_file:/p/plant.yaml" in why
+    urdf = (
+        '<robot name="gantry"><joint name="x" type="prismatic"><axis xyz="1 0 0"/></joint>'
+        "<joint name='wrist' type='continuous'/></robot>"
+    )
+    meta = {"rosbag2_custom_data": {"robot_description": urdf}}
+    assert detect_joint_type(metadata=meta, joint="x")[0] == "prismatic"
+    assert detect_joint_type(metadata=meta, joint="wrist")[0] == "revolute"
+    assert detect_joint_type(metadata=meta)[0] is None  # the joints differ and none was named
+
+
+def test_a_prismatic_csv_log_loads_and_tells_its_joint_type(tmp_path):
+    import numpy as np
+
+    from friction_ros.core.identification.csv_loading import load_csv
+
+    t = np.arange(0.0, 2.0, 0.001)
+    v = 0.05 * np.sin(2 * np.pi * t)
+    rows = np.column_stack([t, np.cumsum(v) * 1e-3, v, 20 * np.sign(v) + 5 * v])
+    header = ["time", "position_m", "velocity_m_s", "force_N"]
+    path = tmp_path / "axis.csv"
+    np.savetxt(path, rows, delimiter=",", header=",".join(header), comments="")
+    data = load_csv(path)
+    assert data.meta["columns"] == dict(zip(("time", "position", "velocity", "effort"), header))
+    assert detect_joint_type(columns=header)[0] == "prismatic"

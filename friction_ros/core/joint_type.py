@@ -152,6 +152,50 @@ def _from_mapping(meta: Mapping, joint: str | None, where: str) -> tuple[str | N
     return None, ""
 
 
+_URDF_JOINT = re.compile(r"<joint\b[^>]*>", re.S)
+_ATTR = re.compile(r"""(\w+)\s*=\s*["']([^"']*)["']""")
+
+
+def _from_urdf(text: str, joint: str | None, where: str) -> tuple[str | None, str]:
+    """The type of ``joint`` (or of every joint, when they agree) in URDF text."""
+    types = {}
+    for tag in _URDF_JOINT.findall(text):
+        a = dict(_ATTR.findall(tag))
+        if a.get("type") in ("revolute", "continuous", "prismatic"):
+            types[a.get("name", "")] = "prismatic" if a["type"] == "prismatic" else "revolute"
+    if joint in types:
+        return types[joint], f"{where}: URDF joint {joint} is {types[joint]}"
+    if not joint and len(set(types.values())) == 1:
+        t = next(iter(types.values()))
+        return t, f"{where}: every URDF joint is {t}"
+    return None, ""
+
+
+def _from_parameter_file(text: str, joint: str | None, where: str) -> tuple[str | None, str]:
+    """``joint_type`` set in an embedded ROS parameter file (node level or ``gains.<joint>``)."""
+    import yaml
+
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return None, ""
+    found = set()
+    for sec in (doc or {}).values() if isinstance(doc, Mapping) else ():
+        params = sec.get("ros__parameters") if isinstance(sec, Mapping) else None
+        if not isinstance(params, Mapping):
+            continue
+        gains = params.get("gains") if isinstance(params.get("gains"), Mapping) else {}
+        own = gains.get(joint, {}) if joint else {}
+        value = own.get("joint_type") if isinstance(own, Mapping) else None
+        value = value or params.get("joint_type")
+        if value in JOINT_TYPES:
+            found.add(value)
+    if len(found) == 1:
+        t = found.pop()
+        return t, f"{where} sets joint_type: {t}"
+    return None, ""
+
+
 def _from_columns(columns: Sequence[str]) -> tuple[str | None, str]:
     linear, rotary = [], []
     for c in columns:
@@ -201,7 +245,9 @@ def detect_joint_type(
 
     Looked for, first hit wins: a ``joint_type`` (or ``joint_type.<joint>``) entry in a bag's
     ``metadata.yaml`` ``custom_data`` (``path``: the bag directory), then in the MCAP metadata
-    records (``metadata``: ``Bag.metadata``, any record), then the CSV ``columns``: a force column
+    records (``metadata``: ``Bag.metadata``, any record), then in the parameter files the recorder
+    embedded there (``parameter_file:<path>``: a node's ``joint_type``) or a URDF held there (the
+    joint's ``type``), then the CSV ``columns``: a force column
     (``force``, ``force_N``) or linear unit suffixes (``position_m``, ``velocity [m/s]``) say
     prismatic; rotary ones (``torque``, ``position_rad``, ``[N*m]``) say revolute. None when nothing
     states it or the hints disagree; ``reason`` says why, for the fit report.
@@ -213,6 +259,18 @@ def detect_joint_type(
     for name, record in (metadata or {}).items():
         if isinstance(record, Mapping):
             found, why = _from_mapping(record, joint, f"bag metadata {name}")
+            if found:
+                return found, why
+    for name, record in (metadata or {}).items():  # embedded parameter files, URDF text
+        for key, text in record.items() if isinstance(record, Mapping) else ():
+            if not isinstance(text, str):
+                continue
+            if "<joint" in text:
+                found, why = _from_urdf(text, joint, f"bag metadata {name} {key}")
+            elif key.startswith("parameter_file:"):
+                found, why = _from_parameter_file(text, joint, f"bag metadata {name} {key}")
+            else:
+                continue
             if found:
                 return found, why
     if columns:
