@@ -171,3 +171,27 @@ def test_plant_simulator_process_reports_prismatic_from_its_yaml(tmp_path):
         assert [v.string_value for v in values.result().values] == ["prismatic", "seed002_x"]
         d = descs.result().descriptors
         assert d[0].description.endswith("[m]") and d[1].description.endswith("[N]")
+
+
+def test_drives_of_both_types_on_one_bus(tmp_path):
+    """<joint>.joint_type and <joint>.lead: a screw axis and a rotary wrist on one drive_interface."""
+    from friction_ros.nodes.drive_interface import DriveInterface
+
+    params = {
+        "interface": "virtual",
+        "channel": "jt_multi",
+        "joints": ["x", "wrist"],
+        "x": {"node_id": 1, "joint_type": "prismatic", "lead": 0.01},
+        "wrist": {"node_id": 2, "gear_ratio": 10.0},
+    }
+    node = _in_process(
+        DriveInterface, write_params(tmp_path / "p.yaml", {"drive_interface": {"ros__parameters": params}})
+    )
+    try:
+        x, wrist = (a.cfg.conversion for a in node.axes)
+        assert x.joint_position(2 * 3.141592653589793) == pytest.approx(0.01)
+        assert wrist.joint_position(10.0) == pytest.approx(1.0)
+        assert _description(node, "x.torque_limit").endswith("[N]")
+        assert _description(node, "wrist.torque_limit").endswith("[N*m]")
+    finally:
+        _close(node)

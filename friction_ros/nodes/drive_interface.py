@@ -61,7 +61,7 @@ from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
-from friction_ros.core.joint_type import joint_schema
+from friction_ros.core.joint_type import JOINT_TYPES, check_joint_type, joint_schema
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
@@ -168,11 +168,13 @@ def declare_joints(node: Node) -> list[str]:
     return joints
 
 
-def axis_param_specs(joints: list[str], v: dict, joint_type: str = "revolute") -> list[Field]:
-    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
-    by = dict(parameter_schema(joint_type).fields())
+def axis_param_specs(joints: list[str], v: dict, joint_types: dict[str, str] | None = None) -> list[Field]:
+    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values,
+    in the units of each joint's type (``joint_types``; default: the node's ``joint_type``)."""
+    by = {t: dict(parameter_schema(t).fields()) for t in JOINT_TYPES}
+    types = {j: (joint_types or {}).get(j, v.get("joint_type", "revolute")) for j in joints}
     return [
-        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
+        dataclasses.replace(by[types[j]][k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[types[j]][k].doc}")
         for j in joints
         for k in AXIS_KEYS
     ]
@@ -196,7 +198,9 @@ class DriveInterface(ParameterNode):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
         self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
-        self.axis_specs = axis_param_specs(joints, v, v["joint_type"])
+        given = {j: self.given_parameters.get(f"{j}.joint_type") for j in joints}
+        types = {j: check_joint_type(p.value, f"{j}.joint_type") for j, p in given.items() if p is not None}
+        self.axis_specs = axis_param_specs(joints, v, types)
         per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
         self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint, AXIS_KEYS)]
