@@ -125,10 +125,7 @@ NODE_FIELDS = [
 
 #: keys ``gains.<joint>.<key>`` accepts besides the PID keys (ros2_controllers puts
 #: feedforward_gain and u_clamp_max there too)
-PER_JOINT_PLAIN_KEYS = tuple(f.name for f in CONTROLLER_FIELDS) + (
-    "adopt_estimator_coefficients",
-    "joint_type",
-)
+PER_JOINT_PLAIN_KEYS = (*(f.name for f in CONTROLLER_FIELDS), "adopt_estimator_coefficients", "joint_type")
 
 
 def parameter_schema(given_section=lambda prefix: {}) -> Schema:

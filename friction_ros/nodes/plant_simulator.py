@@ -5,8 +5,7 @@ a ros2_control stack (topic_based_ros2_control) cannot tell the difference:
 
 * subscribes ``joint_commands`` (sensor_msgs/JointState, effort = joint torque N*m; COMMAND_QOS)
 * publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort N*m;
-  m, m/s and N with ``joint_type: prismatic``),
-  ``diagnostics`` and, in lockstep mode, ``/clock``.
+  m, m/s and N with ``joint_type: prismatic``), ``diagnostics`` and, in lockstep, ``/clock``.
 
 Modes:
 
