@@ -18,10 +18,20 @@ from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from friction_ros.core.config import Field, Schema
 from friction_ros.core.validation import ParameterError, check_choice
 
 JOINT_TYPES = ("revolute", "prismatic")
 DEFAULT_JOINT_TYPE = "revolute"
+
+#: the ``joint_type`` parameter of every node that handles joint quantities
+JOINT_TYPE_FIELD = Field(
+    "joint_type",
+    DEFAULT_JOINT_TYPE,
+    "revolute: positions in rad, efforts in N*m; prismatic: positions in m, efforts in N (REP-103)",
+    choices=JOINT_TYPES,
+    read_only=True,
+)
 
 #: settings whose unit does not follow the joint: angular frequencies [rad/s] and the motor's own
 #: quantities (a prismatic axis is often a rotary motor on a screw)
@@ -88,18 +98,16 @@ def quantity_units(joint_type: str = DEFAULT_JOINT_TYPE) -> dict[str, str]:
     return {k: joint_unit(u, joint_type) for k, u in QUANTITY_UNITS.items()}
 
 
-def joint_field(field, joint_type: str = DEFAULT_JOINT_TYPE):
+def joint_field(field: Field, joint_type: str = DEFAULT_JOINT_TYPE) -> Field:
     """A :class:`~friction_ros.core.config.Field` with its unit in the joint's units."""
     if joint_type == "revolute" or not field.unit or field.name.rsplit(".", 1)[-1] in FIXED_UNIT_KEYS:
         return field
     return dataclasses.replace(field, unit=joint_unit(field.unit, joint_type))
 
 
-def joint_schema(schema, joint_type: str = DEFAULT_JOINT_TYPE):
+def joint_schema(schema: Schema, joint_type: str = DEFAULT_JOINT_TYPE) -> Schema:
     """A copy of a :class:`~friction_ros.core.config.Schema` whose fields (sections included)
     carry the joint's units; the schema itself when the joint is revolute."""
-    from friction_ros.core.config import Schema
-
     if check_joint_type(joint_type) == "revolute":
         return schema
     items = [
@@ -124,7 +132,7 @@ def units_of(joint_type: str = DEFAULT_JOINT_TYPE) -> Iterator[None]:
 # ------------------------------------------------------------------------------ detection
 
 #: CSV headers (lower case, unit suffix stripped) that name a force, not a torque
-_FORCE_HEADERS = ("force", "f")
+_FORCE_HEADERS = ("force",)
 _LINEAR_SUFFIXES = ("_m", " [m]", " (m)", "_m_s", "_m/s", " [m/s]", " (m/s)", "_n", " [n]", " (n)")
 _ROTARY_SUFFIXES = (
     "_rad",
@@ -276,19 +284,3 @@ def detect_joint_type(
     if columns:
         return _from_columns(columns)
     return None, "the log states no joint type"
-
-
-def _joint_type_field():
-    from friction_ros.core.config import Field
-
-    return Field(
-        "joint_type",
-        DEFAULT_JOINT_TYPE,
-        "revolute: positions in rad, efforts in N*m; prismatic: positions in m, efforts in N (REP-103)",
-        choices=JOINT_TYPES,
-        read_only=True,
-    )
-
-
-#: the ``joint_type`` parameter of every node that handles joint quantities
-JOINT_TYPE_FIELD = _joint_type_field()
