@@ -3,6 +3,7 @@ joint type is one line, and a plant_simulator process started from a YAML file r
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -155,11 +156,12 @@ def test_plant_simulator_process_reports_prismatic_from_its_yaml(tmp_path):
 
     params = write_params(
         tmp_path / "plant.yaml",
-        {"plant_simulator": {"ros__parameters": {"joint_type": "prismatic", "preset": "seed002_x"}}},
+        {"/**/plant_simulator": {"ros__parameters": {"joint_type": "prismatic", "preset": "seed002_x"}}},
     )
-    with Listener("joint_type_probe") as lis, Graph([NodeSpec("plant_simulator", "", [params])]) as g:
-        get = lis.node.create_client(GetParameters, "/plant_simulator/get_parameters")
-        describe = lis.node.create_client(DescribeParameters, "/plant_simulator/describe_parameters")
+    ns = f"joint_type_{os.getpid()}"  # a namespace of its own: no other plant answers
+    with Listener("joint_type_probe") as lis, Graph([NodeSpec("plant_simulator", ns, [params])]) as g:
+        get = lis.node.create_client(GetParameters, f"/{ns}/plant_simulator/get_parameters")
+        describe = lis.node.create_client(DescribeParameters, f"/{ns}/plant_simulator/describe_parameters")
         deadline = time.monotonic() + 60
         while not (get.service_is_ready() and describe.service_is_ready()):
             g.assert_alive()
