@@ -81,7 +81,9 @@ def test_outputs_json_yaml_report(gms_fit):
     assert model_from_config(cfg).name == "gms"
     ctrl_cfg, _ = config_from_ros_parameters(doc["compensating_controller"]["ros__parameters"])
     assert CompensatingController(ctrl_cfg).friction.model.name == "gms"
-    OnlineFrictionEstimator(doc["friction_estimator"]["ros__parameters"])
+    est = doc["friction_estimator"]["ros__parameters"]
+    assert est.pop("joint_type") == "revolute"  # the node's; the rest is the estimator's config
+    OnlineFrictionEstimator(est)
     pre = preset_from_config({"plant_simulator": doc["plant_simulator"]})
     assert pre.params.friction_motor.name == "gms"
     text = (out / "report.md").read_text()

@@ -55,7 +55,16 @@ PRESET_NAMES: tuple[str, ...] = (
     "seed001_harmonic_drive",
     "seed000_gearhead",
 )
-_SECTION_KEYS = ("preset", "description", "control_period", "plant", "friction_motor", "friction_load")
+# joint_type: the node's (a fitted parameter file used as a preset carries it); the plant ignores it
+_SECTION_KEYS = (
+    "preset",
+    "description",
+    "control_period",
+    "joint_type",
+    "plant",
+    "friction_motor",
+    "friction_load",
+)
 _OVERRIDE_KEYS = ("control_period", "plant", "friction_motor", "friction_load")
 _FRICTION_SIDES = ("friction_motor", "friction_load")
 

@@ -74,6 +74,7 @@ from friction_ros.core.input_gate import (
     RESYNC,
 )
 from friction_ros.core.joint_config import GAINS, name_joint_error
+from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import (
     CONTROLLER_STATE_FLOATS,
@@ -101,6 +102,7 @@ from friction_ros.nodes.runtime import apply_scheduling, run_node
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
+    JOINT_TYPE_FIELD,
     control_period_field("nominal control period (dt of the control law)"),
     Field("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
     Field(
@@ -123,7 +125,7 @@ NODE_FIELDS = [
 
 #: keys ``gains.<joint>.<key>`` accepts besides the PID keys (ros2_controllers puts
 #: feedforward_gain and u_clamp_max there too)
-PER_JOINT_PLAIN_KEYS = tuple(f.name for f in CONTROLLER_FIELDS) + ("adopt_estimator_coefficients",)
+PER_JOINT_PLAIN_KEYS = (*(f.name for f in CONTROLLER_FIELDS), "adopt_estimator_coefficients", "joint_type")
 
 
 def parameter_schema(given_section=lambda prefix: {}) -> Schema:
@@ -256,7 +258,8 @@ class CompensatingControllerNode(ParameterNode):
     def build_controller(self, joint: str, values: dict, overrides: dict):
         """(controller, reference config) of one joint; errors name the joint's parameter."""
         try:
-            return controller_from_ros_parameters(values)
+            with units_of(values.get("joint_type", "revolute")):
+                return controller_from_ros_parameters(values)
         except ParameterError as exc:
             if self.single:
                 raise

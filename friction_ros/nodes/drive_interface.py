@@ -9,7 +9,7 @@ subset (a drive left out is zeroed by its own watchdog), ``drive_state`` comes o
 every drive has its own safety state; ``~/enable``, faults of the bus, Ctrl-C and shutdown act on all.
 
 Publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort = joint
-torque N*m) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
+torque N*m; m, m/s and force N with ``joint_type: prismatic`` and ``lead``, the travel per motor turn) and ``drive_state`` (friction_msgs/DriveState) once per control period, subscribes to
 ``joint_commands`` (sensor_msgs/JointState effort = joint torque command) with keep-last 1, and
 publishes ``diagnostics``. Service ``~/enable`` (std_srvs/SetBool) enables (clearing latched faults)
 or disables the drive.
@@ -61,6 +61,7 @@ from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
 from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
+from friction_ros.core.joint_type import JOINT_TYPES, check_joint_type, joint_schema
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
@@ -118,16 +119,19 @@ NODE_FIELDS = [
 ]
 
 
-def parameter_schema() -> Schema:
+def parameter_schema(joint_type: str = "revolute") -> Schema:
     """The node's parameters: the bus and loop, one drive (:data:`~friction_ros.core.can.axis.AXIS_SCHEMA`;
-    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling."""
-    return Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING])
+    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling, in the units of
+    ``joint_type``."""
+    return joint_schema(Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING]), joint_type)
 
 
 # per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
 AXIS_KEYS = (
     "node_id",
     "mit.master_id",
+    "joint_type",
+    "lead",
     "gear_ratio",
     "torque_constant",
     "direction",
@@ -164,11 +168,13 @@ def declare_joints(node: Node) -> list[str]:
     return joints
 
 
-def axis_param_specs(joints: list[str], v: dict) -> list[Field]:
-    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values."""
-    by = dict(parameter_schema().fields())
+def axis_param_specs(joints: list[str], v: dict, joint_types: dict[str, str] | None = None) -> list[Field]:
+    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values,
+    in the units of each joint's type (``joint_types``; default: the node's ``joint_type``)."""
+    by = {t: dict(parameter_schema(t).fields()) for t in JOINT_TYPES}
+    types = {j: (joint_types or {}).get(j, v.get("joint_type", "revolute")) for j in joints}
     return [
-        dataclasses.replace(by[k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[k].doc}")
+        dataclasses.replace(by[types[j]][k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[types[j]][k].doc}")
         for j in joints
         for k in AXIS_KEYS
     ]
@@ -192,7 +198,9 @@ class DriveInterface(ParameterNode):
         super().__init__("drive_interface", **kwargs)
         self.joints_param = joints = declare_joints(self)
         self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
-        self.axis_specs = axis_param_specs(joints, v)
+        given = {j: self.given_parameters.get(f"{j}.joint_type") for j in joints}
+        types = {j: check_joint_type(p.value, f"{j}.joint_type") for j, p in given.items() if p is not None}
+        self.axis_specs = axis_param_specs(joints, v, types)
         per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
         apply_scheduling(self, v)
         self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint, AXIS_KEYS)]

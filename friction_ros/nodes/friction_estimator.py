@@ -58,6 +58,7 @@ from friction_ros.core.control_period import control_period_field
 from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA, OnlineFrictionEstimator
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC, JointInputGate
 from friction_ros.core.joint_config import GAINS, joint_values, name_joint_error
+from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import FrictionEstimateEncoder, JointStateDecoder
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
@@ -79,6 +80,7 @@ NODE_FIELDS = [
         "joint to estimate (name in joint_states); not used when joints is set",
         read_only=True,
     ),
+    JOINT_TYPE_FIELD,
     control_period_field("nominal sample period (used when stamps do not advance)", hi=1.0),
     Field(
         "publish_every",
@@ -91,7 +93,9 @@ NODE_FIELDS = [
 ]
 
 #: the estimator's plain keys: per joint as ``gains.<joint>.<key>``
-PLAIN_KEYS = tuple(name for name, item in ESTIMATOR_SCHEMA.items.items() if isinstance(item, Field))
+PLAIN_KEYS = tuple(name for name, item in ESTIMATOR_SCHEMA.items.items() if isinstance(item, Field)) + (
+    "joint_type",
+)
 _ESTIMATOR_PREFIX = re.compile(r"(?<![\w.])estimator\.")
 
 
@@ -174,10 +178,12 @@ class FrictionEstimatorNode(ParameterNode):
         self.joints = joints
         period = self.values["control_period"]
         self._joints: list[_Joint] = []
+        self.joint_types: dict[str, str] = {}
         for j in joints:
             values = self.values if self.single else joint_config(self.values, overrides[j])
             cfg = core_config(values)
-            est = self._build(j, cfg, overrides[j])  # refuses to start if invalid
+            self.joint_types[j] = values["joint_type"]
+            est = self._build(j, cfg, overrides[j], values["joint_type"])  # refuses to start if invalid
             # the controller's plausibility gate: bad samples never reach the estimator's filters
             gate = JointInputGate(
                 j, values.get("input_gate"), period=period, need_velocity=True, need_effort=True
@@ -209,10 +215,14 @@ class FrictionEstimatorNode(ParameterNode):
         return self._joints[0].counts
 
     # -- configuration -------------------------------------------------------------------------------
-    def _build(self, joint: str, cfg: dict, overrides: dict) -> OnlineFrictionEstimator:
-        """The joint's estimator; a ParameterError names the joint's parameter as written."""
+    def _build(
+        self, joint: str, cfg: dict, overrides: dict, joint_type: str = "revolute"
+    ) -> OnlineFrictionEstimator:
+        """The joint's estimator; a ParameterError names the joint's parameter as written, in the
+        joint's units."""
         try:
-            return OnlineFrictionEstimator(cfg)
+            with units_of(joint_type):
+                return OnlineFrictionEstimator(cfg)
         except ParameterError as exc:
             if self.single:
                 raise
@@ -231,7 +241,7 @@ class FrictionEstimatorNode(ParameterNode):
                 if cfg != jt.config:
                     new[jt.name] = (cfg, overrides[jt.name])
         # every estimator first (raises -> the change is rejected, nothing changed), then swap
-        built = {j: (self._build(j, cfg, ov), cfg) for j, (cfg, ov) in new.items()}
+        built = {j: (self._build(j, cfg, ov, self.joint_types[j]), cfg) for j, (cfg, ov) in new.items()}
         for jt in self._joints:
             if jt.name in built:
                 jt.estimator, jt.config = built[jt.name]

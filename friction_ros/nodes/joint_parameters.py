@@ -19,6 +19,7 @@ from rclpy.parameter import Parameter
 
 from friction_ros.core.config import Field, Schema, flatten, unflatten
 from friction_ros.core.joint_config import JointLayout, check_joint_list, joint_values
+from friction_ros.core.joint_type import check_joint_type, joint_field
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.parameters import (
     ParameterNode,
@@ -79,12 +80,17 @@ def declare_joint_config(
 
     Returns ``(node values nested, layout, {joint: {node-level name: value}})``. Unknown names,
     per-joint keys of unknown joints' sections or with no node-level counterpart are refused with
-    one line naming the key.
+    one line naming the key. Node-level fields get the units of the node's ``joint_type``, a
+    joint's own fields those of its own ``joint_type`` when it has one.
     """
     layout = layout_for(schema, joints, gains_section, plain_keys)
     per_joint_given = {k: p for k, p in node.given_parameters.items() if layout.split(k) is not None}
     values = declare_config(node, schema, None, check_unknown=False)  # open sections skip joint keys
     by_name = dict(schema.fields())
+    types = {j: values.get("joint_type", "revolute") for j in joints}
+    for name, param in per_joint_given.items():
+        if layout.split(name)[1] == "joint_type":
+            types[layout.split(name)[0]] = check_joint_type(param.value, f"{node.get_name()}: {name}")
     open_sections = {p for p, s in schema.sections() if s.open}
     overrides: dict[str, dict[str, Any]] = {j: {} for j in joints}
     for name, param in per_joint_given.items():
@@ -101,7 +107,7 @@ def declare_joint_config(
             default = list(value) if hasattr(value, "tolist") or isinstance(value, tuple) else value
             spec = Field(name, default, f"{joint}: {base}", allow_inf=True)
         else:
-            spec = dataclasses.replace(spec, name=name, doc=f"{joint}: {spec.doc}")
+            spec = joint_field(dataclasses.replace(spec, name=name, doc=f"{joint}: {spec.doc}"), types[joint])
         _declare_one(node, name, spec)
         node.parameter_fields[name] = spec
         overrides[joint][base] = spec.check(_value(node, name, spec), name)

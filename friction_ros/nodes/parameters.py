@@ -26,6 +26,7 @@ from rcl_interfaces.msg import (
 from rclpy.node import Node
 
 from friction_ros.core.config import Field, Schema, unflatten
+from friction_ros.core.joint_type import DEFAULT_JOINT_TYPE, check_joint_type, joint_schema
 from friction_ros.core.validation import ParameterError
 
 _SCALAR_TYPES = {
@@ -95,6 +96,15 @@ class ParameterNode(Node):
                     continue  # a per-joint value (friction.j3.fc), not a key of the section
                 out[k] = v.value
         return out
+
+
+def given_joint_type(node: ParameterNode) -> str:
+    """The node's ``joint_type`` as given (default revolute), read before the declaration so the
+    descriptions and messages carry the joint's units; a bad value is one line naming the choices."""
+    given = node.given_parameters.get("joint_type")
+    if given is None:
+        return DEFAULT_JOINT_TYPE
+    return check_joint_type(given.value, f"{node.get_name()}: joint_type")
 
 
 def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
@@ -195,7 +205,10 @@ def declare_config(
     change and may raise ParameterError (cross-parameter checks by the core), which rejects it.
     ``overrides`` (name -> value, None: not given) are values from outside ROS (a tool's own
     command-line options); they replace the parameter values, checked by the same fields.
+    A schema with a ``joint_type`` field gets the units of the given joint type.
     """
+    if "joint_type" in schema.items:
+        schema = joint_schema(schema, given_joint_type(node))
     specs = schema_fields(node, schema)
     for name, spec in specs:
         _declare_one(node, name, spec)

@@ -4,8 +4,8 @@ Stands in for the CAN drive interface with the same topics, so controller, estim
 a ros2_control stack (topic_based_ros2_control) cannot tell the difference:
 
 * subscribes ``joint_commands`` (sensor_msgs/JointState, effort = joint torque N*m; COMMAND_QOS)
-* publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort N*m),
-  ``diagnostics`` and, in lockstep mode, ``/clock``.
+* publishes ``joint_states`` (sensor_msgs/JointState: position rad, velocity rad/s, effort N*m;
+  m, m/s and N with ``joint_type: prismatic``), ``diagnostics`` and, in lockstep, ``/clock``.
 
 Modes:
 
@@ -56,6 +56,7 @@ from friction_ros.core.config import Field, Schema
 from friction_ros.core.control_period import control_period_field
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command, select_joint_commands
 from friction_ros.core.joint_config import JointLayout
+from friction_ros.core.joint_type import JOINT_TYPE_FIELD
 from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, resolve_joint_presets
 from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.validation import ParameterError
@@ -95,6 +96,7 @@ NODE_FIELDS = [
         choices=("realtime", "lockstep"),
         read_only=True,
     ),
+    JOINT_TYPE_FIELD,
     control_period_field("control period (plant step per state)"),
     Field("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
     Field(

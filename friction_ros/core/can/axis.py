@@ -400,7 +400,7 @@ class DriveAxis:
                 limited = False
                 if abs(cmd) > cfg.torque_limit:
                     cmd, limited = math.copysign(cfg.torque_limit, cmd), True
-                i_max_joint = cfg.current_limit * conv.torque_constant * conv.gear_ratio
+                i_max_joint = cfg.current_limit * conv.torque_constant * conv.ratio
                 if abs(cmd) > i_max_joint:
                     cmd, limited = math.copysign(i_max_joint, cmd), True
                 if (

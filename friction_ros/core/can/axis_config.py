@@ -2,7 +2,8 @@
 runs with) and :data:`AXIS_SCHEMA`, the drive_interface parameters it is built from (:func:`axis_config`).
 
 Units at this boundary: the drive's own (A, motor rad) are converted by
-:class:`~friction_ros.core.can.joint.JointConversion`; everything else is SI on the joint side.
+:class:`~friction_ros.core.can.joint.JointConversion`; everything else is SI on the joint side (rad,
+N*m; m and N on a ``joint_type: prismatic`` axis, which needs ``lead``, its travel per motor turn).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
 
 PROTOCOLS = ("odrive_cansimple", "mit")
@@ -112,7 +114,17 @@ AXIS_SCHEMA = Schema(
             ],
             doc="MIT protocol",
         ),
+        JOINT_TYPE_FIELD,
         Field("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
+        Field(
+            "lead",
+            0.0,
+            "prismatic joint: travel per motor turn (screw lead / gear ratio; required there, 0 on a "
+            "revolute joint)",
+            lo=0.0,
+            read_only=True,
+            unit="m/rev",
+        ),
         Field("torque_constant", 0.1, "motor torque constant", lo=1e-9, read_only=True, unit="N*m/A"),
         Field("direction", 1, "sign between motor and joint: 1 or -1", lo=-1, hi=1, read_only=True),
         Field(
@@ -193,13 +205,30 @@ def axis_config(v: Mapping[str, Any], control_rate_hz: float) -> AxisConfig:
     ParameterError on bad combinations. ``telemetry_rate_hz`` 0 means ``control_rate_hz``."""
     if v["direction"] not in (1, -1):
         raise ParameterError(f"direction = {v['direction']} is not allowed: must be one of 1, -1")
+    joint_type, lead = v.get("joint_type", "revolute"), v.get("lead", 0.0)
+    if joint_type == "prismatic" and not lead > 0:
+        raise ParameterError(
+            "joint_type = prismatic needs lead > 0 [m/rev]: the travel per motor turn (screw lead / "
+            "gear ratio), which converts motor turns to m"
+        )
+    if joint_type == "revolute" and lead:
+        raise ParameterError(
+            f"lead = {lead:g} [m/rev] is for a prismatic joint: set joint_type: prismatic or drop lead"
+        )
+    with units_of(joint_type):
+        return _axis_config(v, control_rate_hz, lead)
+
+
+def _axis_config(v: Mapping[str, Any], control_rate_hz: float, lead: float) -> AxisConfig:
     ranges = mitc.MitRanges(**{f.name: v[f"mit.{f.name}"] for f in dataclasses.fields(mitc.MitRanges)})
     return AxisConfig(
         protocol=v["protocol"],
         node_id=v["node_id"],
         mit_master_id=v["mit.master_id"],
         mit_ranges=ranges,
-        conversion=JointConversion(v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"]),
+        conversion=JointConversion(
+            v["gear_ratio"], v["torque_constant"], v["direction"], v["zero_offset"], lead
+        ),
         torque_limit=v["torque_limit"],
         current_limit=v["current_limit"],
         velocity_limit=v["velocity_limit"],

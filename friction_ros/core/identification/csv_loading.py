@@ -8,13 +8,15 @@ sampling and current -> torque are handled there).
 Columns have roles: ``time`` [s x ``time_scale``], ``position`` [rad], ``velocity`` [rad/s],
 ``effort`` [N*m] and ``current`` [A] (joint torque = current x ``torque_constant`` x ``gear_ratio``).
 ``columns`` maps roles to column names; the roles it leaves out are found by header, case-insensitive,
-with a unit annotation (``time [s]``, ``torque (Nm)``, ``position_rad``) ignored:
+with a unit annotation (``time [s]``, ``torque (Nm)``, ``position_rad``, ``force_N``) ignored
+(a prismatic joint's log is in m, m/s and N: :func:`~friction_ros.core.joint_type.detect_joint_type`
+tells from the headers):
 
 =========  ==================================
 time       time, t, timestamp, stamp
 position   position, pos, q
 velocity   velocity, vel, qd, dq
-effort     effort, torque, tau
+effort     effort, torque, tau, force
 current    current, iq
 load       load, load_torque, transmitted
 =========  ==================================
@@ -45,14 +47,17 @@ ROLES: dict[str, tuple[str, ...]] = {
     "time": ("time", "t", "timestamp", "stamp"),
     "position": ("position", "pos", "q"),
     "velocity": ("velocity", "vel", "qd", "dq"),
-    "effort": ("effort", "torque", "tau"),
+    "effort": ("effort", "torque", "tau", "force"),
     "current": ("current", "iq"),
     # the torque the gear transmits to the link (a load cell, an arm's inverse dynamics ...) [N*m],
     # used by the load-dependent friction instead of the fit's own estimate
     "load": ("load", "load_torque", "transmitted"),
 }
 #: SI unit suffixes dropped from a header before matching (``position_rad``, ``torque_Nm``)
-_UNIT_SUFFIXES = ("rad_s", "rad/s", "rads", "rad", "s", "sec", "nm", "n_m", "n*m", "a", "amp", "amps")
+_UNIT_SUFFIXES = (
+    *("rad_s", "rad/s", "rads", "rad", "m_s", "m/s", "s", "sec", "nm", "n_m", "n*m", "a", "amp", "amps"),
+    *("m", "n"),  # a prismatic joint's position and force (position_m, force_N)
+)
 #: time units that need ``time_scale`` (``time_ms``, ``stamp [ns]``): their factor to seconds
 TIME_UNITS = {"ns": 1e-9, "us": 1e-6, "ms": 1e-3}
 #: qualifiers of a set-point column (``position_desired``, ``tau_cmd``): ignored, never a joint name

@@ -18,6 +18,7 @@ Parameter file (``node_name: ros__parameters:``):
 * ``friction_estimator``: ``inertia``, the nearest estimator ``model`` (lugre, stribeck,
   coulomb_viscous or their asymmetric forms) with ``initial`` coefficients in the library config's
   layout (``positive: {fc, fv}`` ...) (and ``lugre`` config);
+* every section: ``joint_type`` (the fit's, ``FitResult.options["joint_type"]``);
 * ``plant_simulator``: a preset section with ``plant.motor_inertia`` and ``friction_motor``
   (loadable by :func:`friction_ros.core.presets.preset_from_config`).
 """
@@ -179,8 +180,12 @@ def parameter_document(
     load_feedforward: float = 0.0,
     load: dict | None = None,
     residual: dict | None = None,
+    joint_type: str = "revolute",
 ) -> dict:
     """The ROS parameter YAML document for the three nodes.
+
+    Every section sets ``joint_type`` (revolute or prismatic), so the nodes read the coefficients
+    in the joint's units (N*m, rad/s or N, m/s).
 
     ``plant_preset`` (name or path): the plant_simulator section starts from that preset's plant
     parameters (torque constant, encoder ...) with the identified inertia and friction; without it
@@ -206,6 +211,7 @@ def parameter_document(
         # node layout (config_from_ros_parameters): friction = the model, compensation = how it is applied
         "compensating_controller": {
             "ros__parameters": {
+                "joint_type": joint_type,
                 "inertia": float(inertia),
                 **({"pid": {k: float(v) for k, v in gains.items()}} if gains else {}),
                 **({"load_feedforward": float(load_feedforward)} if load_feedforward else {}),
@@ -215,11 +221,14 @@ def parameter_document(
                 "compensation": compensation_section(gate),
             }
         },
-        "friction_estimator": {"ros__parameters": estimator_section(config, inertia)},
+        "friction_estimator": {
+            "ros__parameters": {"joint_type": joint_type, **estimator_section(config, inertia)}
+        },
         "plant_simulator": {
             "ros__parameters": {
                 # "" = no base preset: the plant section below is the whole plant
                 "preset": str(plant_preset) if plant_preset else "",
+                "joint_type": joint_type,
                 "description": description or f"identified by friction-fit ({config.get('model')})",
                 "plant": plant,
                 "friction_motor": config,

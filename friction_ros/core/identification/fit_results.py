@@ -12,6 +12,7 @@ from friction_ros.core.identification.breakaway_detection import Breakaway
 from friction_ros.core.identification.excitation_checks import (
     Excitation,
 )
+from friction_ros.core.identification.fit_units import fit_joint_type
 from friction_ros.core.identification.plateau_detection import (
     Plateau,
 )
@@ -79,5 +80,9 @@ class FitResult:
         opts.setdefault("load", m.extra.get("load"))
         opts.setdefault("residual", m.extra.get("residual"))
         return export.parameter_document(
-            m.config, m.coefficients.get("J", 0.0), plant_preset=self.options.get("plant_preset"), **opts
+            m.config,
+            m.coefficients.get("J", 0.0),
+            plant_preset=self.options.get("plant_preset"),
+            joint_type=fit_joint_type(self),
+            **opts,
         )

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from friction_ros.core.config import Schema, flatten, unflatten
+from friction_ros.core.identification.fit_units import fit_joint_type, units_note
 from friction_ros.core.joint_config import JointLayout, check_joint_list, joint_values
 from friction_ros.core.validation import ParameterError
 
@@ -119,6 +120,7 @@ class JointFit:
     warnings: list[str] = field(default_factory=list)
     files: dict = field(default_factory=dict)
     seconds: float = 0.0
+    joint_type: str = "revolute"
 
     @property
     def compensated(self) -> bool:
@@ -145,6 +147,7 @@ def fit_one_joint(task: dict) -> JointFit:
             "fit failed",
             warnings=[f"fit failed: {exc}"],
             seconds=time.perf_counter() - t0,
+            joint_type=fit_joint_type(task),
         )
     rec = res.models[res.recommended]
     nmse = rec.metrics.get("nmse_percent")
@@ -164,6 +167,7 @@ def fit_one_joint(task: dict) -> JointFit:
         document=_plain(doc),
         warnings=list(res.warnings) + [f"compensation {m}: {v.reason}" for m, v in (res.gate or {}).items()],
         files={k: v for k, v in res.files.items() if not k.startswith("plot:")},
+        joint_type=fit_joint_type(res),
     )
     if out.compensated:
         cc = doc["compensating_controller"]["ros__parameters"]
@@ -202,7 +206,7 @@ def controller_layout(joints: Sequence[str]) -> JointLayout:
         sections,
         "pid",
         [f.name for f in PID_SCHEMA if not isinstance(f, Schema)],
-        [f.name for f in CONTROLLER_FIELDS],
+        [f.name for f in CONTROLLER_FIELDS] + ["joint_type"],
     )
 
 
@@ -217,7 +221,7 @@ def estimator_layout(joints: Sequence[str]) -> JointLayout:
         [s.name for s in items if isinstance(s, Schema)],
         None,
         (),
-        [f.name for f in items if not isinstance(f, Schema)],
+        [f.name for f in items if not isinstance(f, Schema)] + ["joint_type"],
     )
 
 
@@ -252,7 +256,9 @@ def joint_parameter_document(fits: Sequence[JointFit]) -> dict:
     joints = [f.joint for f in fits]
     cc = {
         f.joint: (
-            f.document["compensating_controller"]["ros__parameters"] if f.compensated else NOT_COMPENSATED
+            f.document["compensating_controller"]["ros__parameters"]
+            if f.compensated
+            else {**NOT_COMPENSATED, "joint_type": f.joint_type}
         )
         for f in fits
     }
@@ -266,6 +272,14 @@ def joint_parameter_document(fits: Sequence[JointFit]) -> dict:
     if any(est.values()):  # a joint without a fit keeps the estimator's defaults
         doc["friction_estimator"] = {"ros__parameters": per_joint_section(est, estimator_layout(joints))}
     return doc
+
+
+def _units_of(fits: Sequence[JointFit]) -> str:
+    """The parameter file's units: the joints' one joint type's, or each joint's own."""
+    types = sorted({f.joint_type for f in fits})
+    if len(types) == 1:
+        return units_note(types[0])
+    return "each joint in its joint_type's units: " + "; ".join(f"{t}: {units_note(t)}" for t in types)
 
 
 # ------------------------------------------------------------------------------------ all joints
@@ -341,7 +355,7 @@ def fit_joints(
     pf = Path(params_file) if params_file else out / "friction_params.yaml"
     header = (
         f"# friction-fit: joints {', '.join(joints)} from {', '.join(bag_paths)}\n"
-        f"# coefficients SI (N*m, rad/s, kg*m^2); per-joint reports: {out / 'index.md'}"
+        f"# coefficients SI ({_units_of(fits)}); per-joint reports: {out / 'index.md'}"
     )
     pf.parent.mkdir(parents=True, exist_ok=True)
     pf.write_text(export.dump_yaml(doc, header))

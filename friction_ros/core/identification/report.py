@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.core.identification import export
+from friction_ros.core.identification.fit_units import coefficient_unit, fit_joint_type, units, units_note
 from friction_ros.core.identification.records import concat_records
 
 
@@ -44,6 +45,7 @@ def _clean(x):
 
 def summary(res, sources=None, topic=None, joint=None) -> dict:
     tr, va = res.train, res.validation
+    jt = fit_joint_type(res)
     return _clean(
         {
             "tool": "friction-fit",
@@ -51,7 +53,8 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
             "sources": sources or [],
             "topic": topic,
             "joint": joint,
-            "units": {"velocity": "rad/s", "friction": "N*m", "J": "kg*m^2"},
+            "joint_type": jt,
+            "units": units(jt),
             "data": {
                 "train_samples": sum(r.n for r in tr),
                 "validation_samples": sum(r.n for r in va),
@@ -109,6 +112,8 @@ def _n_rest(res) -> int:
 
 
 def markdown(res, sources=None, plots: dict | None = None) -> str:
+    jt = fit_joint_type(res)
+    u = units(jt)
     L = ["# Friction identification report", ""]
     if sources:
         L += ["Sources: " + ", ".join(f"`{s}`" for s in sources), ""]
@@ -118,9 +123,11 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
     ex = res.excitation
     L += [
         "## Data",
+        f"- joint type: {jt} (positions in {u['position']}, velocities in {u['velocity']}, friction in "
+        f"{u['friction']}, inertia in {u['J']})",
         f"- training: {sum(r.n for r in tr)} samples, validation: {sum(r.n for r in va)} samples, "
         f"dt = {tr[0].dt * 1e3:.3g} ms, encoder resolution "
-        + (f"{tr[0].resolution:.3g} rad" if tr[0].resolution > 0 else "unknown (no position)"),
+        + (f"{tr[0].resolution:.3g} {u['position']}" if tr[0].resolution > 0 else "unknown (no position)"),
         (
             f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
             "(seed 003 A.3)"
@@ -142,9 +149,9 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             if tr[0].meta.get("velocity_source", "").startswith("Savitzky")
             else f"- velocity: {tr[0].meta.get('velocity_source', 'given')}; acceleration: its Savitzky-Golay derivative"
         ),
-        f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} rad/s, {ex.reversals} reversals, "
+        f"- excitation: max speed +{ex.max_speed_pos:.3g} / -{ex.max_speed_neg:.3g} {u['velocity']}, {ex.reversals} reversals, "
         f"{len(res.plateaus)} plateaus, {len(res.breakaways)} breakaway events",
-        f"- high/low velocity split: 1 s velocity RMS of the *moving* samples above/below {res.high_threshold:.3g} rad/s "
+        f"- high/low velocity split: 1 s velocity RMS of the *moving* samples above/below {res.high_threshold:.3g} {u['velocity']} "
         "(samples at rest are in neither)",
         f"- scored: every validation sample except standstills (at rest for more than 0.5 s: the friction there is "
         f"whatever torque holds the joint; {_n_rest(res)} samples left out); a subset metric whose measured torque "
@@ -203,12 +210,13 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             L += [f"{m.status}: {m.reason}"]
             continue
         ci = m.identifiability.get("ci95", {}) if m.identifiability else {}
-        L += ["| coefficient | value | 95 % CI |", "|---|---|---|"]
+        L += ["| coefficient | value | unit | 95 % CI |", "|---|---|---|---|"]
         for k, v in m.coefficients.items():
+            unit = coefficient_unit(n, m.config, k, jt)
             if isinstance(v, dict):
-                L.append(f"| {k} | {json.dumps(_clean(v))} | |")
+                L.append(f"| {k} | {json.dumps(_clean(v))} | {unit} | |")
                 continue
-            L.append(f"| {k} | {_fmt(v, 5)} | {_fmt(ci.get(k), 4) if k in ci else ''} |")
+            L.append(f"| {k} | {_fmt(v, 5)} | {unit} | {_fmt(ci.get(k), 4) if k in ci else ''} |")
         if m.config:
             L += ["", f"Library config: `{json.dumps(_clean(m.config))}`"]
         idf = m.identifiability or {}
@@ -251,13 +259,14 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             "",
             "## Plateaus",
             "",
-            "| v [rad/s] | friction [N*m] | std [N*m] | n | source |",
+            f"| v [{u['velocity']}] | friction [{u['friction']}] | std [{u['friction']}] | n | source |",
             "|---|---|---|---|---|",
         ]
         for p in res.plateaus:
             L.append(f"| {p.velocity:.4g} | {p.torque:.4g} | {p.torque_std:.3g} | {p.n} | {p.source} |")
     if res.breakaways:
-        L += ["", "## Breakaway", "", "| t [s] | torque [N*m] | direction |", "|---|---|---|"]
+        effort = "torque" if jt == "revolute" else "force"
+        L += ["", "## Breakaway", "", f"| t [s] | {effort} [{u['friction']}] | direction |", "|---|---|---|"]
         for b in res.breakaways:
             L.append(f"| {b.time:.3f} | {b.torque:.4g} | {b.direction:+d} |")
     if plots:
@@ -345,6 +354,8 @@ def make_plots(res, out: Path) -> dict:
     tr = concat_records(res.train)
     va = concat_records(res.validation)
     J = res.inertia
+    u = units(fit_joint_type(res))
+    effort = f"{'torque' if u['friction'] == 'N*m' else 'force'} [{u['friction']}]"
     # 1 friction-velocity map
     fig, ax = plt.subplots(figsize=(8, 5))
     step = max(tr.n // 4000, 1)
@@ -370,8 +381,8 @@ def make_plots(res, out: Path) -> dict:
         if g:
             ax.plot(g["velocity"], g["friction"], label=n)
     ax.set_xscale("symlog", linthresh=max(1e-3, float(np.min(np.abs(g["velocity"]))) if g else 1e-3))
-    ax.set_xlabel("velocity [rad/s]")
-    ax.set_ylabel("friction [N*m]")
+    ax.set_xlabel(f"velocity [{u['velocity']}]")
+    ax.set_ylabel(f"friction [{u['friction']}]")
     ax.set_title("Steady-state friction-velocity map")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
@@ -398,8 +409,8 @@ def make_plots(res, out: Path) -> dict:
             m = res.models[n]
             jm = m.coefficients.get("J", 0.0)
             ax.plot(x * 1e3, (preds[n] - jm * va.acceleration)[sl], lw=1, label=n)
-    ax.set_xlabel("position - mean [mrad]")
-    ax.set_ylabel("friction [N*m]")
+    ax.set_xlabel(f"position - mean [m{u['position']}]")
+    ax.set_ylabel(f"friction [{u['friction']}]")
     ax.set_title("Presliding hysteresis (2 s low-velocity window, validation)")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
@@ -418,7 +429,7 @@ def make_plots(res, out: Path) -> dict:
             for n in names:
                 ax.plot(t, preds[n][sl], lw=0.8, label=n)
         ax.set_title(f"validation, {title}")
-        ax.set_ylabel("torque [N*m]")
+        ax.set_ylabel(effort)
         ax.grid(True, alpha=0.3)
     axs[1].set_xlabel("time [s]")
     axs[0].legend(fontsize=7, ncol=3)
@@ -433,8 +444,8 @@ def make_plots(res, out: Path) -> dict:
         axs[0].plot(va.t, e, lw=0.5, label=n)
         axs[1].hist(e, bins=80, histtype="step", label=n)
     axs[0].set_xlabel("time [s]")
-    axs[0].set_ylabel("residual [N*m]")
-    axs[1].set_xlabel("residual [N*m]")
+    axs[0].set_ylabel(f"residual [{u['friction']}]")
+    axs[1].set_xlabel(f"residual [{u['friction']}]")
     axs[0].legend(fontsize=7)
     for a in axs:
         a.grid(True, alpha=0.3)
@@ -463,7 +474,8 @@ def write_outputs(
         doc = res.parameter_document()
         header = (
             f"# friction-fit: recommended model {res.recommended} from {', '.join(sources or [])}\n"
-            f"# coefficients SI (N*m, rad/s, kg*m^2); see {out_dir / 'report.md'}"
+            f"# joint_type {fit_joint_type(res)}: coefficients SI ({units_note(fit_joint_type(res))}); "
+            f"see {out_dir / 'report.md'}"
         )
         pf.parent.mkdir(parents=True, exist_ok=True)
         pf.write_text(export.dump_yaml(doc, header))
