@@ -222,5 +222,26 @@ def test_scaled_record_keeps_units_metadata():
     r2 = dataclasses.replace(r, meta={**r.meta, "joint_type": "prismatic"})
     from friction_ros.core.identification.fit_logs import log_joint_type
 
-    assert log_joint_type("auto", [r2]) == ("prismatic", "")
+    assert log_joint_type("auto", [r2])[0] == "prismatic"
     assert log_joint_type("revolute", [r2])[0] == "revolute"
+    assert log_joint_type("auto", [r])[0] == "revolute"
+
+
+def test_cli_reads_a_prismatic_log_by_its_column_names(tmp_path):
+    """A CSV whose columns say metres and newtons is fitted as a prismatic joint without
+    --joint-type; the summary, report and parameter file say so in its units."""
+    t, pos, force = axis_log(1, seconds=12.0)
+    log = tmp_path / "axis.csv"
+    np.savetxt(
+        log, np.column_stack([t, pos, force]), delimiter=",", header="time,position_m,force_N", comments=""
+    )
+    out = tmp_path / "fit"
+    rc = fit_cli.main(
+        [str(log), "--models", "coulomb_viscous", "--out", str(out), "--no-plots", "--quiet", "--no-gate"]
+    )
+    assert rc == 0
+    s = json.loads((out / "summary.json").read_text())
+    assert s["options"]["joint_type"] == "prismatic", s["options"].get("joint_type_source")
+    assert "position_m" in s["options"]["joint_type_source"] or "force" in s["options"]["joint_type_source"]
+    params = (out / "friction_params.yaml").read_text()
+    assert "joint_type: prismatic" in params

@@ -17,6 +17,7 @@ from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.models import check_model_names
 from friction_ros.core.identification.pipeline import DEFAULT_MODELS, JOINT_TYPES, fit_records
 from friction_ros.core.identification.records import JointData
+from friction_ros.core.joint_type import detect_joint_type
 from friction_ros.core.validation import ParameterError, check_choice
 
 
@@ -74,7 +75,7 @@ def fit_bag(
     )
     recs = [load_log(p, topic, joint, **read) for p in bag_paths]
     val_recs = [load_log(p, topic, joint, **read) for p in (validate_on or [])]
-    jt, jt_note = log_joint_type(joint_type, recs)
+    jt, jt_source = log_joint_type(joint_type, recs, bag_paths, joint)
     res = fit_records(
         recs,
         models,
@@ -83,8 +84,7 @@ def fit_bag(
         joint_type=jt,
         **options,
     )
-    if jt_note:
-        res.warnings.append(jt_note)
+    res.options["joint_type_source"] = jt_source
     if val_recs:
         res.options["validated_on"] = [str(p) for p in validate_on]
     if cross_validate:
@@ -110,16 +110,34 @@ def fit_bag(
     return res
 
 
-def log_joint_type(requested: str, records) -> tuple[str, str]:
-    """(joint type, note): ``requested`` unless ``auto``; then the records' ``joint_type`` metadata
-    (a bag's or a CSV header's, see the loaders), else revolute with a note saying so."""
+def log_joint_type(requested: str, records, paths=(), joint: str | None = None) -> tuple[str, str]:
+    """(joint type, where it came from): ``requested`` unless ``auto``; then what the records' or
+    the logs' metadata state (:func:`~friction_ros.core.joint_type.detect_joint_type`: a bag's
+    metadata, an embedded parameter file or URDF, CSV column names), else revolute."""
     check_choice("joint_type", requested, ["auto", *JOINT_TYPES])
     if requested != "auto":
-        return requested, ""
+        return requested, "given"
     found = {r.meta.get("joint_type") for r in records} - {None}
     if len(found) == 1 and (jt := found.pop()) in JOINT_TYPES:
-        return jt, ""
-    return "revolute", ""
+        return jt, "the log's metadata"
+    for p in map(Path, paths):
+        columns = _csv_header(p) if p.suffix.lower() == ".csv" else None
+        jt, why = detect_joint_type(columns=columns, path=p if p.is_dir() else None, joint=joint)
+        if jt in JOINT_TYPES:
+            return jt, why
+    return (
+        "revolute",
+        "nothing in the log states it: revolute assumed (--joint-type prismatic for a linear axis)",
+    )
+
+
+def _csv_header(path: Path) -> list[str] | None:
+    try:
+        with path.open(errors="replace") as f:
+            line = f.readline()
+    except OSError:
+        return None
+    return [c.strip() for c in line.split(",")]
 
 
 def cross_validate_runs(records: list[JointData], models=DEFAULT_MODELS, **options) -> dict:

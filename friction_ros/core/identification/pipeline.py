@@ -76,9 +76,8 @@ from friction_ros.core.identification.velocity_regimes import (
     moving_mask,
     standstill_mask,
 )
+from friction_ros.core.joint_type import JOINT_TYPES
 from friction_ros.core.validation import ParameterError, check_choice
-
-JOINT_TYPES = ("revolute", "prismatic")
 
 DEFAULT_MODELS = ("coulomb", "stribeck", "lugre", "gms4")
 EXPLAINS_LITTLE_NMSE = 30.0  # [%] validation NMSE above which a recommendation comes with a warning
