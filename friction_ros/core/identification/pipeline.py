@@ -21,6 +21,7 @@ import numpy as np
 
 from friction_ros.core.identification import learned, metrics
 from friction_ros.core.identification.breakaway_detection import find_breakaways
+from friction_ros.core.identification.decimation import DEFAULT_MAX_SAMPLES, bound_records
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
     check_excitation,
@@ -107,6 +108,7 @@ def fit_records(
     load_eps: float | None = None,
     validation_records: list[JointData] | None = None,
     residual: str = "none",
+    max_samples: int | None = DEFAULT_MAX_SAMPLES,
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -133,8 +135,11 @@ def fit_records(
     defaults to ``auto``), ``auto`` (for records without plateaus: mlp or rff by validation), ``mlp``
     or ``rff``); the combined model ``<physics>+residual`` competes in
     the recommendation like any other (its parameter count includes the network's).
+    ``max_samples``: a longer log is cut down to this many samples chosen by content
+    (:mod:`~friction_ros.core.identification.decimation`; a warning says what was used; None: all).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
+    records = bound_records([records] if isinstance(records, JointData) else list(records), max_samples)
     call = dict(locals())  # the arguments as given: the load-term check below refits with them
     t_start = time.perf_counter()
     records = [records] if isinstance(records, JointData) else list(records)
