@@ -21,9 +21,13 @@
    into test/data/dfki_pendulum (a user's clone): the printed notes and the JSON say which.
 3. Learned residual inference time: per residual candidate the report's step() time, and for every
    exported residual the median of 10,000 single ``LearnedResidual.step`` calls (goal < 20 us).
+4. Long logs (``bench/long_logs.py``): friction-fit on a 60 s, 10 min and 1 h log (bag, and the 1 h
+   one as CSV) and on a 7-joint 21 s arm bag with ``--jobs 2``: seconds and peak RSS, each in its own
+   process.
 
     .venv/bin/python bench/real_data.py            # full (~100 s CPU; ~3 min wall on a busy 2-core machine)
     .venv/bin/python bench/real_data.py --quick    # 20 s runs, no lugre/nusvr (smoke test)
+    .venv/bin/python bench/real_data.py --section long_logs   # friction-fit on 60 s .. 1 h logs, 7-joint arm
 """
 
 from __future__ import annotations
@@ -775,7 +779,15 @@ def main() -> None:
     ap.add_argument(
         "--quick", action="store_true", help="20 s synthetic runs, coulomb_viscous and stribeck only"
     )
+    ap.add_argument(
+        "--section",
+        choices=["all", "identification", "long_logs"],
+        default="all",
+        help="long_logs: only the long-log rows (bench/long_logs.py), merged into real_data.json",
+    )
     args = ap.parse_args()
+    if args.section == "long_logs":
+        return _long_logs_only()
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     load_start = os.getloadavg()[0]  # other processes on the machine slow the step() timings
     syn, syn_res = synthetic(args.quick)
@@ -797,6 +809,10 @@ def main() -> None:
         "wall_s": time.perf_counter() - t_wall,
         "cpu_s": time.process_time() - t_cpu,
     }
+    if args.section == "all" and not args.quick:
+        import long_logs
+
+        figures["long_logs"] = long_logs.run(print_table)
     print(
         f"\nrun time: {figures['wall_s']:.0f} s wall, {figures['cpu_s']:.0f} s CPU (1-min load average "
         f"{load_start:.1f} at the start, {figures['load_average_1min']['end']:.1f} at the end, {os.cpu_count()} cores)"
@@ -806,6 +822,18 @@ def main() -> None:
         figures,
         ".venv/bin/python bench/real_data.py" + (" --quick" if args.quick else ""),
     )
+
+
+def _long_logs_only() -> None:
+    """The long-log rows alone, merged into the figures of bench/results/real_data.json."""
+    import json
+
+    import long_logs
+
+    path = ROOT / "bench" / "results" / "real_data.json"
+    figures = json.loads(path.read_text()).get("figures", {}) if path.is_file() else {}
+    figures["long_logs"] = long_logs.run(print_table)
+    write_results("real_data", figures, ".venv/bin/python bench/real_data.py --section long_logs")
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ from friction_ros.core.experiment.events import END, START, Event
 from friction_ros.core.identification.decimation import bound_records, decimate, piece_edges
 from friction_ros.core.identification.pipeline import fit_records
 from friction_ros.core.identification.records import prepare
+from friction_ros.core.identification.report import summary
 
 FC, FV, J = 0.8, 0.5, 0.02  # truth of the synthetic joint: tau = J a + FC sgn(v) + FV v + noise
 
@@ -81,7 +82,7 @@ def test_piece_edges_cut_at_reversals():
 
 
 def test_fit_on_decimated_long_log_matches_truth_and_whole_log():
-    rec = _record(400.0)
+    rec = _record(200.0)
     opts = dict(
         models=["coulomb_viscous"],
         load="none",
@@ -91,6 +92,9 @@ def test_fit_on_decimated_long_log_matches_truth_and_whole_log():
     )
     cut = fit_records(rec, max_samples=20_000, **opts)
     assert any(w.startswith(f"{rec.meta['source']}: used ") for w in cut.warnings)
+    doc = summary(cut)  # the JSON summary says what was used
+    assert doc["data"]["decimation"]["of"] == rec.n
+    assert any(": used " in w for w in doc["warnings"])
     whole = fit_records(rec, max_samples=None, **opts)
     c, w = cut.models["coulomb_viscous"].coefficients, whole.models["coulomb_viscous"].coefficients
     fc = next(v for k, v in c.items() if k.lower() in ("fc", "f_c"))

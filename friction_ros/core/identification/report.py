@@ -59,7 +59,10 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
                 "encoder_resolution": tr[0].resolution,
                 "high_velocity_threshold": res.high_threshold,
                 "velocity_filter": "Savitzky-Golay order 3, 21 ms (velocity) / 41 ms (acceleration)",
+                # a long log cut down by content: samples used, of how many, kept sample ranges
+                "decimation": next((r.meta["decimation"] for r in tr if "decimation" in r.meta), None),
             },
+            "warnings": list(getattr(res, "warnings", [])),
             "excitation": vars(res.excitation),
             "plateaus": [vars(p) for p in res.plateaus],
             "breakaways": [vars(b) for b in res.breakaways],
@@ -404,7 +407,7 @@ def make_plots(res, out: Path) -> dict:
         ax.set_ylabel("torque [N*m]")
         ax.grid(True, alpha=0.3)
     axs[1].set_xlabel("time [s]")
-    axs[0].legend(fontsize=7, ncol=3)
+    axs[0].legend(fontsize=7, ncol=3, loc="upper right")  # "best" scans every sample: seconds
     fig.tight_layout()
     fig.savefig(out / "validation.png", dpi=110)
     plt.close(fig)
@@ -418,7 +421,7 @@ def make_plots(res, out: Path) -> dict:
     axs[0].set_xlabel("time [s]")
     axs[0].set_ylabel("residual [N*m]")
     axs[1].set_xlabel("residual [N*m]")
-    axs[0].legend(fontsize=7)
+    axs[0].legend(fontsize=7, loc="upper right")
     for a in axs:
         a.grid(True, alpha=0.3)
     fig.tight_layout()
