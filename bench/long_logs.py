@@ -28,13 +28,11 @@ ROWS = [
     ("1 h log (CSV)", "joint_60min.csv", 3_600_001, []),
     ("7-joint arm, 21 s (--joint all --jobs 2)", "arm7_21s", 7 * 21_001, ["--joint", "all", "--jobs", "2"]),
 ]
-#: main before this work (same logs, same machine): seconds, peak RSS [MB]; 1 h logs not run (~13 GB)
+#: main before this work (same logs, this machine, /usr/bin/time -v): wall s, CPU s, peak RSS [MB];
+#: the 1 h logs were not run (~3.7 KB per sample: ~13 GB)
 BEFORE = {
-    "60 s log (bag)": (66.7, 530.0),
-    "10 min log (bag)": (265.4, 2332.0),
-    "1 h log (bag)": (math.nan, math.nan),
-    "1 h log (CSV)": (math.nan, math.nan),
-    "7-joint arm, 21 s (--joint all --jobs 2)": (math.nan, math.nan),
+    "60 s log (bag)": (66.7, 52.2, 530.0),
+    "10 min log (bag)": (265.4, 67.7, 2332.0),
 }
 GOALS = {  # seconds, peak RSS [MB]
     "60 s log (bag)": (20.0, math.inf),
@@ -45,9 +43,10 @@ GOALS = {  # seconds, peak RSS [MB]
 _WRAP = (
     "import json, resource, subprocess, sys, time\n"
     "t = time.perf_counter()\n"
-    "rc = subprocess.call(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)\n"
+    "rc = subprocess.call(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
     "s = time.perf_counter() - t\n"
-    "print(json.dumps({'rc': rc, 'seconds': s, 'rss_mb': resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024}))\n"
+    "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+    "print(json.dumps({'rc': rc, 'seconds': s, 'cpu_s': u.ru_utime + u.ru_stime, 'rss_mb': u.ru_maxrss / 1024}))\n"
 )
 
 
@@ -101,13 +100,14 @@ def run(print_table) -> dict:
         load = os.getloadavg()[0]
         fig = measure(log, extra)
         fig["load_average_1min"] = [load, os.getloadavg()[0]]  # other processes slow a run down
-        before = BEFORE.get(name, (math.nan, math.nan))
+        before = BEFORE.get(name, (math.nan, math.nan, math.nan))
         goal = GOALS.get(name, (math.inf, math.inf))
         fig.update(
             samples=n,
             bytes_per_sample=fig["rss_mb"] * 2**20 / n,
             before_seconds=before[0],
-            before_rss_mb=before[1],
+            before_cpu_s=before[1],
+            before_rss_mb=before[2],
             goal_seconds=goal[0],
             goal_rss_mb=goal[1],
             meets_goal=fig["rc"] == 0 and fig["seconds"] <= goal[0] and fig["rss_mb"] <= goal[1],
@@ -117,10 +117,12 @@ def run(print_table) -> dict:
             [
                 name,
                 f"{fig['seconds']:.1f}",
+                f"{fig['cpu_s']:.0f}",
                 f"{fig['rss_mb']:.0f}",
                 f"{fig['bytes_per_sample']:.0f}",
                 "-" if math.isnan(before[0]) else f"{before[0]:.1f}",
                 "-" if math.isnan(before[1]) else f"{before[1]:.0f}",
+                "-" if math.isnan(before[2]) else f"{before[2]:.0f}",
                 "-"
                 if math.isinf(goal[0])
                 else f"<= {goal[0]:.0f} s" + ("" if math.isinf(goal[1]) else f", {goal[1]:.0f} MB"),
@@ -130,7 +132,19 @@ def run(print_table) -> dict:
         )
     print_table(
         "friction-fit on long logs (default models; fresh process per row; 2 cores)",
-        ["log", "s", "peak RSS MB", "B/sample", "before s", "before MB", "goal", "met", "load avg"],
+        [
+            "log",
+            "s",
+            "CPU s",
+            "peak RSS MB",
+            "B/sample",
+            "before s",
+            "before CPU s",
+            "before MB",
+            "goal",
+            "met",
+            "load avg",
+        ],
         rows,
     )
     return out

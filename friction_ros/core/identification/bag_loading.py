@@ -156,7 +156,7 @@ class _Growing:
 def _read_streamed(path: Path, topic, joint, events_topic, current_topic, current_field) -> _JointColumns:
     """One chunk at a time: only this joint's columns are kept (NotStreamable: read it whole)."""
     from friction_ros.core.bag import BagError
-    from friction_ros.core.bag.mcap_stream import stream_topics
+    from friction_ros.core.bag.mcap_stream import NotStreamable, stream_topics
     from friction_ros.core.bag.reader import bag_files
 
     cols = {k: _Growing() for k in ("time", "stamp", "position", "velocity", "effort", "current")}
@@ -202,6 +202,8 @@ def _read_streamed(path: Path, topic, joint, events_topic, current_topic, curren
         raise ExcitationError(f"bag {path}: {exc}") from None
     if topic not in topics:
         raise _no_topic(path, topic, topics)
+    if not names:  # no joint-state message at all: the whole-bag reader says so as it always has
+        raise NotStreamable(f"{topic}: no messages")
     if joint is None:
         if len(names) != 1:
             raise ExcitationError(
