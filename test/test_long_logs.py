@@ -61,6 +61,17 @@ def test_decimation_keeps_content_and_says_what_it_used():
     assert np.array_equal(again.torque, d.torque) and again.meta["warnings"][-1] == note
 
 
+def test_derivatives_do_not_reach_across_joins():
+    from friction_ros.core.identification.dynamic_fit import DEFAULT_SIGNALS, fit_signals
+
+    rec = _record(400.0)
+    d = decimate(rec, 20_000)
+    assert d.meta["joins_t"], "pieces from several places"
+    v, a = fit_signals(d, DEFAULT_SIGNALS)  # GMS differentiates the position with a narrow window
+    assert np.abs(v).max() < 1.2 * np.abs(rec.velocity).max()
+    assert np.abs(a).max() < 2.0 * np.abs(rec.acceleration).max()
+
+
 def test_short_logs_are_left_alone_and_budget_is_shared():
     rec = _record(30.0)
     assert bound_records([rec], 80_000)[0] is rec

@@ -218,7 +218,10 @@ def splice(data: JointData, keep: list[tuple[int, int]]) -> JointData:
     n = idx.size
     events: list[Event] = []
     pos = 0
+    joins = []
     for a, b in keep:
+        if pos:
+            joins.append(float(pos * data.dt))
         t0, t1 = data.t[a], data.t[b - 1]
         shift = pos * data.dt - t0
         events += [
@@ -227,6 +230,8 @@ def splice(data: JointData, keep: list[tuple[int, int]]) -> JointData:
             if t0 <= e.time <= t1
         ]
         pos += b - a
+    meta = dict(data.meta)
+    meta["joins_t"] = joins  # times [s] where a piece starts: derivatives must not reach across
     return JointData(
         data.dt * np.arange(n),
         data.position[idx],
@@ -237,6 +242,25 @@ def splice(data: JointData, keep: list[tuple[int, int]]) -> JointData:
         events,
         data.resolution,
         data.t0,
-        dict(data.meta),
+        meta,
         None if data.transmitted is None else data.transmitted[idx],
     )
+
+
+def piecewise_derivatives(data: JointData, window: int) -> tuple[np.ndarray, np.ndarray] | None:
+    """Savitzky-Golay (cubic, ``window`` samples) velocity and acceleration of the position, taken
+    piece by piece between the joins of a spliced record (a position step at a join is no motion);
+    None when the record has no joins. A piece shorter than the window keeps the record's own."""
+    from scipy.signal import savgol_filter
+
+    cuts = np.searchsorted(data.t, data.meta.get("joins_t") or [])
+    cuts = cuts[(cuts > 0) & (cuts < data.n)]
+    if not cuts.size:
+        return None
+    v, a = data.velocity.copy(), data.acceleration.copy()
+    for i0, i1 in zip([0, *cuts], [*cuts, data.n]):
+        if i1 - i0 > window:
+            q = data.position[i0:i1]
+            v[i0:i1] = savgol_filter(q, window, 3, deriv=1, delta=data.dt, mode="interp")
+            a[i0:i1] = savgol_filter(q, window, 3, deriv=2, delta=data.dt, mode="interp")
+    return v, a
