@@ -57,27 +57,25 @@ def decimate(data: JointData, budget: int) -> JointData:
     used = out.n
     n_forced = sum(1 for g in groups if g[2])
     kept_forced = sum(1 for g in groups if g[2] and (g[0], g[1]) in set(chosen))
-
-    spans = ", ".join(f"{data.t[a]:.0f}-{data.t[b - 1]:.0f} s" for a, b in _merged(keep)[:8])
-    more = f" and {len(_merged(keep)) - 8} more" if len(_merged(keep)) > 8 else ""
+    merged = _merged(keep)
+    spans = ", ".join(f"{data.t[a]:.0f}-{data.t[b - 1]:.0f} s" for a, b in merged[:8])
+    more = f" and {len(merged) - 8} more" if len(merged) > 8 else ""
+    special = ""
+    if n_forced:
+        special = f", with {kept_forced} of {n_forced} experiment segments, plateaus and breakaways" + (
+            " (the budget does not hold them all)" if forced_dropped else ""
+        )
     note = (
         f"used {used} of {data.n} samples ({100.0 * used / data.n:.1f} %, {used * dt:.0f} of {data.n * dt:.0f} s): "
-        f"{len(_merged(keep))} stretches chosen for their content (velocity reversals, speeds in both directions, "
-        f"accelerations, positions)"
-        + (
-            f", with {kept_forced} of {n_forced} experiment segments, plateaus and breakaways"
-            if n_forced
-            else ""
-        )
-        + f", joined back to back; kept: {spans}{more}"
-        + (" (the budget could not hold them all)" if forced_dropped else "")
-        + "; raise --max-samples to use more"
+        f"{len(merged)} stretches chosen for their content (velocity reversals, speeds in both directions, "
+        f"accelerations, positions){special}, joined back to back; kept: {spans}{more}; "
+        "raise --max-samples to use more"
     )
     out.meta["warnings"] = list(out.meta.get("warnings", [])) + [note]
     out.meta["decimation"] = {
         "used": used,
         "of": data.n,
-        "kept": [[int(a), int(b)] for a, b in _merged(keep)],
+        "kept": [[int(a), int(b)] for a, b in merged],
     }
     return out
 
