@@ -72,6 +72,27 @@ def test_derivatives_do_not_reach_across_joins():
     assert np.abs(a).max() < 2.0 * np.abs(rec.acceleration).max()
 
 
+def _with_plateaus(hold: float):
+    """400 s of slow reversals with ten constant-speed stretches of ``hold`` seconds."""
+    dt = 0.002
+    t = np.arange(int(400 / dt)) * dt
+    v = 0.15 * np.sin(2 * math.pi * t / 3.3)
+    for k in range(10):
+        v[(t >= 20 + 35 * k) & (t < 20 + 35 * k + hold)] = 0.2 * (1 if k % 2 else -1)
+    q = np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * dt)])
+    tau = FC * np.tanh(v / 1e-3) + FV * v + np.random.default_rng(0).normal(0.0, 0.01, t.size)
+    return prepare(t, q, None, tau)
+
+
+def test_plateaus_kept_only_when_they_make_a_plateau_experiment():
+    from friction_ros.core.identification.decimation import _must_keep
+
+    # a few constant-speed moments in ordinary motion: not kept first (the fit must not turn into a
+    # plateau fit on a handful of them); a plateau experiment's plateaus are
+    assert not [s for s in _must_keep(_with_plateaus(0.6)) if s[1] > s[0]]
+    assert len([s for s in _must_keep(_with_plateaus(5.0)) if s[1] > s[0]]) >= 5
+
+
 def test_short_logs_are_left_alone_and_budget_is_shared():
     rec = _record(30.0)
     assert bound_records([rec], 80_000)[0] is rec

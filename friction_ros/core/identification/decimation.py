@@ -27,6 +27,7 @@ from friction_ros.core.identification.records import JointData
 DEFAULT_MAX_SAMPLES = 80_000
 PIECES = 24  # pieces per budget: enough for variety, few joins
 PIECE_SECONDS = (1.0, 10.0)  # a piece lasts this long at least / at most [s]
+PLATEAU_SHARE = 0.05  # detected plateaus covering this share of a record make it a plateau experiment
 FORCED_SHARE = 0.5  # at most this share of the budget goes to segments, plateaus and breakaways first
 _V_BINS, _A_BINS, _Q_BINS = 12, 3, 16
 
@@ -101,20 +102,25 @@ def piece_edges(velocity: np.ndarray, length: int) -> np.ndarray:
 
 
 def _must_keep(data: JointData, block_seconds: float = 120.0) -> list[tuple[float, float, int]]:
-    """(t0, t1 [s], priority) kept whole: experiment segments and plateaus (priority 2); a breakaway
-    as an instant (priority 1: its piece is kept; it joins no pieces). Searched in blocks of ``block_seconds`` overlapping by
+    """(t0, t1 [s], priority) kept whole: experiment segments (priority 2); detected plateaus when they
+    make up a plateau experiment (>= PLATEAU_SHARE of the record; the odd constant-speed moment of
+    ordinary motion is not one, and keeping those would turn the fit into a plateau fit) and
+    breakaways as instants (priority 1: their piece is kept; they join no pieces). Searched in blocks of ``block_seconds`` overlapping by
     10 s: the searches cost more than linear time on a long record."""
     from friction_ros.core.identification.breakaway_detection import find_breakaways
     from friction_ros.core.identification.plateau_detection import find_plateaus
 
     spans = [(s.time - 0.05, e.time + 0.2, 2) for s, e in completed_segments(data.events, "")]
     step, over = int(round(block_seconds / data.dt)), int(round(10.0 / data.dt))
+    plateaus = []
     for i0 in range(0, data.n, step):
         part = data.slice(i0, min(i0 + step + over, data.n))
         if part.n < 3:
             continue
-        spans += [(p.t_start - 1.0, p.t_end + 0.3, 2) for p in find_plateaus(part)]
+        plateaus += [(p.t_start - 1.0, p.t_end + 0.3, 1) for p in find_plateaus(part)]
         spans += [(b.time, b.time, 1) for b in find_breakaways(part)]
+    if sum(t1 - t0 - 1.3 for t0, t1, _ in plateaus) >= PLATEAU_SHARE * data.duration:
+        spans += plateaus
     return spans
 
 
