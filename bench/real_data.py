@@ -25,10 +25,14 @@
    bring (friction_ros.core.synthetic_logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
    creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints
    of the real DFKI double pendulum: recommended model, validation NMSE, verdict and warnings per log.
+5. Long logs (``bench/long_logs.py``): friction-fit on a 60 s, 10 min and 1 h log (bag, and the 1 h
+   one as CSV) and on a 7-joint 21 s arm bag with ``--jobs 2``: seconds and peak RSS, each in its own
+   process.
 
     .venv/bin/python bench/real_data.py            # full (~100 s CPU + the gauntlet's ~4 min CPU)
     .venv/bin/python bench/real_data.py --quick    # 20 s runs, no lugre/nusvr (smoke test)
     .venv/bin/python bench/real_data.py --gauntlet # section 4 alone (bench/_gauntlet.py)
+    .venv/bin/python bench/real_data.py --section long_logs   # friction-fit on 60 s .. 1 h logs, 7-joint arm
 """
 
 from __future__ import annotations
@@ -783,7 +787,15 @@ def main() -> None:
         "--quick", action="store_true", help="20 s synthetic runs, coulomb_viscous and stribeck only"
     )
     ap.add_argument("--gauntlet", action="store_true", help="run the gauntlet section alone")
+    ap.add_argument(
+        "--section",
+        choices=["all", "identification", "long_logs"],
+        default="all",
+        help="long_logs: only the long-log rows (bench/long_logs.py), merged into real_data.json",
+    )
     args = ap.parse_args()
+    if args.section == "long_logs":
+        return _long_logs_only()
     t_wall, t_cpu = time.perf_counter(), time.process_time()
     if args.gauntlet:
         figures = {
@@ -820,6 +832,10 @@ def main() -> None:
         "wall_s": time.perf_counter() - t_wall,
         "cpu_s": time.process_time() - t_cpu,
     }
+    if args.section == "all" and not args.quick:
+        import long_logs
+
+        figures["long_logs"] = long_logs.run(print_table)
     print(
         f"\nrun time: {figures['wall_s']:.0f} s wall, {figures['cpu_s']:.0f} s CPU (1-min load average "
         f"{load_start:.1f} at the start, {figures['load_average_1min']['end']:.1f} at the end, {os.cpu_count()} cores)"
@@ -829,6 +845,18 @@ def main() -> None:
         figures,
         ".venv/bin/python bench/real_data.py" + (" --quick" if args.quick else ""),
     )
+
+
+def _long_logs_only() -> None:
+    """The long-log rows alone, merged into the figures of bench/results/real_data.json."""
+    import json
+
+    import long_logs
+
+    path = ROOT / "bench" / "results" / "real_data.json"
+    figures = json.loads(path.read_text()).get("figures", {}) if path.is_file() else {}
+    figures["long_logs"] = long_logs.run(print_table)
+    write_results("real_data", figures, ".venv/bin/python bench/real_data.py --section long_logs")
 
 
 if __name__ == "__main__":

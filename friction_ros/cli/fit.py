@@ -122,6 +122,13 @@ def build_parser() -> argparse.ArgumentParser:
         "--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)"
     )
     p.add_argument(
+        "--max-samples",
+        type=int,
+        default=80_000,
+        help="a longer log is cut down to this many samples chosen by content (reversals, speeds, "
+        "accelerations, positions, plateaus); the report says what was used (default 80000; 0: all)",
+    )
+    p.add_argument(
         "--train-window",
         choices=["content", "window", "first"],
         default="content",
@@ -298,6 +305,7 @@ def fit_options(args, columns) -> dict:
         cross_validate=args.cross_validate,
         validate_on=args.validate_on,
         joint_type=args.joint_type,
+        max_samples=args.max_samples or None,
     )
 
 

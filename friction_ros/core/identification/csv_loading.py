@@ -159,6 +159,40 @@ def _read_table(path: Path) -> tuple[list[str], list[list[str]], int, list[str]]
     return headers, rows, numbered[1][0] if len(numbered) > 1 else head_no + 1, notes
 
 
+def _header(path: Path) -> tuple[int, str | None, list[str]] | None:
+    """(line number, delimiter, column names) of the header line, read without the rest of the file."""
+    try:
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
+            for no, ln in enumerate(f, 1):
+                if ln.strip() and not ln.lstrip().startswith("#"):
+                    head = ln.rstrip("\r\n")
+                    delim = max(_DELIMITERS, key=head.count)
+                    delim = delim if head.count(delim) else None
+                    cells = next(csv.reader([head], delimiter=delim)) if delim else head.split()
+                    return no, delim, [c.strip() for c in cells]
+    except OSError:
+        return None
+    return None
+
+
+def _fast_columns(path: Path, head: tuple[int, str | None, list[str]], roles: dict[str, int]):
+    """{role: values} parsed by numpy straight from the file (one array per column, no per-row
+    objects), or None when a row is unusual (empty or non-numeric cells, a short row): the careful
+    reader then says what is wrong."""
+    no, delim, headers = head
+    cols = sorted(set(roles.values()) | {len(headers) - 1})
+    try:
+        with open(path, encoding="utf-8-sig") as f:
+            arr = np.loadtxt(
+                f, delimiter=delim, comments="#", skiprows=no, usecols=cols, ndmin=2, quotechar='"'
+            )
+    except (ValueError, OSError, UnicodeDecodeError):
+        return None
+    if arr.shape[0] < 3:
+        return None
+    return {r: arr[:, cols.index(j)].copy() for r, j in roles.items()}
+
+
 def _is_number(cell: str) -> bool:
     try:
         float(cell)
@@ -263,8 +297,18 @@ def load_csv(
         scale = check_real("time_scale", time_scale, 0.0, lo_open=True, unit="s per time unit")
     except ParameterError as exc:
         raise ExcitationError(f"csv {path}: {exc}") from None
-    headers, rows, first_line, notes = _read_table(path)
-    roles, name = _resolve(path, headers, columns, joint)
+    head = _header(path)
+    fast = None
+    if head is not None and not all(_is_number(c) for c in head[2]):
+        headers = head[2]
+        roles, name = _resolve(path, headers, columns, joint)
+        if "time" in roles and ("position" in roles or "velocity" in roles):
+            fast = _fast_columns(path, head, roles)
+    if fast is None:
+        headers, rows, first_line, notes = _read_table(path)
+        roles, name = _resolve(path, headers, columns, joint)
+    else:
+        rows, notes = fast, []
     hint = "name it with --columns role=<column> (columns= in Python)"
     if "time" not in roles:
         raise ExcitationError(
@@ -293,9 +337,13 @@ def load_csv(
             f"csv {path}: the torque comes from current column {headers[roles['current']]!r}: "
             "pass --torque-constant [N*m/A] (and --gear-ratio)"
         )
-    if len(rows) < 3:
+    if fast is None and len(rows) < 3:
         raise ExcitationError(f"csv {path}: {len(rows)} data rows: need at least 3")
-    col = {r: _column(path, headers, rows, j, first_line) for r, j in roles.items()}
+    col = (
+        fast
+        if fast is not None
+        else {r: _column(path, headers, rows, j, first_line) for r, j in roles.items()}
+    )
     t = col["time"] * scale
     if not np.all(np.isfinite(t)):
         k = int(np.flatnonzero(~np.isfinite(t))[0])

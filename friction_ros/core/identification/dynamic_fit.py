@@ -28,6 +28,7 @@ from scipy.optimize import differential_evolution, minimize
 from scipy.signal import savgol_filter
 
 from friction_ros.core.identification.data_scale import torque_scale
+from friction_ros.core.identification.decimation import piecewise_derivatives
 from friction_ros.core.identification.ga import run_ga
 from friction_ros.core.identification.linsolve import solve_grams
 from friction_ros.core.identification.models import FitSpec
@@ -81,6 +82,8 @@ def fit_signals(data: JointData, sig: Signals | None = None) -> tuple[np.ndarray
     w = max(int(round(sig.velocity_window / data.dt)) | 1, 5)
     if data.n <= w:
         return data.velocity, data.acceleration
+    if (pieces := piecewise_derivatives(data, w)) is not None:  # a long log cut down: joins
+        return pieces
     v = savgol_filter(data.position, w, 3, deriv=1, delta=data.dt, mode="interp")
     a = savgol_filter(data.position, w, 3, deriv=2, delta=data.dt, mode="interp")
     return v, a

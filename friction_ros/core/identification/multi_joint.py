@@ -56,17 +56,19 @@ def bag_joint_names(bag_paths: Sequence, topic: str) -> list[str]:
             raise ParameterError(f"{p}: a CSV log holds one joint: --joint all or a list needs bags")
         if not Path(p).exists():
             raise ParameterError(f"bag {p}: no such file or directory")
-        try:
-            bag = read_bag(p, topics=None)
-        except BagError as exc:
-            raise ParameterError(f"bag {p}: {exc}") from None
-        if topic not in bag:
-            have = ", ".join(sorted(bag.topics)) if hasattr(bag, "topics") else "?"
-            raise ParameterError(f"bag {p} has no topic {topic} (topics: {have}): pass --topic")
-        try:
-            here = bag[topic].joint_names
-        except BagError as exc:
-            raise ParameterError(f"bag {p}: {exc}") from None
+        here = _streamed_joint_names(p, topic)
+        if here is None:
+            try:
+                bag = read_bag(p, topics=None)
+            except BagError as exc:
+                raise ParameterError(f"bag {p}: {exc}") from None
+            if topic not in bag:
+                have = ", ".join(sorted(bag.topics)) if hasattr(bag, "topics") else "?"
+                raise ParameterError(f"bag {p} has no topic {topic} (topics: {have}): pass --topic")
+            try:
+                here = bag[topic].joint_names
+            except BagError as exc:
+                raise ParameterError(f"bag {p}: {exc}") from None
         if names is None:
             names = list(here)
         elif missing := [j for j in names if j not in here]:
@@ -77,6 +79,24 @@ def bag_joint_names(bag_paths: Sequence, topic: str) -> list[str]:
     if not names:
         raise ParameterError(f"{bag_paths[0]}: topic {topic} names no joints")
     return names
+
+
+def _streamed_joint_names(path, topic: str) -> list[str] | None:
+    """The joints on ``topic`` of an indexed MCAP bag, read chunk by chunk (None: read it whole)."""
+    from friction_ros.core.bag import BagError, storage_of
+    from friction_ros.core.bag.mcap_stream import NotStreamable, stream_topics
+    from friction_ros.core.bag.reader import bag_files
+
+    if storage_of(path) != "mcap":
+        return None
+    seen: dict[str, None] = {}
+    try:
+        topics, _ = stream_topics(
+            bag_files(path)[1], {topic: lambda td: seen.update(dict.fromkeys(td.joint_names))}
+        )
+    except (NotStreamable, BagError):
+        return None
+    return list(seen) if topic in topics else None
 
 
 def requested_joints(text: str, available: Sequence[str]) -> list[str]:

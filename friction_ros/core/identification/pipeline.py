@@ -23,6 +23,7 @@ from friction_ros.core.identification.baseline import NAME as BASELINE
 from friction_ros.core.identification.baseline import validated_baseline
 from friction_ros.core.identification.breakaway_detection import find_breakaways
 from friction_ros.core.identification.data_scale import data_scale, with_scale
+from friction_ros.core.identification.decimation import DEFAULT_MAX_SAMPLES, bound_records
 from friction_ros.core.identification.dynamic_fit import fit_time_domain
 from friction_ros.core.identification.excitation_checks import (
     check_motion,
@@ -108,6 +109,7 @@ def fit_records(
     validation_records: list[JointData] | None = None,
     residual: str = "none",
     joint_type: str = "revolute",
+    max_samples: int | None = DEFAULT_MAX_SAMPLES,
 ) -> FitResult:
     """Fit ``models`` to prepared records (see module and package docstrings).
 
@@ -138,9 +140,12 @@ def fit_records(
     angle-dependent load terms (gravity is constant along the axis: the offset takes it).
     Every model is compared with the inverse-dynamics baseline (:mod:`baseline`); a model that
     cannot be fitted or diverges is listed with the reason (:mod:`model_status`).
+    ``max_samples``: a longer log is cut down to this many samples chosen by content
+    (:mod:`~friction_ros.core.identification.decimation`; a warning says what was used; None: all).
     """
     check_choice("train_window", train_window, ["content", "window", "first"])
     check_choice("joint_type", joint_type, list(JOINT_TYPES))
+    records = bound_records([records] if isinstance(records, JointData) else list(records), max_samples)
     call = dict(locals())  # the arguments as given: the load-term check below refits with them
     t_start = time.perf_counter()
     records = [records] if isinstance(records, JointData) else list(records)

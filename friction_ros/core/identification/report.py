@@ -62,13 +62,15 @@ def summary(res, sources=None, topic=None, joint=None) -> dict:
                 "encoder_resolution": tr[0].resolution,
                 "high_velocity_threshold": res.high_threshold,
                 "velocity_filter": "Savitzky-Golay order 3, 21 ms (velocity) / 41 ms (acceleration)",
+                # a long log cut down by content: samples used, of how many, kept sample ranges
+                "decimation": next((r.meta["decimation"] for r in tr if "decimation" in r.meta), None),
             },
+            "warnings": list(getattr(res, "warnings", [])),
             "excitation": vars(res.excitation),
             "plateaus": [vars(p) for p in res.plateaus],
             "breakaways": [vars(b) for b in res.breakaways],
             "options": {k: v for k, v in res.options.items() if k != "gate_options"},
             "recommended": res.recommended,
-            "warnings": list(res.warnings),
             "recommendation": getattr(res, "recommendation", {}),
             "gate": {m: v.as_dict() for m, v in (getattr(res, "gate", None) or {}).items()},
             "models": {
@@ -432,7 +434,7 @@ def make_plots(res, out: Path) -> dict:
         ax.set_ylabel(effort)
         ax.grid(True, alpha=0.3)
     axs[1].set_xlabel("time [s]")
-    axs[0].legend(fontsize=7, ncol=3)
+    axs[0].legend(fontsize=7, ncol=3, loc="upper right")  # "best" scans every sample: seconds
     fig.tight_layout()
     fig.savefig(out / "validation.png", dpi=110)
     plt.close(fig)
@@ -446,7 +448,7 @@ def make_plots(res, out: Path) -> dict:
     axs[0].set_xlabel("time [s]")
     axs[0].set_ylabel(f"residual [{u['friction']}]")
     axs[1].set_xlabel(f"residual [{u['friction']}]")
-    axs[0].legend(fontsize=7)
+    axs[0].legend(fontsize=7, loc="upper right")
     for a in axs:
         a.grid(True, alpha=0.3)
     fig.tight_layout()

@@ -1,0 +1,150 @@
+"""Benchmark section: friction-fit on long logs, seconds and peak RSS per log class.
+
+Each row runs ``friction-fit`` with its default models and options in a fresh subprocess (a small
+wrapper process, so the peak RSS is that run's: with ``--jobs 2`` the largest of its processes).
+The logs are the long-log generator's (``bench/long_log_files.py``: the realistic joint's truth at
+1 kHz, speed varying over the log; a 7-joint arm bag), written to ``/tmp/long_logs`` when missing.
+
+    .venv/bin/python bench/real_data.py --section long_logs
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+LOGS = Path("/tmp/long_logs")
+#: (row, log, samples, extra friction-fit arguments)
+ROWS = [
+    ("60 s log (bag)", "joint_1min", 60_001, []),
+    ("10 min log (bag)", "joint_10min", 600_001, []),
+    ("1 h log (bag)", "joint_60min", 3_600_001, []),
+    ("1 h log (CSV)", "joint_60min.csv", 3_600_001, []),
+    ("7-joint arm, 21 s (--joint all --jobs 2)", "arm7_21s", 7 * 21_001, ["--joint", "all", "--jobs", "2"]),
+]
+#: main before this work (same logs, this machine, /usr/bin/time -v): wall s, CPU s, peak RSS [MB];
+#: the 1 h logs were not run (~3.7 KB per sample: ~13 GB)
+BEFORE = {
+    "60 s log (bag)": (66.7, 52.2, 530.0),
+    "10 min log (bag)": (265.4, 67.7, 2332.0),
+}
+GOALS = {  # seconds, peak RSS [MB]
+    "60 s log (bag)": (20.0, math.inf),
+    "1 h log (bag)": (300.0, 1536.0),
+    "1 h log (CSV)": (300.0, 1536.0),
+    "7-joint arm, 21 s (--joint all --jobs 2)": (90.0, math.inf),
+}
+_WRAP = (
+    "import json, resource, subprocess, sys, time\n"
+    "t = time.perf_counter()\n"
+    "rc = subprocess.call(sys.argv[1:], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)\n"
+    "s = time.perf_counter() - t\n"
+    "u = resource.getrusage(resource.RUSAGE_CHILDREN)\n"
+    "print(json.dumps({'rc': rc, 'seconds': s, 'cpu_s': u.ru_utime + u.ru_stime, 'rss_mb': u.ru_maxrss / 1024}))\n"
+)
+
+
+def ensure_logs() -> None:
+    """Write the benchmark logs to /tmp/long_logs unless they are there."""
+    need = [r[1] for r in ROWS if not (LOGS / r[1]).exists()]
+    if not need:
+        return
+    LOGS.mkdir(parents=True, exist_ok=True)
+    subprocess.check_call(
+        [
+            sys.executable,
+            str(ROOT / "bench" / "long_log_files.py"),
+            str(LOGS),
+            "--minutes",
+            "1",
+            "10",
+            "60",
+            "--csv",
+            "--arm",
+        ],
+        env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+    )
+
+
+def measure(log: str, extra: list[str]) -> dict:
+    """One friction-fit run in a fresh process: seconds, peak RSS [MB], exit code, what was used."""
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "friction_ros.cli.fit", str(LOGS / log), "--out", out, "--quiet", *extra]
+        res = subprocess.run(
+            [sys.executable, "-c", _WRAP, *cmd],
+            capture_output=True,
+            text=True,
+            cwd=str(ROOT),
+            env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "OMP_NUM_THREADS": "1"},
+        )
+        fig = json.loads(res.stdout.strip().splitlines()[-1])
+        summary = Path(out) / "summary.json"
+        if summary.is_file():
+            doc = json.loads(summary.read_text())
+            fig["used"] = next((w for w in doc.get("warnings", []) if ": used " in w), "")
+            fig["recommended"] = doc.get("recommended")
+    return fig
+
+
+def run(print_table) -> dict:
+    """Measure every row; print the table; return the figures for real_data.json."""
+    ensure_logs()
+    out, rows = {}, []
+    for name, log, n, extra in ROWS:
+        load = os.getloadavg()[0]
+        fig = measure(log, extra)
+        fig["load_average_1min"] = [load, os.getloadavg()[0]]  # other processes slow a run down
+        before = BEFORE.get(name, (math.nan, math.nan, math.nan))
+        goal = GOALS.get(name, (math.inf, math.inf))
+        fig.update(
+            samples=n,
+            bytes_per_sample=fig["rss_mb"] * 2**20 / n,
+            before_seconds=before[0],
+            before_cpu_s=before[1],
+            before_rss_mb=before[2],
+            goal_seconds=goal[0],
+            goal_rss_mb=goal[1],
+            meets_goal=fig["rc"] == 0 and fig["seconds"] <= goal[0] and fig["rss_mb"] <= goal[1],
+        )
+        out[name] = fig
+        rows.append(
+            [
+                name,
+                f"{fig['seconds']:.1f}",
+                f"{fig['cpu_s']:.0f}",
+                f"{fig['rss_mb']:.0f}",
+                f"{fig['bytes_per_sample']:.0f}",
+                "-" if math.isnan(before[0]) else f"{before[0]:.1f}",
+                "-" if math.isnan(before[1]) else f"{before[1]:.0f}",
+                "-" if math.isnan(before[2]) else f"{before[2]:.0f}",
+                "-"
+                if math.isinf(goal[0])
+                else f"<= {goal[0]:.0f} s" + ("" if math.isinf(goal[1]) else f", {goal[1]:.0f} MB"),
+                "yes" if fig["meets_goal"] else ("FAILED" if fig["rc"] else "no"),
+                f"{load:.1f}",
+            ]
+        )
+    print_table(
+        "friction-fit on long logs (default models; fresh process per row; 2 cores)",
+        [
+            "log",
+            "s",
+            "CPU s",
+            "peak RSS MB",
+            "B/sample",
+            "before s",
+            "before CPU s",
+            "before MB",
+            "goal",
+            "met",
+            "load avg",
+        ],
+        rows,
+    )
+    return out
