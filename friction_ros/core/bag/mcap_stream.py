@@ -12,12 +12,15 @@ from __future__ import annotations
 
 import os
 import struct
+import zlib
 from collections.abc import Callable, Iterable
 
 import numpy as np
 
 from .contents import TopicData, TopicInfo
 from .errors import BagError
+from .mcap_index import index_matches
+from .mcap_records import CHANNEL, SCHEMA, RecordError, read_channel, read_schema
 from .mcap_scan import MAGIC, McapScan
 from .msgdef import normalize_type
 from .qos import parse_qos
@@ -41,15 +44,38 @@ class _Scan(McapScan):
     def __init__(self, path):  # noqa: D107 - the parent's __init__ reads the whole file: not called
         self.path = path
         self.schemas, self.channels, self.metadata = {}, {}, {}
-        self.segments, self.locs, self.warnings = [], {}, []
+        self.segments, self.locs, self.warnings, self.problems = [], {}, [], []
         self.truncated = False
-        self.stats_count = None
+        self.expected = None
+        self.profile = ""
+        self._unsupported, self._loose = [], []
+        self._chunks_seen = False
+        self._last_chunk = self._last_resync = 8
+        self._chunk_index = {}
+        self._start_time = None
+
+    def _summary(self, summary: bytes) -> None:
+        """Schemas and channels of an intact summary section (positions relative to its start)."""
+        pos, end = 0, len(summary)
+        while pos + 9 <= end:
+            op, ln = _OPHDR.unpack_from(summary, pos)
+            body, stop = pos + 9, pos + 9 + ln
+            if stop > end:
+                raise RecordError(f"record at summary byte {pos} runs past its end")
+            if op == SCHEMA:
+                sid, schema = read_schema(summary, body, stop)
+                self.schemas[sid] = schema
+            elif op == CHANNEL:
+                cid, channel = read_channel(summary, body, stop)
+                self.channels[cid] = channel
+            pos = stop
 
     def chunks(self):
         """Yield (decompressed chunk as uint8 array, {channel id: record offsets}) in file order."""
         with open(self.path, "rb") as f:
             size = os.fstat(f.fileno()).st_size
-            self._check_magic(f.read(16))
+            if f.read(8) != MAGIC:
+                raise NotStreamable("damaged magic bytes")
             if size < 8 + 37 + 17:
                 raise NotStreamable("too short")
             f.seek(size - 37)
@@ -59,7 +85,13 @@ class _Scan(McapScan):
                 raise NotStreamable("no summary")
             f.seek(start)
             summary = f.read(size - 37 - start)
-            self._scan_summary(summary, 0, len(summary))
+            (crc,) = struct.unpack_from("<I", foot, 25)  # over the summary and the footer up to the CRC
+            if crc and zlib.crc32(summary + foot[:25]) != crc:
+                raise NotStreamable("the summary fails its CRC check")
+            try:
+                self._summary(summary)
+            except RecordError as exc:
+                raise NotStreamable(f"damaged summary ({exc})") from None
             if not self.channels:
                 raise NotStreamable("no channels in the summary")
             f.seek(8)
@@ -75,13 +107,16 @@ class _Scan(McapScan):
                     body = f.read(ln)
                     (ch,) = struct.unpack_from("<H", body, 0)
                     (nbytes,) = struct.unpack_from("<I", body, 2)
-                    entries = np.frombuffer(body, "<u8", nbytes // 8, 6).reshape(-1, 2)
-                    pending[1][ch] = entries[:, 1].astype(np.int64)
+                    if len(body) < 6 + nbytes or nbytes % 16:
+                        raise NotStreamable("damaged message index")
+                    pending[1][ch] = np.frombuffer(body, "<u8", nbytes // 8, 6).reshape(-1, 2)
                     continue
                 if pending is not None:
                     if not pending[1]:
                         raise NotStreamable("chunk without message index")
-                    yield pending
+                    if not index_matches(pending[0].tobytes(), pending[1]):
+                        raise NotStreamable("a message index does not match its chunk")
+                    yield pending[0], {c: e[:, 1].astype(np.int64) for c, e in pending[1].items()}
                     pending = None
                 if op in (0x0F, 0x02):
                     return
@@ -91,7 +126,7 @@ class _Scan(McapScan):
                     body = f.read(ln)
                     if len(body) < ln:
                         raise NotStreamable("truncated chunk")
-                    seg = self._chunk(memoryview(body), 0, ln)
+                    seg, _problem = self._chunk(memoryview(body), 0, ln)
                     if seg is None:
                         raise NotStreamable("corrupt chunk")
                     buf = np.frombuffer(self.segments[seg], np.uint8)
