@@ -124,9 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--max-samples",
         type=int,
-        default=80_000,
+        default=300_000,
         help="a longer log is cut down to this many samples chosen by content (reversals, speeds, "
-        "accelerations, positions, plateaus); the report says what was used (default 80000; 0: all)",
+        "accelerations, positions, plateaus); the report says what was used (default 300000: 5 min at 1 kHz; 0: all)",
     )
     p.add_argument(
         "--train-window",

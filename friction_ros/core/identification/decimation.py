@@ -23,8 +23,9 @@ import numpy as np
 from friction_ros.core.experiment.events import Event, completed_segments
 from friction_ros.core.identification.records import JointData
 
-#: samples a fit keeps by default (80 s at 1 kHz): ~10 s of training, the rest validation
-DEFAULT_MAX_SAMPLES = 80_000
+#: samples a fit keeps by default (5 min at 1 kHz: an identification experiment is used whole; a
+#: robot's hour-long log is cut down): ~10 s of training, the rest validation
+DEFAULT_MAX_SAMPLES = 300_000
 PIECES = 24  # pieces per budget: enough for variety, few joins
 PIECE_SECONDS = (1.0, 10.0)  # a piece lasts this long at least / at most [s]
 PLATEAU_SHARE = 0.05  # detected plateaus covering this share of a record make it a plateau experiment
@@ -54,6 +55,8 @@ def decimate(data: JointData, budget: int) -> JointData:
     features = _features(data, edges)
     chosen, forced_dropped = _select(groups, features, edges, budget)
     keep = [(int(edges[a]), int(edges[b])) for a, b in chosen]
+    if not keep:  # every piece is larger than the budget (one long segment): its first samples
+        keep = [(0, min(budget, data.n))]
     out = splice(data, keep)
     used = out.n
     n_forced = sum(1 for g in groups if g[2])

@@ -26,6 +26,8 @@ from friction_ros.core.identification.metrics import nmse_percent, relative_erro
 DIVERGED_NMSE = 200.0
 #: ... or worse than a constant and this many times the inverse-dynamics baseline's validation NMSE
 BASELINE_FACTOR = 1.5
+#: relative error [%] (100 ||y - y_hat|| / ||y||) beyond which a plateau map's prediction ran away
+RUNAWAY_PERCENT = 300.0
 
 
 def failed_model(name: str, status: str, reason: str) -> ModelResult:
@@ -49,7 +51,10 @@ def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResu
     validation prediction is not finite, its NMSE exceeds :data:`DIVERGED_NMSE`, or it is worse
     than a constant (NMSE > 100 %) and :data:`BASELINE_FACTOR` times the baseline's NMSE; in both
     cases only when its error is also larger than the torque itself (relative error > 100 %: a
-    torque without variance makes any NMSE large)."""
+    torque without variance makes any NMSE large). A static map fitted to constant-velocity
+    plateaus is judged on the plateaus, not on the time-domain torque (which also holds the load
+    between them): it diverged only when its prediction is not finite or its error exceeds
+    :data:`RUNAWAY_PERCENT` of the torque itself."""
     yhat = np.asarray(res.extra.get("validation_prediction", []), dtype=float)
     y = np.asarray(measured, dtype=float)
     why = ""
@@ -57,7 +62,12 @@ def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResu
         why = "its prediction on the validation data is not finite"
     else:
         nm = nmse_percent(yhat, y)
-        if not relative_error_percent(yhat, y) > 100.0:
+        rel = relative_error_percent(yhat, y)
+        if res.method == "plateaus":  # judged on its plateaus (docstring): only a runaway counts
+            nm = math.nan
+            if rel > RUNAWAY_PERCENT:
+                why = f"its error on the validation data is more than {RUNAWAY_PERCENT / 100:g} times the torque itself"
+        if not rel > 100.0:
             nm = math.nan  # nearer the measurement than zero is: not diverged (a torque without variance)
         nb = (
             float(baseline.metrics.get("nmse_percent", math.nan))
@@ -68,7 +78,9 @@ def judge_divergence(res: ModelResult, measured: np.ndarray, baseline: ModelResu
             "the fit does not carry over to the validation data (a simulation that ran away, or "
             "coefficients the training data do not determine)"
         )
-        if math.isfinite(nm) and nm > DIVERGED_NMSE:
+        if why:
+            pass
+        elif math.isfinite(nm) and nm > DIVERGED_NMSE:
             why = f"its validation error is more than {DIVERGED_NMSE / 100:g} times the variance of the measured torque: {cause}"
         elif math.isfinite(nm) and math.isfinite(nb) and nm > 100.0 and nm > BASELINE_FACTOR * nb:
             why = (

@@ -167,7 +167,10 @@ def fit_one_joint(task: dict) -> JointFit:
             "fit failed",
             warnings=[f"fit failed: {exc}"],
             seconds=time.perf_counter() - t0,
-            joint_type=fit_joint_type(task),
+            # the joint type asked for (``auto`` when the log was to say it: revolute in the index)
+            joint_type=fit_joint_type(
+                {"joint_type": task.get("joint_type") if task.get("joint_type") != "auto" else None}
+            ),
         )
     rec = res.models[res.recommended]
     nmse = rec.metrics.get("nmse_percent")
