@@ -179,6 +179,14 @@ def prepare(
         pos, vel, eff = (None if x is None else x[sl] for x in (pos, vel, eff))
         if ts.size < 3:
             raise ExcitationError("time: fewer than 3 joint states share one clock")
+    if events and ts.size:
+        # joint states stamped at or before the experiment's first event are not part of it: a
+        # recorder that caught the plant's initial state, or matched a sample later, then gives the
+        # same record (and the same grid, bit for bit)
+        after = ts > min(e.time for e in events)
+        if 3 <= int(after.sum()) < ts.size:
+            ts = ts[after]
+            pos, vel, eff = (None if x is None else x[after] for x in (pos, vel, eff))
     if eff is None or not np.any(np.isfinite(eff)):
         if current is None:
             raise ExcitationError(
