@@ -179,12 +179,16 @@ def prepare(
         pos, vel, eff = (None if x is None else x[sl] for x in (pos, vel, eff))
         if ts.size < 3:
             raise ExcitationError("time: fewer than 3 joint states share one clock")
-    if events and ts.size:
-        # joint states stamped at or before the experiment's first event are not part of it: a
-        # recorder that caught the plant's initial state, or matched a sample later, then gives the
-        # same record (and the same grid, bit for bit)
-        after = ts > min(e.time for e in events)
-        if 3 <= int(after.sum()) < ts.size:
+    if events and ts.size > 3:
+        # a state or two stamped at the very start of the experiment, and none earlier, is its
+        # initial state: a recorder catches it or misses it by a sample; left out, both recordings
+        # give the same record (and the same grid, bit for bit). A log that starts well before its
+        # first event keeps everything.
+        first = min(e.time for e in events)
+        after = ts > first
+        lead = ts[~after]
+        dt0 = float(np.median(np.diff(ts)))
+        if 0 < lead.size <= 2 and float(first - lead[0]) <= 2.0 * dt0 and int(after.sum()) >= 3:
             ts = ts[after]
             pos, vel, eff = (None if x is None else x[after] for x in (pos, vel, eff))
     if eff is None or not np.any(np.isfinite(eff)):
