@@ -68,6 +68,7 @@ def test_addon_node_sums_the_arm_command_and_switches_off(tmp_path):
     joints = ["a", "b"]
     params = {
         "joints": joints,
+        "effort_limit": 100.0,
         "mode": "compensation_only",
         "sum_base_command": True,
         "friction": {"model": "coulomb_viscous", "fc": 1.0, "fv": 0.5, "b": dict(FRICTION)},
@@ -230,6 +231,7 @@ def test_estimates_are_adopted_only_by_joints_that_adopt_them_and_only_when_conv
     joints = ["a", "b"]
     params = {
         "joints": joints,
+        "effort_limit": 100.0,
         "mode": "compensation_only",
         "friction": {"model": "coulomb_viscous", "fc": 1.0, "fv": 0.5},
         "compensation": {"source": "feedforward", "smoothing_velocity": 1e-6},

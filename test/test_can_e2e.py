@@ -251,7 +251,7 @@ def test_compensating_controller_tracks_sinusoid_through_can(tmp_path):
     proc, _log = start_stack(tmp_path, params=["telemetry_timeout:=0.03"])
     ctrl_cmd = [sys.executable, "-m", "friction_ros.nodes.compensating_controller", "--ros-args",
                 "-p", "joint_name:=j1", "-p", f"pid.p:={KP}", "-p", f"pid.d:={KD}",
-                "-p", "pid.u_clamp_max:=4.0", "-p", "pid.u_clamp_min:=-4.0",
+                "-p", "pid.u_clamp_max:=4.0", "-p", "pid.u_clamp_min:=-4.0", "-p", "effort_limit:=4.0",
                 "-p", "reference.type:=sinusoid", "-p", "reference.amplitude:=0.3",
                 "-p", "reference.frequency:=0.5"]  # fmt: skip
     ctrl = subprocess.Popen(ctrl_cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -146,7 +146,7 @@ def test_a_good_model_is_enabled_and_the_file_carries_the_verdicts(abb):
     refused = [m for m, x in bad.items() if not x.enabled]
     assert refused and sec.get("refused") == refused
     assert sec["source"] in ("none", *[m for m, x in bad.items() if x.enabled])
-    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD)
+    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD, effort_limit=4.9)
     comp = doc["compensating_controller"]["ros__parameters"]["compensation"]
     cfg = {"friction": {"model": BAD_STRIBECK, **{k: v for k, v in comp.items() if k != "source"}}}
     with pytest.raises(ParameterError, match="refused by the safety gate"):
@@ -220,7 +220,7 @@ def test_the_node_refuses_a_refused_source_from_the_fitted_file(tmp_path, abb):
 
     _, scale = abb
     bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
-    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD)
+    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD, effort_limit=4.9)
     sec = doc["compensating_controller"]["ros__parameters"]
     assert "feedback" in sec["compensation"]["refused"]
 

@@ -33,6 +33,7 @@ def test_load_section_is_fed_forward_and_holds_against_gravity(tmp_path):
             "compensating_controller": {
                 "ros__parameters": {
                     "mode": "pid",
+                    "effort_limit": 4.9,
                     "pid": PD,
                     "inertia": 0.0012,
                     "compensation": {"source": "feedforward", "gain": 1.0},
@@ -117,6 +118,7 @@ def test_residual_section_over_dds_adds_the_residual_step(tmp_path):
             "compensating_controller": {
                 "ros__parameters": {
                     "mode": "pid",
+                    "effort_limit": 4.9,
                     "pid": PD,
                     "friction": CV,
                     "residual": section,
@@ -165,7 +167,11 @@ def test_load_and_residual_parameters_change_at_run_time(tmp_path):
 
     params = write_params(
         tmp_path / "ctrl.yaml",
-        {"compensating_controller": {"ros__parameters": {"pid": PD, "load": {"gravity": 1.0}}}},
+        {
+            "compensating_controller": {
+                "ros__parameters": {"effort_limit": 4.9, "pid": PD, "load": {"gravity": 1.0}}
+            }
+        },
     )
     rclpy.init(args=["--ros-args", "--params-file", params])
     try:
@@ -203,7 +209,9 @@ def test_fitted_file_with_load_terms_and_no_ripple_starts_the_node(tmp_path):
 
     load = JointLoad(gravity=2.0, gravity_phase=0.1).to_config()
     assert load["ripple_cos"] == []
-    doc = parameter_document({"model": "coulomb_viscous", "fc": 0.5, "fv": 0.1}, 0.01, load=load)
+    doc = parameter_document(
+        {"model": "coulomb_viscous", "fc": 0.5, "fv": 0.1}, 0.01, load=load, effort_limit=5.0
+    )
     path = tmp_path / "fit.yaml"
     path.write_text(dump_yaml(doc))
     assert "ripple_cos" not in path.read_text()

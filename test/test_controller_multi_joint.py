@@ -36,6 +36,7 @@ def _joint_params(i: int) -> dict:
             "u_clamp_min": -40.0 - i,
         },
         "inertia": 0.01 * i,
+        "effort_limit": 50.0 + i,
         "friction": models[i % 3],
         "compensation": {"source": "blended" if i % 2 else "feedforward", "gain": 0.8 + 0.02 * i},
         "load": {"gravity": 1.5 * (i % 4), "gravity_phase": 0.1 * i, "load_friction": 0.02 * (i % 2)},
@@ -48,7 +49,11 @@ def _multi_params() -> dict:
     doc: dict = {"joints": JOINTS, "pid": {"p": 100.0, "i": 0.0, "d": 1.0}, "gains": {}}
     for i, j in enumerate(JOINTS, start=1):
         p = _joint_params(i)
-        doc["gains"][j] = {**p["pid"], "inertia": p["inertia"]}  # ros2_controllers: u_clamp_* are the PID's
+        doc["gains"][j] = {
+            **p["pid"],
+            "inertia": p["inertia"],
+            "effort_limit": p["effort_limit"],
+        }  # ros2_controllers: u_clamp_* are the PID's
         for section in ("friction", "compensation", "load", "reference"):
             doc.setdefault(section, {})[j] = p[section]
     return doc
@@ -168,6 +173,7 @@ def test_a_missing_joint_gets_zero_torque_and_the_others_stay_controlled(tmp_pat
     joints = ["joint1", "joint2", "joint3"]
     params = {
         "joints": joints,
+        "effort_limit": 100.0,
         "pid": {"p": 100.0, "i": 0.0, "d": 0.0},
         "gains": {"joint2": {"p": 50.0}},
         "reference": {"type": "constant", "offset": 0.1},
@@ -231,7 +237,8 @@ def test_a_missing_joint_gets_zero_torque_and_the_others_stay_controlled(tmp_pat
     ],
 )
 def test_per_joint_parameter_errors_name_the_joint_and_the_key(tmp_path, params, line):
-    path = write_params(tmp_path / "p.yaml", {"compensating_controller": {"ros__parameters": params}})
+    doc = {"compensating_controller": {"ros__parameters": {"effort_limit": 10.0, **params}}}
+    path = write_params(tmp_path / "p.yaml", doc)
     r = subprocess.run(
         [
             sys.executable,
@@ -261,6 +268,7 @@ def test_per_joint_parameters_change_at_run_time_for_that_joint_only(tmp_path):
 
     params = {
         "joints": ["a", "b", "c"],
+        "effort_limit": 100.0,
         "pid": {"p": 100.0, "d": 1.0},
         "gains": {"b": {"p": 50.0}},
         "friction": {"c": {"model": "coulomb_viscous", "fc": 0.5, "fv": 0.1}},

@@ -45,6 +45,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
 
     ctrl = {
         "mode": "pid",
+        "effort_limit": 100.0,
         "pid": PID,
         "reference": {"type": "constant", "offset": OFFSET},
         "state_timeout": 0.2,

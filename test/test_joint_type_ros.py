@@ -63,6 +63,7 @@ def test_prismatic_controller_and_estimator_speak_newtons_and_metres(tmp_path):
         "compensating_controller": {
             "ros__parameters": {
                 "joint_type": "prismatic",
+                "effort_limit": 500.0,
                 "friction": {"model": "coulomb_viscous", "fc": 10.0, "fv": 50.0},
             }
         },
@@ -115,8 +116,8 @@ def test_per_joint_type_on_a_multi_joint_controller(tmp_path):
                 "joints": ["x", "wrist"],
                 "friction": {"model": "coulomb_viscous", "fc": 1.0, "fv": 0.1},
                 "gains": {
-                    "x": {"joint_type": "prismatic", "u_clamp_max": 200.0},
-                    "wrist": {"u_clamp_max": 2.0},
+                    "x": {"joint_type": "prismatic", "u_clamp_max": 200.0, "effort_limit": 300.0},
+                    "wrist": {"u_clamp_max": 2.0, "effort_limit": 3.0},
                 },
             }
         }

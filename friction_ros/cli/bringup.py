@@ -359,6 +359,7 @@ def main(argv: list[str] | None = None) -> int:
                         s.overrides["mode"] = args.mode
                 if args.mode == "lockstep" and s.node != "plant_simulator":
                     s.overrides["use_sim_time"] = True
+            preset_effort_limit(specs, args.preset or "abb_m19s", list(args.params))
             if args.pin == "on" or (args.pin == "auto" and args.mode == "lockstep"):
                 pin_latency_chain(specs)
         if args.compose and not (len(specs) == 1 and isinstance(specs[0], ComposedSpec)):
@@ -382,6 +383,35 @@ def main(argv: list[str] | None = None) -> int:
     label, code, reason = first
     print(f"error: {label}: {reason}", file=sys.stderr)
     return 2 if code == 2 else 1
+
+
+def preset_effort_limit(specs: list[NodeSpec], preset: str, params: list[str]) -> None:
+    """A controller started beside a simulated plant gets the plant preset's torque limit as its
+    ``effort_limit`` unless a parameter file gives one (the controller refuses to run without)."""
+    if not any(s.node == "plant_simulator" for s in specs):
+        return
+    for path in params:
+        doc = load_yaml(path, "parameter file")
+        for key, section in (doc or {}).items() if isinstance(doc, dict) else []:
+            values = (section or {}).get("ros__parameters", {}) if isinstance(section, dict) else {}
+            if "compensating_controller" in str(key) and isinstance(values, dict):
+                gains = values.get("gains") or {}
+                if (
+                    "effort_limit" in values
+                    or "u_clamp_max" in values
+                    or (
+                        isinstance(gains, dict)
+                        and any(isinstance(g, dict) and "effort_limit" in g for g in gains.values())
+                    )
+                ):
+                    return
+    from friction_ros.core.experiment.joint_scale import JointScale
+    from friction_ros.core.presets import load_preset
+
+    limit = float(JointScale.from_preset(load_preset(preset)).torque_limit)
+    for s in specs:
+        if s.node == "compensating_controller" and "effort_limit" not in s.overrides:
+            s.overrides["effort_limit"] = limit
 
 
 def check_preset(spec: NodeSpec) -> None:

@@ -140,7 +140,14 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         f = results_dir / f"controller_{label}.yaml"
         refused = label != "none" and not verdicts[label].enabled
         doc = controller_document(
-            cfg, inertia, label, reference, gains, load_feedforward=-scale.load, allow_refused=refused
+            cfg,
+            inertia,
+            label,
+            reference,
+            gains,
+            load_feedforward=-scale.load,
+            allow_refused=refused,
+            effort_limit=scale.torque_limit,
         )
         f.write_text(dump_yaml(doc))
         run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)

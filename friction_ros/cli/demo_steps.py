@@ -72,9 +72,16 @@ def controller_document(
     *,
     load_feedforward: float = 0.0,
     allow_refused: bool = False,
+    effort_limit: float,
 ) -> dict:
-    """compensating_controller parameters (README layout: ``friction`` = model, ``compensation`` = how)."""
-    params: dict = {"mode": "pid", "pid": dict(gains), "reference": dict(reference)}
+    """compensating_controller parameters (README layout: ``friction`` = model, ``compensation`` = how);
+    ``effort_limit``: the joint's torque limit (the preset's drive limit)."""
+    params: dict = {
+        "mode": "pid",
+        "effort_limit": float(effort_limit),
+        "pid": dict(gains),
+        "reference": dict(reference),
+    }
     if load_feedforward:
         params["load_feedforward"] = float(load_feedforward)
     if model_config is not None:

@@ -78,7 +78,14 @@ class AddonOutput:
     def publish_sum(self, sec: int, nanosec: int) -> None:
         """Base command + compensation on joint_commands and commands."""
         base = self.base
-        total = [base.get(ch.joint, 0.0) + ch.compensation for ch in self.channels]
+        # the sum sent to the joint stays inside the joint's limits (effort_limit / u_clamp)
+        total = [
+            min(
+                max(base.get(ch.joint, 0.0) + ch.compensation, ch.controller.u_clamp_min),
+                ch.controller.u_clamp_max,
+            )
+            for ch in self.channels
+        ]
         self.send(sec, nanosec, total)
         self._sum.data = total
         self.sum_pub.publish(self._sum)

@@ -48,16 +48,13 @@ leaf (``pid.p``, ``compensation.source``, ``friction.model`` + that model's coef
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 
 from friction_msgs.msg import ControllerState, FrictionEstimate
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory
 
-from friction_ros.core.coefficient_exchange import from_fields
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control.controller import (
     CompensatingController,
@@ -67,7 +64,6 @@ from friction_ros.core.control.controller import (
 from friction_ros.core.control.controller_config import CONTROLLER_FIELDS, controller_parameter_schema
 from friction_ros.core.control_period import control_period_field
 from friction_ros.core.experiment.references import reference_from_config
-from friction_ros.core.experiment.trajectory import TrajectoryReference
 from friction_ros.core.input_gate import (
     DUPLICATE,
     REJECTED,
@@ -82,7 +78,7 @@ from friction_ros.core.wire import (
     JointStateEncoder,
 )
 from friction_ros.nodes.addon_output import AddonOutput
-from friction_ros.nodes.commands import stamp_to_ns
+from friction_ros.nodes.controller_inputs import ReferenceInputs
 from friction_ros.nodes.controller_joints import JointChannel
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import (
@@ -158,7 +154,7 @@ assert CONTROLLER_STATE_FLOATS == tuple(
 ), "friction_msgs/ControllerState and the wire encoder disagree"
 
 
-class CompensatingControllerNode(ParameterNode):
+class CompensatingControllerNode(ReferenceInputs, ParameterNode):
     """Thin adapter over one CompensatingController per joint; see the module docstring."""
 
     def __init__(self, **kwargs):
@@ -259,7 +255,14 @@ class CompensatingControllerNode(ParameterNode):
         """(controller, reference config) of one joint; errors name the joint's parameter."""
         try:
             with units_of(values.get("joint_type", "revolute")):
-                return controller_from_ros_parameters(values)
+                ctrl, ref = controller_from_ros_parameters(values)
+            if not ctrl.limits_given:
+                raise ParameterError(
+                    "effort_limit is not set: give the joint's torque (force) limit, e.g. effort_limit: 2.5 "
+                    "(per joint gains.<joint>.effort_limit; or finite u_clamp_min/u_clamp_max): the plant "
+                    "preset's, the drive's torque_limit, or the one friction-fit writes"
+                )
+            return ctrl, ref
         except ParameterError as exc:
             if self.single:
                 raise
@@ -319,69 +322,6 @@ class CompensatingControllerNode(ParameterNode):
         return response
 
     # -- inputs -----------------------------------------------------------------------------------
-    def _on_trajectory(self, msg: JointTrajectory) -> None:
-        names = list(msg.joint_names)
-        mine = [ch for ch in self.channels if ch.joint in names]
-        try:
-            if not mine:
-                raise ParameterError(f"none of the joints {', '.join(self.joints)} is in joint_names {names}")
-            times = [p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in msg.points]
-            stamp = stamp_to_ns(msg.header.stamp)
-            if stamp == 0 or self._t0_ns is None:
-                start = (self._last_ns - self._t0_ns) * 1e-9 if self._last_ns is not None else 0.0
-            else:
-                start = (stamp - self._t0_ns) * 1e-9
-            built = []
-            for ch in mine:
-                j = names.index(ch.joint)
-                pos = [p.positions[j] if j < len(p.positions) else math.nan for p in msg.points]
-                vel = (
-                    [p.velocities[j] for p in msg.points]
-                    if all(len(p.velocities) > j for p in msg.points)
-                    else None
-                )
-                built.append((ch, TrajectoryReference(times, pos, vel, start_time=start)))
-        except ParameterError as exc:
-            self.counts["rejected_references"] += 1
-            self.get_logger().error(f"rejected reference trajectory: {exc}; keeping the previous reference")
-            return
-        for ch, traj in built:
-            ch.trajectory, ch.desired = traj, None
-
-    def _on_desired(self, msg: JointState) -> None:
-        """The arm's desired state per joint (position, velocity; acceleration from the effort
-        field is not assumed): the newest one is the reference of the next period."""
-        names = list(msg.name)
-        for ch in self.channels:
-            if ch.joint in names:
-                i = names.index(ch.joint)
-                if i < len(msg.position) and math.isfinite(msg.position[i]):
-                    vel = msg.velocity[i] if i < len(msg.velocity) and math.isfinite(msg.velocity[i]) else 0.0
-                    ch.desired, ch.trajectory = (float(msg.position[i]), float(vel), 0.0), None
-
-    @property
-    def adopting(self) -> bool:
-        """Whether any joint adopts the estimator's coefficients (``adopt_estimator_coefficients``)."""
-        return any(ch.values.get("adopt_estimator_coefficients") for ch in self.channels)
-
-    def _on_estimate(self, data: bytes) -> None:
-        if not self.adopting:
-            return  # nothing adopts: no message object
-        msg = deserialize_message(data, FrictionEstimate)
-        if not msg.converged:
-            return
-        ch = self._by_joint.get(msg.joint_name) if msg.joint_name else self.channels[0]
-        if ch is None or not ch.values.get("adopt_estimator_coefficients"):
-            return
-        try:
-            ch.controller.set_coefficients(from_fields(msg.model, msg.coefficient_names, msg.coefficients))
-            self.counts["adopted"] += 1
-        except (ParameterError, ValueError) as exc:
-            self.counts["rejected_estimates"] += 1
-            self.get_logger().warning(
-                f"{self._label(ch)}estimator coefficients not adopted: {exc}", throttle_duration_sec=5.0
-            )
-
     def _now_ns(self) -> int:
         if self._sim_clock:
             return self.get_clock().now().nanoseconds
@@ -445,6 +385,8 @@ class CompensatingControllerNode(ParameterNode):
                 ref = ch.reference.sample(t)
             terms = ch.controller.compute(t, ref, (pos, vel), self.dt)
             ch.command = ch.compensation = terms.command
+            if ch.controller.guard.active:
+                ch.log_dropped_terms(self.get_logger(), self._label(ch), t)
             self.counts["saturated"] += int(terms.saturated)
             if ch.controller.compensation_fallback and not ch.fallback_logged:
                 ch.fallback_logged = True

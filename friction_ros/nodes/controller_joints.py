@@ -4,8 +4,10 @@ ControllerState message and its diagnostics status (the node itself:
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
+from friction_ros.core.control.command_safety import JointLimits
 from friction_ros.core.control.controller import ControllerTerms
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.experiment.trajectory import TrajectoryReference
@@ -44,6 +46,18 @@ class JointChannel:
         self.diag_rejected = 0
         self.waiting_logged = False
 
+    @property
+    def reference_limits(self) -> JointLimits:
+        """The limits a reference must respect at the door: the joint's own, and no more than the
+        input gate's plausibility bounds (``input_gate.max_position`` / ``max_velocity``)."""
+        lim, gate = self.controller.limits, self.gate
+        return dataclasses.replace(
+            lim,
+            position_min=max(lim.position_min, -gate.max_position),
+            position_max=min(lim.position_max, gate.max_position),
+            velocity_limit=min(lim.velocity_limit, gate.max_velocity),
+        )
+
     def replace(self, controller, reference, values, overrides) -> None:
         controller.compensation_enabled = self.controller.compensation_enabled
         self.controller, self.reference, self.values, self.overrides = (
@@ -53,6 +67,15 @@ class JointChannel:
             overrides,
         )
         self.residual_logged = False
+
+    def log_dropped_terms(self, logger, label: str, t: float) -> None:
+        """Log a dropped non-finite or out-of-limit term once when it starts and once when it has been
+        valid again for 1 s (:class:`~friction_ros.core.control.command_safety.TermGuard`)."""
+        guard = self.controller.guard
+        for why in guard.take_new():
+            logger.error(f"{label}{why}: term dropped, its state reset")
+        for name in guard.clear_quiet(t, 1.0):
+            logger.info(f"{label}{name}: valid again for 1 s (cleared)")
 
     def terms_message(self, sec: int, nanosec: int, t: ControllerTerms) -> bytes:
         """friction_msgs/ControllerState CDR bytes of one period's terms."""
@@ -110,6 +133,9 @@ class JointChannel:
             level, text = WARN, "no joint state: commanding zero torque"
         if ctrl.compensation_fallback:
             level, text = ERROR, ctrl.fallback_reason
+        values["dropped_terms"] = ctrl.guard.total
+        if ctrl.guard.active:
+            level, text = ERROR, "; ".join(ctrl.guard.active.values()) + ": term dropped, its state reset"
         values["residual_nonfinite"] = ctrl.residual_nonfinite
         if ctrl.residual_note and not self.residual_logged:
             self.residual_logged = True  # once per controller (a parameter change builds a new one)

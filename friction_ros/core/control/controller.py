@@ -16,9 +16,16 @@ the load-dependent and position-dependent friction with the velocity (and weight
 learned residual map's ``g_c r`` from the measured motion and the previous command, bounded, 0
 for a non-finite output (counted: ``residual_nonfinite``, ``residual_note``); 0 for kind none.
 
-``u_clamp_max/min`` default to +-1e6 N*m (:data:`friction_ros.core.input_gate.PLAUSIBLE_EFFORT`,
-the plant simulator's plausibility bound): whatever the gains and inputs, the command stays finite
-and bounded; set them to the joint's torque limit. In ``pid`` mode the PID integrator is kept
+Limits (:mod:`.command_safety`): the command is clamped to ``+-effort_limit`` (the joint's torque or
+force limit) and to ``u_clamp_min/max`` when tighter; the compensating_controller node refuses to start
+without one of them. Without any (the pure core, e.g. a simulation script) the command stays within
++-1e6 N*m (:data:`friction_ros.core.input_gate.PLAUSIBLE_EFFORT`). Whatever the gains and inputs, the
+command is finite: a reference that is not finite or lies beyond ``position_min/max``,
+``velocity_limit`` or ``acceleration_limit`` is replaced by the last good reference position at rest;
+a non-finite friction or load term is dropped (its states reset); a feedback law that overflows is
+reset and the last command held. Each such event is recorded in ``guard`` (a
+:class:`.command_safety.TermGuard`) for the node's log and diagnostics.
+In ``pid`` mode the PID integrator is kept
 inside the same clamp and, by default, only integrates while the output is not saturated
 (``pid.antiwindup_strategy`` = conditional_integration), so a saturated transient does not wind up.
 
@@ -68,10 +75,10 @@ from __future__ import annotations
 import copy
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
 from typing import Any
 
 from friction_ros.core.config import unflatten
+from friction_ros.core.control.command_safety import JointLimits, TermGuard, check_reference_sample
 from friction_ros.core.control.compensation import (
     FrictionCompensator,
 )
@@ -82,6 +89,7 @@ from friction_ros.core.control.controller_config import (
     config_from_ros_parameters,
     default_config,
 )
+from friction_ros.core.control.controller_terms import ControllerTerms
 from friction_ros.core.control.limit_cycle import LimitCycleDetector
 from friction_ros.core.control.load_compensation import (
     LearnedFeedforward,
@@ -90,46 +98,14 @@ from friction_ros.core.control.load_compensation import (
     learned_residual,
 )
 from friction_ros.core.control.pid import Pid
-from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
+from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode, loop_gains
+from friction_ros.core.control.velocity_estimate import VelocityEstimator
+from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 from friction_ros.core.validation import (
     ParameterError,
     check_keys,
     check_real,
 )
-
-
-@dataclass(slots=True)
-class ControllerTerms:
-    """All terms of one period (friction_msgs/ControllerState fields, SI units)."""
-
-    time: float = 0.0
-    mode: str = "pid"
-    reference_position: float = 0.0
-    reference_velocity: float = 0.0
-    reference_acceleration: float = 0.0
-    position: float = 0.0
-    velocity: float = 0.0
-    error: float = 0.0
-    error_dot: float = 0.0
-    p_term: float = 0.0
-    i_term: float = 0.0
-    d_term: float = 0.0
-    velocity_feedforward: float = 0.0
-    inertia_feedforward: float = 0.0
-    friction_feedforward: float = 0.0
-    friction_feedback: float = 0.0
-    #: tau_L: identified load, gravity, load-dependent and position-dependent friction (section load)
-    load_feedforward: float = 0.0
-    #: learned residual model (section residual), bounded, 0 when it returned a non-finite value
-    learned_feedforward: float = 0.0
-    command_unlimited: float = 0.0
-    command: float = 0.0
-    saturated: bool = False
-    #: friction compensation switched off (latched) by the run-time limit-cycle detector
-    compensation_fallback: bool = False
-
-    def as_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
 
 def controller_from_ros_parameters(
@@ -159,51 +135,6 @@ def controller_from_ros_parameters(
         if model and text.startswith(f"{model}."):  # a coefficient, named by the model's library
             text = "friction." + text[len(model) + 1 :]
         raise ParameterError(text) from None
-
-
-def loop_gains(mode: str, pid: Pid, scheme) -> tuple[float, float]:
-    """(K_p, K_d) of the loop's linear feedback ``u = K_p e + K_d e_dot + ...`` per mode [N*m/rad,
-    N*m*s/rad]: pid ``p, d``; dnpf / gain_scheduling ``kp, kd`` (the configured baseline);
-    cascade ``kp_velocity kp_position, kp_velocity``; sliding_mode ``k_s lambda, k_s`` (its
-    relay adds no linear stiffness). Used by the feedback-path stability bound."""
-    if scheme is None:
-        c = pid.config()
-        return float(c.get("p", 0.0)), float(c.get("d", 0.0))
-    if isinstance(scheme, Cascade):
-        return scheme.kp_velocity * scheme.kp_position, scheme.kp_velocity
-    if isinstance(scheme, SlidingMode):
-        return scheme.k_s * scheme.lam, scheme.k_s
-    return float(scheme.kp), float(scheme.kd)
-
-
-class VelocityEstimator:
-    """Measured velocity, or a filtered backward difference of position with a jump-hold filter."""
-
-    def __init__(self, source: str, filter_time_constant: float, jump_limit: float):
-        self.source = source
-        self.tf = filter_time_constant
-        self.jump_limit = jump_limit
-        self.reset()
-
-    def reset(self) -> None:
-        self._pos = None
-        self._v = 0.0
-
-    def update(self, position: float, velocity: float | None, dt: float) -> tuple[float, float]:
-        """Return (position used, velocity estimate)."""
-        pos = float(position)
-        if self._pos is not None and abs(pos - self._pos) > self.jump_limit:
-            pos = self._pos  # seed 001 lost-bit hold
-        if self.source == "measured" and velocity is not None:
-            raw = float(velocity)
-        else:
-            raw = 0.0 if self._pos is None else (pos - self._pos) / dt
-        self._pos = pos
-        if self.tf > 0.0:
-            self._v += dt / (self.tf + dt) * (raw - self._v)
-        else:
-            self._v = raw
-        return pos, self._v
 
 
 class CompensatingController:
@@ -250,6 +181,25 @@ class CompensatingController:
         umin = check_real("controller.u_clamp_min", top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
         if umin >= umax:
             raise ParameterError(f"controller.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
+        try:
+            limits = JointLimits(
+                top["effort_limit"],
+                top["position_min"],
+                top["position_max"],
+                top["velocity_limit"],
+                top["acceleration_limit"],
+            )
+        except ParameterError as exc:
+            raise ParameterError(f"controller.{exc}") from None
+        umin, umax = limits.command_bounds(umin, umax)
+        if umax <= 0.0 or umin >= 0.0:
+            raise ParameterError(
+                f"controller.u_clamp_min/u_clamp_max = {umin:g}/{umax:g} must hold zero torque "
+                "inside (u_clamp_min < 0 < u_clamp_max)"
+            )
+        # a running node needs a finite limit (see limits_given); the pure core keeps a plausibility bound
+        limits_given = math.isfinite(umin) and math.isfinite(umax)
+        umin, umax = max(umin, -PLAUSIBLE_EFFORT), min(umax, PLAUSIBLE_EFFORT)
         rate, vsrc, vtf = top["rate_limit"], top["velocity_source"], top["velocity_filter_time_constant"]
         jump, lc_on = top["position_jump_limit"], top["limit_cycle_detection"]
         lc_f, lc_a = top["limit_cycle_min_frequency"], top["limit_cycle_min_amplitude"]
@@ -283,6 +233,9 @@ class CompensatingController:
         self.feedforward_gain = ffg
         self.inertia = inertia
         self.u_clamp_max, self.u_clamp_min = umax, umin
+        self.limits, self.limits_given = limits, limits_given
+        self.guard = TermGuard()  # non-finite terms dropped (see command_safety)
+        self._hold_ref: float | None = None  # the last reference position that passed the check
         self.rate_limit = rate
         self.velocity = VelocityEstimator(vsrc, vtf, jump)
         self.pid = pid
@@ -391,6 +344,14 @@ class CompensatingController:
         m_pos = float(measured[0])
         m_vel = None if len(measured) < 2 or measured[1] is None else float(measured[1])
         pos, vel = self.velocity.update(m_pos, m_vel, dt)
+        guard = self.guard
+        why = check_reference_sample(self.limits, r_pos, r_vel, r_acc)
+        if why:  # hold the last good reference position (or where the joint is), at rest
+            guard.record("reference", why, t)
+            r_pos = self._hold_ref if self._hold_ref is not None else pos
+            r_vel = r_acc = 0.0
+        else:
+            self._hold_ref = r_pos
         e = r_pos - pos
         edot = r_vel - vel
         addon, on = self._addon, self.compensation_enabled
@@ -400,11 +361,18 @@ class CompensatingController:
             f_ff = f_fb = 0.0
         else:
             f_ff, f_fb = self.friction.update(r_vel, vel, dt, error=e)
+            if not (math.isfinite(f_ff) and math.isfinite(f_fb)):  # dropped, its states restart
+                guard.record("friction compensation", f"friction compensation was {f_ff!r}/{f_fb!r}", t)
+                self.friction.reset()
+                f_ff = f_fb = 0.0
             if not on:
                 f_ff = f_fb = 0.0
         tau_l = tau_r = 0.0
         if self._load_on and on:
             tau_l = self.load.torque(pos, r_vel, vel, r_acc, not self.compensation_fallback)
+            if not math.isfinite(tau_l):
+                guard.record("load feedforward", f"load feedforward was {tau_l!r}", t)
+                tau_l = 0.0
         learned = self.residual is not None and not self.compensation_fallback
         if learned:
             prev = 0.0 if self._prev_cmd is None else self._prev_cmd
@@ -472,6 +440,13 @@ class CompensatingController:
                 lo = hi = min(max(0.5 * (lower + upper), self.u_clamp_min), self.u_clamp_max)
             cmd = min(max(unlimited, lo), hi)
             sat = cmd != unlimited
+        if not math.isfinite(cmd):  # the feedback law overflowed: restart it, hold the last command
+            guard.record("feedback", f"feedback command was {unlimited!r}", t)
+            self.pid.reset()
+            if self.scheme is not None:
+                self.scheme.reset()
+            prev = 0.0 if self._prev_cmd is None else self._prev_cmd
+            cmd, sat = min(max(prev, self.u_clamp_min), self.u_clamp_max), True
         self._prev_cmd = cmd
         lc = self.limit_cycle
         if lc is not None and not self.compensation_fallback and self._watch:

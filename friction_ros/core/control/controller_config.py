@@ -13,13 +13,13 @@ from collections.abc import Mapping
 from typing import Any
 
 from friction_ros.core.config import Field, Schema, unflatten
+from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, COMPENSATION_SCHEMA
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS
 from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
 from friction_ros.core.friction.joint_load import JOINT_LOAD_SCHEMA
 from friction_ros.core.friction.learned_residual import LEARNED_RESIDUAL_SCHEMA
-from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
 
 CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode", "compensation_only")
 VELOCITY_SOURCES = ("measured", "differentiated")
@@ -46,6 +46,7 @@ CONTROLLER_FIELDS: tuple[Field, ...] = (
         0.0,
         "velocity feedforward gain (command += gain * reference velocity)",
         lo=0.0,
+        hi=PLAUSIBLE_GAIN,
         unit="N*m*s/rad",
     ),
     Field(
@@ -53,6 +54,7 @@ CONTROLLER_FIELDS: tuple[Field, ...] = (
         0.0,
         "J_hat for the inertia feedforward J_hat * reference acceleration",
         lo=0.0,
+        hi=PLAUSIBLE_GAIN,
         unit="kg*m^2",
     ),
     Field(
@@ -61,8 +63,46 @@ CONTROLLER_FIELDS: tuple[Field, ...] = (
         "constant torque added to the command: holds a known load such as gravity",
         unit="N*m",
     ),
-    Field("u_clamp_max", PLAUSIBLE_EFFORT, "upper torque limit", unit="N*m", allow_inf=True),
-    Field("u_clamp_min", -PLAUSIBLE_EFFORT, "lower torque limit (< u_clamp_max)", unit="N*m", allow_inf=True),
+    Field(
+        "effort_limit",
+        _INF,
+        "the joint's torque (force) limit: every command is clamped to +-effort_limit; the node needs "
+        "it (or finite u_clamp_max/min): the plant preset's, the drive's torque_limit or friction-fit's",
+        lo=0.0,
+        lo_open=True,
+        unit="N*m",
+        allow_inf=True,
+    ),
+    Field(
+        "u_clamp_max", _INF, "upper torque limit (also bounded by effort_limit)", unit="N*m", allow_inf=True
+    ),
+    Field("u_clamp_min", -_INF, "lower torque limit (< u_clamp_max)", unit="N*m", allow_inf=True),
+    Field(
+        "position_min",
+        -_INF,
+        "lowest reference position allowed (references beyond are refused)",
+        unit="rad",
+        allow_inf=True,
+    ),
+    Field("position_max", _INF, "highest reference position allowed", unit="rad", allow_inf=True),
+    Field(
+        "velocity_limit",
+        _INF,
+        "largest |reference velocity| allowed",
+        lo=0.0,
+        lo_open=True,
+        unit="rad/s",
+        allow_inf=True,
+    ),
+    Field(
+        "acceleration_limit",
+        _INF,
+        "largest |reference acceleration| allowed",
+        lo=0.0,
+        lo_open=True,
+        unit="rad/s^2",
+        allow_inf=True,
+    ),
     Field("rate_limit", _INF, "torque rate limit", lo=0.0, lo_open=True, unit="N*m/s", allow_inf=True),
     Field(
         "velocity_source",

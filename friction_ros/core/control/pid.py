@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
 from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
 
 ANTIWINDUP_STRATEGIES = ("none", "back_calculation", "conditional_integration")
@@ -107,9 +108,9 @@ class Pid:
 
     def _set(self, cfg: Mapping[str, Any]) -> None:
         n = self.prefix
-        p = check_real(f"{n}.p", cfg["p"], 0.0)
-        i = check_real(f"{n}.i", cfg["i"], 0.0)
-        d = check_real(f"{n}.d", cfg["d"], 0.0)
+        p = check_real(f"{n}.p", cfg["p"], 0.0, PLAUSIBLE_GAIN)
+        i = check_real(f"{n}.i", cfg["i"], 0.0, PLAUSIBLE_GAIN)
+        d = check_real(f"{n}.d", cfg["d"], 0.0, PLAUSIBLE_GAIN)
         imax = check_real(f"{n}.i_clamp_max", cfg["i_clamp_max"], allow_inf=True)
         imin = check_real(f"{n}.i_clamp_min", cfg["i_clamp_min"], hi=imax, allow_inf=True)
         umax = check_real(f"{n}.u_clamp_max", cfg["u_clamp_max"], allow_inf=True)

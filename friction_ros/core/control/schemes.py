@@ -389,3 +389,18 @@ def seed000_relay(x, nominal: float = 1.0, amplitude: float = 0.1, deadband: flo
     x = np.asarray(x, dtype=float)
     u = np.where(x >= deadband, nominal - amplitude, np.where(x <= -deadband, nominal + amplitude, nominal))
     return float(u) if u.ndim == 0 else u
+
+
+def loop_gains(mode: str, pid, scheme) -> tuple[float, float]:
+    """(K_p, K_d) of the loop's linear feedback ``u = K_p e + K_d e_dot + ...`` per mode [N*m/rad,
+    N*m*s/rad]: pid ``p, d``; dnpf / gain_scheduling ``kp, kd`` (the configured baseline);
+    cascade ``kp_velocity kp_position, kp_velocity``; sliding_mode ``k_s lambda, k_s`` (its
+    relay adds no linear stiffness). Used by the feedback-path stability bound."""
+    if scheme is None:
+        c = pid.config()
+        return float(c.get("p", 0.0)), float(c.get("d", 0.0))
+    if isinstance(scheme, Cascade):
+        return scheme.kp_velocity * scheme.kp_position, scheme.kp_velocity
+    if isinstance(scheme, SlidingMode):
+        return scheme.k_s * scheme.lam, scheme.k_s
+    return float(scheme.kp), float(scheme.kd)

@@ -90,6 +90,7 @@ def arm_parameter_document(
         "mode": "compensation_only",
         "sum_base_command": True,
         "compensation": {"source": "feedforward", "smoothing": "tanh"},
+        "gains": {},
         "friction": {},
         "load": {},
         "reference": {},
@@ -120,7 +121,8 @@ def arm_parameter_document(
                 "gravity_phase": _r(getattr(p, "gravity_phase", 0.0)),
             }
         limit = _r(scale.torque_limit)
-        pd["gains"][joint].update(u_clamp_max=limit, u_clamp_min=-limit)
+        pd["gains"][joint]["effort_limit"] = limit
+        addon["gains"][joint] = {"effort_limit": limit}  # the sum sent to the joint stays inside it
         table.append(
             {
                 "joint": joint,

@@ -79,3 +79,24 @@ def with_scale(records, scale: DataScale):
         dataclasses.replace(r, meta={**r.meta, VELOCITY_KEY: scale.velocity, TORQUE_KEY: scale.torque})
         for r in records
     ]
+
+
+#: the effort limit friction-fit writes without a plant preset: this many times the log's peak |effort|
+EFFORT_LIMIT_MARGIN = 1.5
+
+
+def effort_limit_of_log(records) -> float:
+    """The torque (force) limit a parameter file gets from a log: ``EFFORT_LIMIT_MARGIN`` x the
+    largest |effort| recorded, rounded up to two significant digits (nan for a log without effort).
+    The joint did all of its identification run inside it; set the joint's rated limit when known."""
+    peak = 0.0
+    for r in records:
+        tau = np.asarray(r.torque, dtype=float)
+        tau = tau[np.isfinite(tau)]
+        if tau.size:
+            peak = max(peak, float(np.max(np.abs(tau))))
+    if not peak > 0.0:
+        return math.nan
+    x = EFFORT_LIMIT_MARGIN * peak
+    step = 10.0 ** (math.floor(math.log10(x)) - 1)
+    return float(round(math.ceil(x / step - 1e-9) * step, 12))

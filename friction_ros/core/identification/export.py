@@ -25,6 +25,7 @@ Parameter file (``node_name: ros__parameters:``):
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import yaml
@@ -181,8 +182,12 @@ def parameter_document(
     load: dict | None = None,
     residual: dict | None = None,
     joint_type: str = "revolute",
+    effort_limit: float = float("nan"),
 ) -> dict:
     """The ROS parameter YAML document for the three nodes.
+
+    ``effort_limit``: the joint's torque (force) limit the controller clamps every command to
+    (left out when not finite: the controller then refuses to start until one is given).
 
     Every section sets ``joint_type`` (revolute or prismatic), so the nodes read the coefficients
     in the joint's units (N*m, rad/s or N, m/s).
@@ -212,6 +217,7 @@ def parameter_document(
         "compensating_controller": {
             "ros__parameters": {
                 "joint_type": joint_type,
+                **({"effort_limit": float(effort_limit)} if math.isfinite(effort_limit) else {}),
                 "inertia": float(inertia),
                 **({"pid": {k: float(v) for k, v in gains.items()}} if gains else {}),
                 **({"load_feedforward": float(load_feedforward)} if load_feedforward else {}),

@@ -9,6 +9,7 @@ import numpy as np
 
 from friction_ros.core.identification import export
 from friction_ros.core.identification.breakaway_detection import Breakaway
+from friction_ros.core.identification.data_scale import effort_limit_of_log
 from friction_ros.core.identification.excitation_checks import (
     Excitation,
 )
@@ -69,6 +70,18 @@ class FitResult:
         m = self.models.get(self.recommended) if self.recommended else None
         return float(m.coefficients.get("J", 0.0)) if m else 0.0
 
+    @property
+    def effort_limit(self) -> float:
+        """The joint's torque (force) limit for the parameter file: the plant preset's when one is
+        given, else from the log's peak effort (:func:`~.data_scale.effort_limit_of_log`)."""
+        preset = self.options.get("plant_preset")
+        if preset:
+            from friction_ros.core.experiment.joint_scale import JointScale
+            from friction_ros.core.presets import load_preset
+
+            return float(JointScale.from_preset(load_preset(preset)).torque_limit)
+        return effort_limit_of_log([*self.train, *self.validation])
+
     def parameter_document(self, model: str | None = None, **gate_options) -> dict:
         """``gate_options``: ``gate`` (verdicts), ``gains``, ``load_feedforward`` (export.parameter_document)."""
         name = model or self.recommended
@@ -79,6 +92,7 @@ class FitResult:
         opts.setdefault("load_feedforward", float(self.options.get("load_offset", 0.0) or 0.0))
         opts.setdefault("load", m.extra.get("load"))
         opts.setdefault("residual", m.extra.get("residual"))
+        opts.setdefault("effort_limit", self.effort_limit)
         return export.parameter_document(
             m.config,
             m.coefficients.get("J", 0.0),
