@@ -65,6 +65,7 @@ os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
 
 CONTROLLER = {
     "mode": "pid",
+    "effort_limit": 4.9,
     "pid": {"p": 30.0, "i": 60.0, "d": 0.3},
     "compensation": {"source": "feedforward"},
     "friction": {"model": "coulomb_viscous", "fc": 0.8, "fv": 0.01},

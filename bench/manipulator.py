@@ -160,7 +160,8 @@ def tracking(duration: float, seeds=(1, 2, 3)) -> list[dict]:
     plant = next(v["ros__parameters"] for v in yaml.safe_load(PLANT.read_text()).values())
     rows = []
     for joint, preset in joint_presets(plant):
-        plain = {"mode": "pid", "pid": pd["gains"][joint]}
+        gains = dict(pd["gains"][joint])
+        plain = {"mode": "pid", "effort_limit": gains.pop("effort_limit"), "pid": gains}
         comp = dict(plain)
         comp["friction"] = addon["friction"][joint]
         comp["compensation"] = {

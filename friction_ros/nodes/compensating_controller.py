@@ -78,9 +78,10 @@ from friction_ros.core.wire import (
     JointStateEncoder,
 )
 from friction_ros.nodes.addon_output import AddonOutput
+from friction_ros.nodes.command_owner import CommandOwnerWatch
 from friction_ros.nodes.controller_inputs import ReferenceInputs
 from friction_ros.nodes.controller_joints import JointChannel
-from friction_ros.nodes.diagnostics import DiagnosticsPublisher
+from friction_ros.nodes.diagnostics import ERROR, DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import (
     current_joint_values,
     declare_joint_config,
@@ -203,6 +204,7 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, raw=True
         )
         self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
+        self.owner = CommandOwnerWatch(self, "joint_commands", role="commands")
         self.sum_base = bool(self.values["sum_base_command"])
         if self.sum_base and not self.addon:
             raise ParameterError("sum_base_command = true needs mode compensation_only (an add-on)")
@@ -460,6 +462,11 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
         for ch in self.channels:
             log = lambda text, ch=ch: self.get_logger().error(self._label(ch) + text)  # noqa: E731
             statuses.append((ch.joint, *ch.status(self.counts, compute, self.addon, log)))
+        if self.owner.conflict:  # another publisher commands these joints too
+            statuses = [
+                (j, ERROR, self.owner.status(), {**v, "command_publishers": len(self.owner.publishers)})
+                for j, _, _, v in statuses
+            ]
         if self.single:
             self.diag.publish(*statuses[0][1:])
         else:

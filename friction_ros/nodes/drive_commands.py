@@ -12,6 +12,7 @@ from sensor_msgs.msg import JointState
 from friction_ros.core.can.axis import DriveAxis
 from friction_ros.core.can.joint_commands import route_efforts
 from friction_ros.core.wire import JointStateDecoder
+from friction_ros.nodes.command_owner import CommandOwnerWatch
 from friction_ros.nodes.qos import COMMAND_QOS
 
 
@@ -34,6 +35,7 @@ class CommandIntake:
         self._ignored_last: dict[str, float] = {}
         self._decoder = JointStateDecoder()
         self._pending: collections.deque = collections.deque(maxlen=1)
+        self.owner = CommandOwnerWatch(node, "joint_commands")  # one command source per joint
         self.subscription = node.create_subscription(
             JointState, "joint_commands", self.on_bytes, COMMAND_QOS, raw=True
         )
@@ -60,6 +62,9 @@ class CommandIntake:
             cmd = self._decoder.decode(data)
         except Exception:  # undecodable: rejected like a NaN command (zero torque) on every drive
             self.apply((), (math.nan,) * len(self.axes), t)
+            return
+        if self.owner.conflict:  # two command sources: follow neither (command_owner policy)
+            self.apply(cmd.name, (0.0,) * len(cmd.effort), t)
             return
         self.apply(cmd.name, cmd.effort, t)
 

@@ -61,6 +61,7 @@ from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, resolve_joint_p
 from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
+from friction_ros.nodes.command_owner import CommandOwnerWatch
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
@@ -229,6 +230,7 @@ class PlantSimulator(ParameterNode):
             )
         )
         self.create_subscription(JointState, "joint_commands", self._on_command, qos, raw=True)
+        self.owner = CommandOwnerWatch(self, "joint_commands")  # one command source per joint
         # realtime mode is the clock source: wall time without an rclpy Time object per cycle
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         hardware = self.preset.name if not self.multi else ",".join(pr.name for pr in self.presets)
@@ -355,6 +357,8 @@ class PlantSimulator(ParameterNode):
         efforts = self._select(msg)
         if efforts is None:
             return
+        if self.owner.conflict:  # two command sources: follow neither (command_owner policy)
+            efforts = dict.fromkeys(efforts, 0.0)
         if self.lockstep:
             if msg.stamp_ns != self._t_ns:
                 self._commands_ignored += 1  # duplicate or stale answer
