@@ -43,7 +43,9 @@ def test_two_controllers_on_one_joint_are_refused_and_reported(tmp_path):
             # one controller: it moves the joint towards 0.5 rad
             assert lis.wait_for(lambda: states[-1].position[0] > 0.3, 30, g), states[-1].position
             with Graph([second]) as g2:
-                assert lis.wait_for(lambda: "publishers on /joint_commands" in g.output("plant_simulator"), 30, g)
+                assert lis.wait_for(
+                    lambda: "publishers on /joint_commands" in g.output("plant_simulator"), 30, g
+                )
                 n = len(states)
                 time.sleep(1.5)
                 held = [m.position[0] for m in states[n:]]

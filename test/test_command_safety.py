@@ -180,3 +180,55 @@ def test_trajectory_check_names_the_first_bad_point():
         assert words in str(e.value), str(e.value)
     assert check_reference_sample(JointLimits(), 1e300, 0.0, 0.0) == ""
     assert "acceleration" in check_reference_sample(JointLimits(acceleration_limit=1.0), 0.0, 0.0, 2.0)
+
+
+def test_an_unstable_loop_is_stopped_and_the_joint_damped_to_rest():
+    """PID p x200 with blended compensation: the watch first switches compensation off; the loop
+    still oscillates (the gains), so position feedback stops and the loop's damping alone brings the
+    joint to rest: the command was +-limit before, it is 0 at rest at the end."""
+    from friction_ros.core.experiment.arm_example import stribeck_map
+    from friction_ros.core.experiment.joint_scale import JointScale
+    from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
+    from friction_ros.core.harness import run_closed_loop
+    from friction_ros.core.presets import load_preset
+
+    for name in ("abb_m19s", "seed001_harmonic_drive"):
+        preset = load_preset(name)
+        scale = JointScale.from_preset(preset, period=1e-3)
+        g = tracking_gains(scale)
+        ref = tracking_reference(scale, duration=3.0)
+        model = stribeck_map(preset, 1.0)
+        cfg = {
+            "mode": "pid",
+            "effort_limit": scale.torque_limit,
+            "pid": {"p": 200.0 * g["p"], "d": g["d"]},
+            "friction": {"model": model, "source": "blended"},
+        }
+        ctrl = CompensatingController(cfg)
+        res = run_closed_loop(preset, ctrl, ref, 3.0, 1e-3)
+        assert ctrl.compensation_fallback and ctrl.loop_unstable, name
+        assert "gains make it unstable" in ctrl.fallback_reason
+        assert np.max(np.abs(res.torque)) <= scale.torque_limit * (1 + 1e-12)
+        last = res.t > 2.5
+        assert np.ptp(res.true_position[last]) < 1e-6 * max(1.0, scale.travel), name
+        assert np.max(np.abs(res.torque[last])) < 1e-3 * scale.torque_limit, name
+        # the same gains without the feedback path: the unwatched PID alone is what oscillates
+        ok = CompensatingController({**cfg, "pid": {"p": g["p"], "d": g["d"]}})
+        run_closed_loop(preset, ok, ref, 3.0, 1e-3)
+        assert not ok.loop_unstable
+
+
+def test_the_watch_is_armed_only_after_its_averages_settle():
+    """A start-up transient (a first error sample far from zero, chatter in the first periods) used to
+    fire the watch at t = 0.053 s on a fitted file in realtime mode."""
+    from friction_ros.core.control.limit_cycle import LimitCycleDetector
+
+    det = LimitCycleDetector(window=0.04, hold=0.03)
+
+    def sample(k: int) -> bool:  # a 50 Hz oscillation about a reference at rest, from the first sample
+        e = 0.01 * math.sin(2 * math.pi * 50 * k * 1e-3 + 0.3)
+        return det.update(k * 1e-3, e, 10 * e, 0.0, -e, 1e-3, 0.0)
+
+    assert not any(sample(k) for k in range(68))  # armed after one window, then the hold
+    assert any(sample(k) for k in range(68, 200))
+    assert det.fired_at >= 0.04 + 0.03 - 2e-3

@@ -174,6 +174,7 @@ def test_the_node_reports_the_fallback_as_diagnostic_error_and_one_log_line(tmp_
             "compensating_controller": {
                 "ros__parameters": {
                     "mode": "pid",
+                    "effort_limit": 4.9,
                     "pid": SEED003_PD,
                     "inertia": 0.0012,
                     "compensation": {"source": "feedback"},

@@ -264,6 +264,13 @@ class CompensatingController:
             else None
         )
         self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
+        self.loop_unstable = False  # latched: the loop oscillates without compensation (joint damped)
+        # after a fallback, a second detector watches the plain loop (armed from the fallback on)
+        self._loop_watch = (
+            LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a, window=lc_w, hold=lc_h)
+            if lc_on
+            else None
+        )
         # only a feedback path puts the compensation inside the loop: a feedforward term is a function
         # of the reference and cannot make the loop oscillate by itself (so it is not watched)
         # (the load's friction part fed back from the measured velocity and the learned residual,
@@ -272,6 +279,30 @@ class CompensatingController:
             (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
         ) or self.residual is not None
         self.fallback_reason = ""
+
+    def _on_limit_cycle(self, t: float, lc: LimitCycleDetector) -> None:
+        """First firing: friction compensation off (latched), and the detector watches on. A second
+        firing without compensation, with the command swinging over a quarter of its range or more,
+        means the loop itself is unstable (gains): the position feedback
+        stops and the joint is brought to rest by the loop's damping alone, ``u = tau_load - K_d v``
+        (the identified load and the constant load feedforward still held), until the controller is
+        rebuilt or reconfigured."""
+        what = f"({lc.frequency:.0f} Hz, error {lc.amplitude:.3g} RMS, not in the reference) at t = {t:.3f} s"
+        if not self.compensation_fallback:
+            self.compensation_fallback = True
+            self.fallback_reason = (
+                f"compensation-induced limit cycle {what}: friction compensation switched off"
+            )
+            return
+        if lc.command_amplitude < 0.25 * 0.5 * (self.u_clamp_max - self.u_clamp_min):
+            lc.reset()  # a small ring or chatter of the plain loop, not an unstable one: watch on
+            return
+        self.loop_unstable = True
+        self.pid.reset()
+        self.fallback_reason = (
+            f"the loop oscillates without friction compensation {what}: the gains make it unstable; "
+            "position feedback stopped, the joint damped to rest until the gains change"
+        )
 
     @property
     def residual_nonfinite(self) -> int:
@@ -449,13 +480,14 @@ class CompensatingController:
             cmd, sat = min(max(prev, self.u_clamp_min), self.u_clamp_max), True
         self._prev_cmd = cmd
         lc = self.limit_cycle
-        if lc is not None and not self.compensation_fallback and self._watch:
-            if lc.update(t, e, cmd, r_vel, pos, dt, r_pos):
-                self.compensation_fallback = True
-                self.fallback_reason = (
-                    f"compensation-induced limit cycle ({lc.frequency:.0f} Hz, error {lc.amplitude:.3g} RMS, "
-                    f"not in the reference) at t = {t:.3f} s: friction compensation switched off"
-                )
+        if self.loop_unstable:  # the loop oscillates without compensation: damp the joint to rest
+            hold = tau_l + (self.load_feedforward if on else 0.0) - self.loop_damping * vel
+            cmd, sat = min(max(hold, self.u_clamp_min), self.u_clamp_max), True
+        elif lc is not None and not self.compensation_fallback:
+            if self._watch and lc.update(t, e, cmd, r_vel, pos, dt, r_pos):
+                self._on_limit_cycle(t, lc)
+        elif lc is not None and self._loop_watch.update(t, e, cmd, r_vel, pos, dt, r_pos):
+            self._on_limit_cycle(t, self._loop_watch)
         self.terms = ControllerTerms(
             time=float(t),
             mode=self.mode,

@@ -18,7 +18,9 @@ reference velocity ``v_ref``; with exponential averages of time constant ``windo
 * **oscillation** when ``f_e >= min_frequency``, ``A_e >= amplitude``, ``A_e >= 2 A_r``,
   ``f_ref < f_e / 4`` (the reference does not explain it), ``P_fast >= P / 2`` (sustained) and
   ``A_u >= min_command`` (the command oscillates too);
-* it **fires** when the oscillation has held for ``hold`` seconds.
+* it **fires** when the oscillation has held for ``hold`` seconds; it is armed only ``window``
+  after its first sample (or a reset), when the averages have settled: the start-up transient of a
+  loop (averages that begin at zero, a first error sample) is never taken for an oscillation.
 
 ``amplitude`` is ``max(min_amplitude, 4 q)`` with ``q`` the smallest position step seen (the
 encoder count, estimated online), so quantisation noise (one-count chatter) never qualifies.
@@ -83,6 +85,7 @@ class LimitCycleDetector:
         self._q = math.inf
         self._last_pos: float | None = None
         self._held = 0.0
+        self._t0: float | None = None
         self.fired = False
         self.fired_at = math.nan
         self.frequency = 0.0
@@ -111,6 +114,8 @@ class LimitCycleDetector:
             if 1e-9 < step < self._q:  # below 1e-9: floating-point noise, not a count
                 self._q = step
         self._last_pos = position
+        if self._t0 is None:
+            self._t0 = t
         r = position + error if reference_position is None else reference_position
         a_hp = dt / (0.5 * self.window + dt)
         a = dt / (self.window + dt)
@@ -148,7 +153,8 @@ class LimitCycleDetector:
         amp = math.sqrt(max(self._pe, 0.0))
         self.frequency, self.amplitude = f_e, amp
         osc = (
-            f_e >= self.min_frequency
+            t - self._t0 >= self.window  # armed once the averages have settled (no start-up transient)
+            and f_e >= self.min_frequency
             and amp >= thr
             and thr > 0.0
             and f_r < 0.25 * f_e
@@ -161,3 +167,8 @@ class LimitCycleDetector:
             self.fired = True
             self.fired_at = float(t)
         return self.fired
+
+    @property
+    def command_amplitude(self) -> float:
+        """RMS of the command's oscillation (high-passed like the error's)."""
+        return math.sqrt(max(self._pu, 0.0))
