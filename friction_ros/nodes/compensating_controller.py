@@ -307,7 +307,7 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
                 self.get_logger().info(
                     f"{label}compensation fallback cleared by a parameter change: compensation active again"
                 )
-                ch.fallback_logged = False
+                ch.fallback_logged = ""
             note_changed = new_ctrl.feedback_bound_note != ch.controller.feedback_bound_note
             ch.replace(new_ctrl, new_ref, jv, ov)
             self.get_logger().info(f"{label}parameters changed: {', '.join(sorted(changes))}")
@@ -390,8 +390,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             if ch.controller.guard.active:
                 ch.log_dropped_terms(self.get_logger(), self._label(ch), t)
             self.counts["saturated"] += int(terms.saturated)
-            if ch.controller.compensation_fallback and not ch.fallback_logged:
-                ch.fallback_logged = True
+            if ch.controller.compensation_fallback and ch.fallback_logged != ch.controller.fallback_reason:
+                ch.fallback_logged = ch.controller.fallback_reason  # each stage once: fallback, unstable loop
                 self.get_logger().error(self._label(ch) + ch.controller.fallback_reason)
                 self._publish_diagnostics()
             if listening:

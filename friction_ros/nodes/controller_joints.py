@@ -41,7 +41,7 @@ class JointChannel:
         self.compensation = 0.0
         self.last_state_wall = time.monotonic()
         self.timed_out = False
-        self.fallback_logged = False
+        self.fallback_logged = ""  # the fallback reason last logged
         self.residual_logged = False
         self.diag_rejected = 0
         self.waiting_logged = False
