@@ -60,7 +60,12 @@ class _StaticStribeckFamily(FitModel):
         body = self._body(c)
         if eps > 0:
             fc = body["fc"]
-            full = {"fc": fc, "fs": body.get("fs", fc), "vs": body.get("vs", 1.0), "delta": body.get("delta", 2.0)}
+            full = {
+                "fc": fc,
+                "fs": body.get("fs", fc),
+                "vs": body.get("vs", 1.0),
+                "delta": body.get("delta", 2.0),
+            }
             return {"model": "stribeck_eps", **full, "fv": float(c.get("fv", 0.0)), "eps": eps}
         return {"model": self.plateau_shape, **body}
 
@@ -232,7 +237,9 @@ class GMSFit(_CompiledDynamic):
     def nonlinear(self):
         ne = self.n_elements
         xs = [Coef(f"x{i + 1}", 1e-6, 0.1, True, 1) for i in range(ne)]
-        return [*_SHAPE, Coef("attraction_n", 1.0, 1e5, True), *xs] + [Coef("s_damp", 1e-6, 0.1, True)] * self.damped
+        return [*_SHAPE, Coef("attraction_n", 1.0, 1e5, True), *xs] + [
+            Coef("s_damp", 1e-6, 0.1, True)
+        ] * self.damped
 
     def linear(self):
         return [f"beta{i + 1}" for i in range(self.n_elements)]

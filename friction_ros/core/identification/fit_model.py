@@ -194,4 +194,6 @@ def fit_model(name: str) -> FitModel:
             _load_plugins()
     from friction_ros.core.identification.models import LEARNED
 
-    raise ParameterError(f"model = {name!r} is not allowed: must be one of {model_help()}, {', '.join(LEARNED)}")
+    raise ParameterError(
+        f"model = {name!r} is not allowed: must be one of {model_help()}, {', '.join(LEARNED)}"
+    )

@@ -27,7 +27,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from friction_ros.core.identification.fit_model import FitModel, fit_model, mid_velocity, model_help, sat_sign
+from friction_ros.core.identification.fit_model import (  # noqa: F401 (mid_velocity, sat_sign re-exported)
+    FitModel,
+    fit_model,
+    mid_velocity,
+    model_help,
+    sat_sign,
+)
 from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.validation import ParameterError
 
@@ -330,5 +336,7 @@ def check_model_names(models) -> list[str]:
         else:
             out.append(fit_model(m).name)
     if not out:
-        raise ParameterError(f"models = [] is empty: must name at least one of {model_help()}, {', '.join(LEARNED)}")
+        raise ParameterError(
+            f"models = [] is empty: must name at least one of {model_help()}, {', '.join(LEARNED)}"
+        )
     return list(dict.fromkeys(out))
