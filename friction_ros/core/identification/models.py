@@ -7,17 +7,12 @@ Every model predicts the measured joint torque as (seed 003 A.3, eq. 1 with tau_
 where ``theta`` are the few coefficients that enter nonlinearly (searched globally, then refined)
 and ``beta`` (static level, element weights, micro-damping), the viscous coefficient ``fv`` and
 the inertia ``J`` enter linearly and are solved exactly by non-negative least squares for every
-candidate ``theta`` (variable projection). The regressors ``phi_j`` of the dynamic models come from
-the compiled kernels in :mod:`kernels`; the normalised forms are documented there.
-
-The physical coefficients returned by :meth:`FitSpec.coefficients` carry the friction library's
-names (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k, alpha``: the ``to_config()``
-keys, units and equations in docs/coefficients.md) plus the inertia ``J`` [kg*m^2]; only the
-normalised search variables of ``theta`` (``r = fc/fs`` [-], ``sigma_n = sigma/fc`` [1/rad],
-``sigma0_n = sigma0/fs`` [1/rad], ``attraction_n = attraction/fs`` [1/s],
-``x_i = alpha_i fs/k_i`` [rad], ``s_damp = sigma1 / sum_j k_j`` [s]; equations in :mod:`kernels`)
-and the Stribeck step ``dfs = fs - fc`` [N*m] are names of their own. The library config is assembled in
-:func:`friction_ros.core.identification.export.library_config`.
+candidate ``theta`` (variable projection). What a family owns (its coefficients, bounds,
+regressors, physical coefficients, library config) is its :class:`~.fit_model.FitModel` (built-in
+families in :mod:`~.fit_families`, the compiled regressors in :mod:`kernels`); a :class:`FitSpec`
+is one fit's search space built from it (bounds in the log's units, narrowed by the data, load
+terms, constraints). :meth:`FitSpec.coefficients` returns the family's physical coefficients (the
+friction library's names, docs/coefficients.md) plus the inertia ``J`` [kg*m^2].
 """
 
 from __future__ import annotations
