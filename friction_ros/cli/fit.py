@@ -71,7 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
         default=["coulomb", "stribeck", "lugre", "gms4"],
         help=(
             "models: coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
-            "damping sigma1) anfis nusvr (default: coulomb stribeck lugre gms4)"
+            "damping sigma1) anfis nusvr, or a model added as a plugin (docs/architecture.md) "
+            "(default: coulomb stribeck lugre gms4)"
         ),
     )
     p.add_argument("--out", default="friction_fit", help="output directory (default friction_fit)")

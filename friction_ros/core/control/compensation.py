@@ -115,7 +115,10 @@ def _presliding_bound(
     if isinstance(s1, (int, float)) and s1 > 0.0 and w * s1 > f * kd:
         changes["sigma1"] = f * max(kd, 0.0) / w
         notes.append(f"sigma1 {s1:.4g} -> {changes['sigma1']:.4g} N*m*s/rad (<= {f:g} Kd {kd:.4g})")
-    stiff_key = {"lugre": "sigma0", "gms": "k", "dahl": "sigma"}.get(name)
+    from friction_ros.core.friction import MODEL_CLASSES
+
+    cls = MODEL_CLASSES.get(name)
+    stiff_key = cls.STIFFNESS if cls is not None else None
     k = cfg.get(stiff_key) if stiff_key else None
     if k is not None:
         k_sum = float(sum(k)) if isinstance(k, (list, tuple)) else float(k)
@@ -174,7 +177,7 @@ class FrictionCompensator:
         self._ff_model = build_model(model) if model is not None else None
         self._fb_model = build_model(model) if model is not None else None
         self._observer = None
-        if model is not None and self.source == "observer" and model.name == "lugre":
+        if model is not None and self.source == "observer" and LuGreObserver.observes(model):
             self._observer = LuGreObserver(self._fb_model, self.observer_gain)
         self.bound_note = ""
         if getattr(self, "_loop_gains", None) is not None:

@@ -220,7 +220,7 @@ class CompensatingController:
         elif mode == "gain_scheduling":
             gs = dict(cfg["gain_scheduling"])
             if gs.get("k") is None and gs.get("model") is None and friction.model is not None:
-                if friction.model.name == "gms":
+                if GainScheduling.has_virgin_curve(friction.model):
                     gs["model"] = friction.model.to_config()
             scheme = GainScheduling(gs)
         elif mode == "cascade":

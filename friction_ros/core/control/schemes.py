@@ -175,6 +175,12 @@ class GainScheduling:
         "model": None,
     }
 
+    @staticmethod
+    def has_virgin_curve(model) -> bool:
+        """Whether a library ``model`` carries a Maxwell-slip virgin curve (``k``, ``alpha``, ``fs``)."""
+        c = model.coefficients
+        return all(key in c for key in ("k", "alpha", "fs"))
+
     def __init__(self, config: Mapping[str, Any] | None = None):
         c = _cfg("gain_scheduling", self.DEFAULTS, config)
         n = "gain_scheduling"

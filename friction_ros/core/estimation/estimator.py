@@ -7,15 +7,9 @@ Pipeline per sample (effort = motor torque on the joint side, velocity measured)
 2. ``model``:
 
    * linear in the parameters, fitted by RLS with forgetting and excitation gating
-     (:mod:`.rls`), regressors in the filtered velocity ``v_f``:
-
-     ``viscous``                     F = fv v  (seed 004 eq. (2))
-     ``coulomb_viscous``             F = fc sgn(v) + fv v  (seed 004 eq. (3))
-     ``asymmetric_coulomb_viscous``  F = positive.fc + positive.fv v (v > 0);
-                                     F = -negative.fc + negative.fv v (v < 0)  (seed 004 B.3)
-     ``stribeck``                    F = [fc + (fs - fc) E(v)] sgn(v) + fv v, E = exp(-|v/vs|^delta),
-                                     vs and delta fixed (linear in fc, fs, fv)  (seed 004 eq. (5))
-     ``asymmetric_stribeck``         the same with a set per direction (``positive.fc`` ...)
+     (:mod:`.rls`), regressors in the filtered velocity ``v_f``: ``viscous``, ``coulomb_viscous``,
+     ``asymmetric_coulomb_viscous``, ``stribeck`` (vs and delta fixed), ``asymmetric_stribeck``
+     (equations and library configs in :mod:`.adapted_models`).
 
    The coefficients carry the names of the friction library model that
    :meth:`OnlineFrictionEstimator.model_config` returns, flattened as in the FrictionEstimate message
@@ -47,6 +41,7 @@ from typing import Any
 import numpy as np
 
 from friction_ros.core.config import Field, Schema
+from friction_ros.core.estimation.adapted_models import ADAPTED
 from friction_ros.core.estimation.lugre_observer import LuGreObserver
 from friction_ros.core.estimation.measurement import DisturbanceObserver, TorqueBalanceEstimator
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
@@ -57,28 +52,8 @@ from friction_ros.core.validation import (
 )
 
 METHODS = ("torque_balance", "disturbance_observer")
-ESTIMATOR_MODELS = (
-    "viscous",
-    "coulomb_viscous",
-    "asymmetric_coulomb_viscous",
-    "stribeck",
-    "asymmetric_stribeck",
-    "lugre",
-)
-_COEF_NAMES = {
-    "viscous": ["fv"],
-    "coulomb_viscous": ["fc", "fv"],
-    "asymmetric_coulomb_viscous": ["positive.fc", "negative.fc", "positive.fv", "negative.fv"],
-    "stribeck": ["fc", "fs", "fv"],
-    "asymmetric_stribeck": [
-        "positive.fc",
-        "positive.fs",
-        "positive.fv",
-        "negative.fc",
-        "negative.fs",
-        "negative.fv",
-    ],
-}
+#: the RLS-adapted models (:mod:`.adapted_models`) and the LuGre observer
+ESTIMATOR_MODELS = (*ADAPTED, "lugre")
 
 ESTIMATOR_SCHEMA = Schema(
     "estimator",
@@ -173,22 +148,10 @@ def regressor(model: str, v: float, vs: float = 0.05, delta: float = 2.0) -> np.
 
 def _regressor(model: str, v: float, vs: float, delta: float) -> tuple[float, ...]:
     """phi(v) as a tuple of floats (hot path of :meth:`OnlineFrictionEstimator.update`)."""
-    v = float(v)
-    s = 1.0 if v > 0 else (-1.0 if v < 0 else 0.0)
-    if model == "viscous":
-        return (v,)
-    if model == "coulomb_viscous":
-        return (s, v)
-    if model == "asymmetric_coulomb_viscous":
-        p, n = float(v > 0), float(v < 0)
-        return (p, -n, p * v, n * v)
-    E = math.exp(-(abs(v / vs) ** delta))
-    if model == "stribeck":
-        return (s * (1.0 - E), s * E, v)
-    if model == "asymmetric_stribeck":
-        p, n = float(v > 0), float(v < 0)
-        return (p * (1 - E), p * E, p * v, -n * (1 - E), -n * E, n * v)
-    raise ParameterError(f"estimator.model = {model!r} is not linear in its parameters")
+    m = ADAPTED.get(model)
+    if m is None:
+        raise ParameterError(f"estimator.model = {model!r} is not linear in its parameters")
+    return m.regressor(float(v), vs, delta)
 
 
 class OnlineFrictionEstimator:
@@ -215,7 +178,7 @@ class OnlineFrictionEstimator:
         self._cfg = cfg
         self.rls = None
         self.lugre = None
-        if self.model_name == "lugre":
+        if self.model_name not in ADAPTED:  # lugre: the observer (ESTIMATOR_MODELS has no other)
             from friction_ros.core.control.compensation import build_model
 
             if not cfg["lugre"]:
@@ -226,7 +189,7 @@ class OnlineFrictionEstimator:
             self.lugre = LuGreObserver(m, 0.0)
             self.coefficient_names = list(m.param_names)
         else:
-            names = _COEF_NAMES[self.model_name]
+            names = list(ADAPTED[self.model_name].names)
             init = dict(_dotted(cfg["initial"] or {}))
             check_keys(f"{n}.initial", init, names)
             vals = [check_real(f"{n}.initial.{k}", init.get(k, 0.0)) for k in names]
@@ -283,32 +246,10 @@ class OnlineFrictionEstimator:
 
     def model_config(self) -> dict[str, Any]:
         """Current estimate as a friction-library model config (projected onto the valid range)."""
-        c = {k: max(v, 0.0) for k, v in self.coefficients.items()} if self.rls is not None else None
-        if self.model_name == "lugre":
+        if self.rls is None:
             return self.lugre.model.to_config()
-        if self.model_name == "viscous":
-            return {"model": "viscous", "fv": c["fv"]}
-        if self.model_name == "coulomb_viscous":
-            return {"model": "coulomb_viscous", "fc": c["fc"], "fv": c["fv"]}
-        if self.model_name == "asymmetric_coulomb_viscous":
-            return {
-                "model": "asymmetric",
-                "base": "coulomb_viscous",
-                "positive": {"fc": c["positive.fc"], "fv": c["positive.fv"]},
-                "negative": {"fc": c["negative.fc"], "fv": c["negative.fv"]},
-            }
-
-        def strib(fc, fs, fv):
-            return {"fc": fc, "fs": max(fs, fc), "vs": self.vs, "delta": self.delta, "fv": fv}
-
-        if self.model_name == "stribeck":
-            return {"model": "stribeck", **strib(c["fc"], c["fs"], c["fv"])}
-        return {
-            "model": "asymmetric",
-            "base": "stribeck",
-            "positive": strib(c["positive.fc"], c["positive.fs"], c["positive.fv"]),
-            "negative": strib(c["negative.fc"], c["negative.fs"], c["negative.fv"]),
-        }
+        c = {k: max(v, 0.0) for k, v in self.coefficients.items()}
+        return ADAPTED[self.model_name].config(c, self.vs, self.delta)
 
     # -- the update ----------------------------------------------------------------------------------
     def update(

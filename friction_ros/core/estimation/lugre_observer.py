@@ -23,9 +23,16 @@ class LuGreObserver:
     so it stays stable for stiff bristles (sigma0 ~ 1e5 N*m/rad) at 1 ms.
     """
 
+    NEEDS = ("sigma0", "fc", "fs", "vs")
+
+    @classmethod
+    def observes(cls, model) -> bool:
+        """Whether the observer can follow ``model``: one with a LuGre bristle (its coefficients)."""
+        return all(k in model.coefficients for k in cls.NEEDS)
+
     def __init__(self, model, gain: float = 0.0):
         c = model.coefficients
-        for k in ("sigma0", "fc", "fs", "vs"):
+        for k in self.NEEDS:
             if k not in c:
                 raise ParameterError(f"LuGre observer needs a LuGre model: coefficient {k!r} missing")
         self.model = model

@@ -27,6 +27,7 @@ _EXPORTS = {
     "STATIC_MODEL_NAMES": "registry",
     "make_model": "registry",
     "model_from_config": "registry",
+    "register_model": "registry",
     "Coulomb": "static",
     "CoulombViscous": "static",
     "GADupont": "static",

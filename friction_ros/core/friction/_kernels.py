@@ -51,6 +51,7 @@ K_POLYNOMIAL = 12
 K_LOAD_DEPENDENT = 13
 K_KARNOPP = 14
 K_GKF = 15
+K_TABLE = 16  # a static map given as a table (models without a kernel of their own)
 K_ASYMMETRIC = 20
 K_DAHL = 30
 K_LUGRE = 31
@@ -120,6 +121,8 @@ def static_torque(kind, p, o, v, load):
         for j in range(n - 1, -1, -1):
             acc = acc * av + p[base + j]
         return acc * s
+    if kind == K_TABLE:
+        return table_torque(p, o, v)
     if kind == K_LOAD_DEPENDENT:
         # p = fc, fl, fv, veps
         veps = p[o + 3]
@@ -128,6 +131,35 @@ def static_torque(kind, p, o, v, load):
             return v / (veps + av) * mag + p[o + 2] * v
         return mag * s + p[o + 2] * v
     return math.nan
+
+
+@jit
+def table_torque(p, o, v):
+    """A static map tabulated at speeds 0 < w_1 < ... < w_n (see ``StaticModel.table_speeds``):
+    p = n, w_1..w_n, F(+w_1)..F(+w_n), F(-w_1)..F(-w_n), F(0+), F(0-). Linear in |v| between
+    the nodes (from F(0+-) at 0), extended with the last segment's slope; F(0) = 0."""
+    if v == 0.0:
+        return 0.0
+    n = int(p[o])
+    av = abs(v)
+    w = o + 1
+    f = o + 1 + n if v > 0.0 else o + 1 + 2 * n
+    if av <= p[w]:
+        f0 = p[o + 1 + 3 * n] if v > 0.0 else p[o + 2 + 3 * n]
+        return f0 + (p[f] - f0) * av / p[w]
+    lo, hi = 0, n - 1
+    if av >= p[w + hi]:
+        lo = n - 2
+    else:
+        while hi - lo > 1:  # bisection: p[w + lo] < av <= p[w + hi]
+            mid = (lo + hi) // 2
+            if p[w + mid] < av:
+                lo = mid
+            else:
+                hi = mid
+    hi = lo + 1
+    u = (av - p[w + lo]) / (p[w + hi] - p[w + lo])
+    return p[f + lo] + (p[f + hi] - p[f + lo]) * u
 
 
 @jit

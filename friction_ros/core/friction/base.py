@@ -33,6 +33,9 @@ class FrictionModel:
     is_dynamic: ClassVar[bool] = False
     #: True when the model's torque depends on the transmitted (load) torque (gearbox term)
     load_dependent: ClassVar[bool] = False
+    #: the coefficient holding the presliding stiffness (a number or a list summed), which the
+    #: controller's feedback bound scales down (Dahl ``sigma``, LuGre ``sigma0``, GMS ``k``); None: none
+    STIFFNESS: ClassVar[str | None] = None
 
     def __init__(self, **coefficients: Any) -> None:
         check_keys(self.name, coefficients, [c.name for c in self.COEFS])
@@ -170,9 +173,38 @@ class FrictionModel:
 
 
 class StaticModel(FrictionModel):
-    """A memoryless velocity map: ``torque(v)`` is ``steady_state(v)``."""
+    """A memoryless velocity map: ``torque(v)`` is ``steady_state(v)``.
+
+    A subclass without a compiled kernel of its own (``KIND``; a model defined outside the package)
+    is simulated by the plant from a table of ``steady_state`` at :meth:`table_speeds` (linear in
+    |v| between the nodes, :func:`~._kernels.table_torque`); the controller and the fitter call
+    ``steady_state`` itself.
+    """
 
     is_dynamic = False
+    KIND = _kernels.K_TABLE
+
+    def table_speeds(self) -> np.ndarray:
+        """Speeds 0 < w_1 < ... < w_n of the plant's table (override to follow the map's own
+        scales): 601 nodes log-spaced over 1e-9 .. 1e4 (rad/s or m/s), 2 % apart, so a smooth map
+        is tabulated within about 5e-5 of its curvature scale."""
+        return np.geomspace(1e-9, 1e4, 601)
+
+    def _kernel_params(self) -> list[float]:
+        if type(self).KIND != _kernels.K_TABLE:
+            return super()._kernel_params()
+        w = np.asarray(self.table_speeds(), dtype=float)
+        if w.ndim != 1 or w.size < 2 or not np.all(np.diff(w) > 0) or w[0] <= 0:
+            raise ParameterError(f"{self.name}.table_speeds() must be >= 2 increasing speeds > 0")
+        fp, fn = self._steady(w), self._steady(-w)
+        f0 = self._steady(np.array([1e-300, -1e-300]))
+        return [
+            float(w.size),
+            *w.tolist(),
+            *np.asarray(fp, float).tolist(),
+            *np.asarray(fn, float).tolist(),
+            *f0,
+        ]
 
     def torque(self, v: Any, load: Any = 0.0) -> np.ndarray | float:
         """Vectorised friction torque at velocity ``v`` (``load``: transmitted torque, gearbox models)."""

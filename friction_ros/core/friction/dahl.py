@@ -20,6 +20,7 @@ class Dahl(DynamicModel):
 
     name = "dahl"
     KIND = _kernels.K_DAHL
+    STIFFNESS = "sigma"
     STATE_NAMES = ("F",)
     COEFS = (
         Field(

@@ -37,6 +37,7 @@ class GMS(DynamicModel):
 
     name = "gms"
     KIND = _kernels.K_GMS
+    STIFFNESS = "k"
     COEFS = (
         Field(
             "fc",

@@ -25,6 +25,7 @@ class LuGre(DynamicModel):
 
     name = "lugre"
     KIND = _kernels.K_LUGRE
+    STIFFNESS = "sigma0"
     STATE_NAMES = ("z",)
     COEFS = (
         Field(

@@ -1,4 +1,4 @@
-"""Model registry: ``make_model``, ``model_from_config``, ``MODEL_NAMES``."""
+"""Model registry: ``make_model``, ``model_from_config``, ``MODEL_NAMES``, ``register_model``."""
 
 from __future__ import annotations
 
@@ -20,9 +20,22 @@ STATIC_MODEL_NAMES = tuple(n for n, c in MODEL_CLASSES.items() if not c.is_dynam
 DYNAMIC_MODEL_NAMES = tuple(n for n, c in MODEL_CLASSES.items() if c.is_dynamic)
 
 
+def register_model(cls: type[FrictionModel]) -> type[FrictionModel]:
+    """Add a model class defined outside the package (a :class:`~.base.StaticModel` or
+    :class:`~.base.DynamicModel` subclass with ``name`` and ``COEFS``) to the registry:
+    :func:`make_model`, :func:`model_from_config`, the ``asymmetric`` wrapper, the controller and
+    the plant find it by name (usable as a decorator). ``MODEL_NAMES`` stays the built-in list."""
+    if not (isinstance(cls, type) and issubclass(cls, FrictionModel)) or cls.name in ("", "base"):
+        raise ParameterError(f"friction model {cls!r} must be a FrictionModel subclass with a name")
+    if cls.is_dynamic and cls.KIND == FrictionModel.KIND:
+        raise ParameterError(f"friction model {cls.name!r} is dynamic without a compiled kernel (KIND)")
+    MODEL_CLASSES[cls.name] = BASE_MODEL_CLASSES[cls.name] = cls
+    return cls
+
+
 def make_model(name: str, **coefficients: Any) -> FrictionModel:
-    """Build a validated friction model by name (see ``MODEL_NAMES``)."""
-    check_choice("friction.model", name, MODEL_NAMES)
+    """Build a validated friction model by name (see ``MODEL_NAMES`` and :func:`register_model`)."""
+    check_choice("friction.model", name, list(MODEL_CLASSES))
     return MODEL_CLASSES[name](**coefficients)
 
 
@@ -38,7 +51,7 @@ def model_from_config(config: Mapping[str, Any] | FrictionModel | None) -> Frict
     if not isinstance(config, Mapping):
         raise ParameterError(f"friction config = {config!r} must be a mapping with a 'model' key")
     if "model" not in config:
-        raise ParameterError(f"friction config is missing 'model': must be one of {', '.join(MODEL_NAMES)}")
+        raise ParameterError(f"friction config is missing 'model': must be one of {', '.join(MODEL_CLASSES)}")
     cfg = dict(config)
     name = cfg.pop("model")
     return make_model(name, **cfg)

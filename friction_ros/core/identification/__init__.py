@@ -11,7 +11,9 @@ nu-SVR per direction), ``identifiability`` (collinearity flags, confidence inter
 ``load_terms`` (gravity, offset, spring, load- and position-dependent friction regressors, chosen by
 validation), ``diagnosis`` (what a poor fit's residual follows), ``residual_learning`` (learned
 residual on a physics backbone), ``csv_loading``/``log_loading`` (CSV logs, any bag),
-``realistic_joint`` (a realistic synthetic robot joint with known truth).
+``realistic_joint`` (a realistic synthetic robot joint with known truth), ``fit_model`` (the
+plugin base every fittable family implements, and its registry) with ``fit_families`` (the
+built-in families).
 
 Entry points: :func:`fit_bag` (``fit_logs``: logs in, files out) and :func:`fit_records` (``pipeline``, which compares the models;
 ``model_fits`` turns each family's fit into a ``ModelResult`` of ``fit_results``).
@@ -19,13 +21,16 @@ Entry points: :func:`fit_bag` (``fit_logs``: logs in, files out) and :func:`fit_
 
 from friction_ros.core.identification.bag_loading import load_bag
 from friction_ros.core.identification.fit_logs import cross_validate_runs, fit_bag
+from friction_ros.core.identification.fit_model import Coef, FitModel, register_fit_model
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
 from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_records
 from friction_ros.core.identification.records import ExcitationError, JointData, prepare
 
 __all__ = [
+    "Coef",
     "DEFAULT_MODELS",
     "ExcitationError",
+    "FitModel",
     "FitResult",
     "JointData",
     "ModelResult",
@@ -34,4 +39,5 @@ __all__ = [
     "fit_records",
     "load_bag",
     "prepare",
+    "register_fit_model",
 ]

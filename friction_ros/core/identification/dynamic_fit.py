@@ -70,8 +70,8 @@ SMOOTH_SIGNALS = Signals(velocity_window=None, filter_hz=None)
 
 
 def default_signals(spec: FitSpec) -> Signals:
-    """DEFAULT_SIGNALS for GMS, SMOOTH_SIGNALS for the other families."""
-    return DEFAULT_SIGNALS if spec.family == "gms" else SMOOTH_SIGNALS
+    """DEFAULT_SIGNALS for a family with ``narrow_signals`` (GMS), SMOOTH_SIGNALS for the others."""
+    return DEFAULT_SIGNALS if spec.model.narrow_signals else SMOOTH_SIGNALS
 
 
 def fit_signals(data: JointData, sig: Signals | None = None) -> tuple[np.ndarray, np.ndarray]:

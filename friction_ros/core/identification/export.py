@@ -1,16 +1,9 @@
 """Fitted coefficients -> friction-library configs and the ROS parameter YAML the nodes load.
 
-Library configs (``model.to_config()`` form, validated with ``model_from_config``):
-
-* ``coulomb``/``coulomb_viscous``/``stribeck`` fitted in the time domain with a linear zone
-  ``eps`` -> ``stribeck_eps`` (seed 003 A.2.2; Coulomb as fs = fc); from plateaus -> the plain
-  library model (``asymmetric`` wrapper when the directions differ);
-* ``dahl`` -> ``dahl`` (alpha = 1; the fitted ``fv`` has no place in the library's Dahl),
-  ``lugre`` -> ``lugre``, ``gms<N>`` -> ``gms``, ``gms<N>d`` -> ``gms`` with ``sigma1``: the fitted
-  coefficients already carry the library's names (docs/coefficients.md), so the config is the
-  library model's coefficients picked from the fit (``fs`` held >= ``fc``, GMS ``alpha`` summing
-  exactly to 1);
-* ``anfis``/``nusvr`` have no library model: no config (JSON summary only).
+Library configs (``model.to_config()`` form, validated with ``model_from_config``): each fitted
+model's :meth:`~friction_ros.core.identification.fit_model.FitModel.library_config` (the built-in
+families' in :mod:`~friction_ros.core.identification.fit_families`); ``anfis``/``nusvr`` have no
+library model: no config (JSON summary only).
 
 Parameter file (``node_name: ros__parameters:``):
 
@@ -30,73 +23,18 @@ from typing import Any
 
 import yaml
 
-from friction_ros.core.friction import MODEL_CLASSES
-
 
 def library_config(
     name: str, coefs: dict, *, eps: float = 0.0, per_direction: dict | None = None
 ) -> dict | None:
-    """The library ``to_config()`` dict for a fitted model (None for learned models)."""
-    c = coefs
-    if name in ("anfis", "nusvr"):
+    """The library ``to_config()`` dict for a fitted model (None for learned models): the model's
+    :meth:`~friction_ros.core.identification.fit_model.FitModel.library_config`."""
+    from friction_ros.core.identification.fit_model import fit_model
+    from friction_ros.core.identification.models import LEARNED
+
+    if name in LEARNED:
         return None
-    if name in ("coulomb", "coulomb_viscous", "stribeck"):
-        if per_direction:
-            base = "stribeck" if name == "stribeck" else name
-            return {
-                "model": "asymmetric",
-                "base": base,
-                "positive": _static(name, per_direction["positive"], 0.0, bare=True),
-                "negative": _static(name, per_direction["negative"], 0.0, bare=True),
-            }
-        return _static(name, c, float(c.get("eps", eps)))
-    if name == "dahl":
-        return {"model": "dahl", "sigma": c["sigma"], "fc": c["fc"], "alpha": 1.0}
-    if name == "lugre":
-        return {"model": "lugre", **_library_coefficients("lugre", c)}
-    if name.startswith("gms"):
-        out = {"model": "gms", **_library_coefficients("gms", c)}
-        alpha = [float(a) for a in c["alpha"]]
-        alpha[-1] = 1.0 - sum(alpha[:-1])  # exact sum 1 after rounding
-        out.update(k=[float(k) for k in c["k"]], alpha=alpha)
-        return out
-    return None
-
-
-def _library_coefficients(model: str, c: dict) -> dict:
-    """The fitted coefficients that ``model`` has, in the library's order, with ``fs >= fc``."""
-    out = {co.name: c[co.name] for co in MODEL_CLASSES[model].COEFS if co.name in c}
-    out["fs"] = max(out["fs"], out["fc"])
-    return out
-
-
-def _static(name: str, c: dict, eps: float, bare: bool = False) -> dict:
-    fc = float(c["fc"])
-    fv = float(c.get("fv", 0.0))
-    if name == "stribeck":
-        body = {
-            "fc": fc,
-            "fs": max(float(c["fs"]), fc),
-            "vs": float(c["vs"]),
-            "delta": float(c["delta"]),
-            "fv": fv,
-        }
-        model = "stribeck"
-    elif name == "coulomb_viscous":
-        body = {"fc": fc, "fv": fv}
-        model = "coulomb_viscous"
-    else:
-        body = {"fc": fc}
-        model = "coulomb"
-    if eps > 0 and not bare:
-        full = {
-            "fc": fc,
-            "fs": body.get("fs", fc),
-            "vs": body.get("vs", 1.0),
-            "delta": body.get("delta", 2.0),
-        }
-        return {"model": "stribeck_eps", **full, "fv": fv, "eps": float(eps)}
-    return body if bare else {"model": model, **body}
+    return fit_model(name).library_config(coefs, eps=eps, per_direction=per_direction)
 
 
 def estimator_section(config: dict, inertia: float) -> dict:

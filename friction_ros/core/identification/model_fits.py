@@ -12,10 +12,8 @@ import numpy as np
 from friction_ros.core.identification import export, identifiability
 from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.dynamic_fit import DynamicFit
+from friction_ros.core.identification.fit_model import fit_model
 from friction_ros.core.identification.fit_results import ModelResult
-from friction_ros.core.identification.models import (
-    sat_sign,
-)
 from friction_ros.core.identification.records import concat_records
 from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus, stribeck_map
 from friction_ros.core.validation import ParameterError
@@ -90,7 +88,8 @@ def imprecise_breakaways(breakaways) -> str:
 
 def fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResult:
     levels = breakaway_levels(breakaways)
-    sf: StaticFit = fit_plateaus(plateaus, name, breakaway=levels or None)
+    shape = fit_model(name).plateau_shape
+    sf: StaticFit = fit_plateaus(plateaus, shape, breakaway=levels or None)
     per = sf.per_direction if sf.asymmetric else None
     coefs = dict(sf.coefficients)
 
@@ -109,7 +108,7 @@ def fit_static_plateaus(name, plateaus, train, eps, breakaways=()) -> ModelResul
     cfg = export.library_config(name, coefs, eps=0.0, per_direction=per)
     _validate_config(cfg)
     notes = [f"fitted to {sf.n_points} plateau means (robust soft-L1 least squares), rms {sf.rms:.3g} N*m"]
-    if levels and name == "stribeck":
+    if levels and shape == "stribeck":
         notes.append(
             "static level fs from the breakaway ramps ("
             + ", ".join(f"{'+' if d > 0 else '-'}{x:.4g}" for d, x in levels.items())
@@ -200,12 +199,7 @@ def wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> ModelR
     spec = fit.spec
 
     def ss(v, c=coefs):
-        v = np.asarray(v, dtype=float)
-        if spec.family == "dahl":
-            return c["fc"] * np.sign(v)
-        if spec.family in ("coulomb", "stribeck"):
-            return stribeck_map(v, {**c, "fs": c.get("fs", c["fc"])}) * np.abs(sat_sign(v, c.get("eps", eps)))
-        return stribeck_map(v, c)
+        return spec.model.steady_state(c, np.asarray(v, dtype=float), eps)
 
     ident = {}
     if ident_check:

@@ -7,17 +7,12 @@ Every model predicts the measured joint torque as (seed 003 A.3, eq. 1 with tau_
 where ``theta`` are the few coefficients that enter nonlinearly (searched globally, then refined)
 and ``beta`` (static level, element weights, micro-damping), the viscous coefficient ``fv`` and
 the inertia ``J`` enter linearly and are solved exactly by non-negative least squares for every
-candidate ``theta`` (variable projection). The regressors ``phi_j`` of the dynamic models come from
-the compiled kernels in :mod:`kernels`; the normalised forms are documented there.
-
-The physical coefficients returned by :meth:`FitSpec.coefficients` carry the friction library's
-names (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k, alpha``: the ``to_config()``
-keys, units and equations in docs/coefficients.md) plus the inertia ``J`` [kg*m^2]; only the
-normalised search variables of ``theta`` (``r = fc/fs`` [-], ``sigma_n = sigma/fc`` [1/rad],
-``sigma0_n = sigma0/fs`` [1/rad], ``attraction_n = attraction/fs`` [1/s],
-``x_i = alpha_i fs/k_i`` [rad], ``s_damp = sigma1 / sum_j k_j`` [s]; equations in :mod:`kernels`)
-and the Stribeck step ``dfs = fs - fc`` [N*m] are names of their own. The library config is assembled in
-:func:`friction_ros.core.identification.export.library_config`.
+candidate ``theta`` (variable projection). What a family owns (its coefficients, bounds,
+regressors, physical coefficients, library config) is its :class:`~.fit_model.FitModel` (built-in
+families in :mod:`~.fit_families`, the compiled regressors in :mod:`kernels`); a :class:`FitSpec`
+is one fit's search space built from it (bounds in the log's units, narrowed by the data, load
+terms, constraints). :meth:`FitSpec.coefficients` returns the family's physical coefficients (the
+friction library's names, docs/coefficients.md) plus the inertia ``J`` [kg*m^2].
 """
 
 from __future__ import annotations
@@ -27,7 +22,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import signal
 
-from friction_ros.core.identification import kernels
+from friction_ros.core.identification.fit_model import (  # noqa: F401 (mid_velocity, sat_sign re-exported)
+    FitModel,
+    fit_model,
+    mid_velocity,
+    model_help,
+    sat_sign,
+)
 from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.validation import ParameterError
 
@@ -35,39 +36,15 @@ DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (seed 00
 CONSTRAINT_WEIGHT = 1e6  # linear equality constraints: pseudo-observation weight (see FitSpec._constrain)
 
 
-def mid_velocity(v: np.ndarray) -> np.ndarray:
-    """Velocity averaged over each sample interval, (v[k-1] + v[k]) / 2.
-
-    A dynamic model's state update from t[k-1] to t[k] holds the velocity constant; with a measured
-    (continuous) velocity the interval mean is second-order accurate, whereas holding v[k] makes
-    the state lead by dt/2 and biases the damping estimate by about sigma0 dt / 2. Used for every
-    dynamic family (Dahl, LuGre, GMS): on the ABB M19-S plant the GMS-4 truth driven by v[k] misses
-    the plant's friction by 0.031 N*m RMS, driven by the interval mean by 0.007 N*m.
-    """
-    v = np.ascontiguousarray(v, dtype=float)
-    return np.concatenate([v[:1], 0.5 * (v[1:] + v[:-1])])
-
-
-def sat_sign(v: np.ndarray, eps: float) -> np.ndarray:
-    """sgn(v) with a linear zone of width eps (seed 003 A.2.1): clip(v / eps, -1, 1)."""
-    return np.clip(np.asarray(v, dtype=float) / eps, -1.0, 1.0)
-
-
 @dataclass
 class FitSpec:
     """One fittable model: names, bounds and regressors of its nonlinear and linear parts."""
 
-    name: str
-    family: str
+    model: FitModel  # the family's plugin (fit_model.FitModel): regressors, coefficients, export
     nonlinear: list[str]
     lower: np.ndarray
     upper: np.ndarray
     log: np.ndarray  # search in log10 space for this coefficient
-    linear: list[str]  # model-specific linear coefficients (viscous and J are appended)
-    viscous: bool = True
-    dynamic: bool = False
-    n_elements: int = 0
-    damped: bool = False  # GMS: presliding damping time constant s = sigma1 / sum k (last of theta)
     eps: float = DEFAULT_EPS
     mid_velocity: bool = True  # drive the states with the interval-mean velocity
     extra: dict = field(default_factory=dict)
@@ -79,6 +56,36 @@ class FitSpec:
     # the unit of each nonlinear coefficient in the search (velocity_scale^power, see spec_for): the
     # optimiser sees the same numbers for a log re-expressed in other units; None = all 1
     unit: np.ndarray | None = None
+
+    @property
+    def name(self) -> str:
+        return self.model.name
+
+    @property
+    def family(self) -> str:
+        return self.model.family
+
+    @property
+    def linear(self) -> list[str]:
+        """The model's own linear coefficients (``fv``, load terms and ``J`` are appended)."""
+        return self.model.linear()
+
+    @property
+    def viscous(self) -> bool:
+        return self.model.viscous
+
+    @property
+    def dynamic(self) -> bool:
+        return self.model.dynamic
+
+    @property
+    def n_elements(self) -> int:
+        return getattr(self.model, "n_elements", 0)
+
+    @property
+    def damped(self) -> bool:
+        """GMS: presliding damping time constant s = sigma1 / sum k (last of theta)."""
+        return getattr(self.model, "damped", False)
 
     # ------------------------------------------------------------------ search-space transforms
     def to_search(self, theta: np.ndarray) -> np.ndarray:
@@ -129,20 +136,9 @@ class FitSpec:
         """Model-specific regressor columns phi (n x len(linear)) for one theta."""
         v = np.ascontiguousarray(v, dtype=float)
         theta = np.ascontiguousarray(theta, dtype=float)
-        f = self.family
-        if f == "coulomb":
-            return sat_sign(v, self.eps)[:, None]
-        if f == "stribeck":
-            vs, delta, eps = theta
-            sg = sat_sign(v, eps)
-            return np.column_stack([sg, sg * np.exp(-(np.abs(v / vs) ** delta))])
-        if f == "dahl":
-            return kernels.dahl_features(theta, self.state_velocity(v), dt)
-        if f == "lugre":
-            return kernels.lugre_features(theta, self.state_velocity(v), dt)
-        if f == "gms":
-            return kernels.gms_features(theta, self.state_velocity(v), dt, self.damped)
-        raise ParameterError(f"model family {f!r} has no regressors")
+        if self.dynamic:
+            v = self.state_velocity(v)
+        return self.model.features(theta, v, dt, self.eps)
 
     def state_velocity(self, v: np.ndarray) -> np.ndarray:
         """The velocity that drives the internal states: the interval mean (see :func:`mid_velocity`)
@@ -195,19 +191,14 @@ class FitSpec:
         if sos.shape[0]:
             E = signal.sosfilt(sos, E, axis=0)
         E = np.ascontiguousarray(E)
-        f = self.family
-        if f == "gms":
-            g = kernels.gms_gram(P, self.state_velocity(v), E, dt, sos, self.damped)
-        elif f in ("dahl", "lugre"):
-            kern = {"dahl": kernels.dahl_gram, "lugre": kernels.lugre_gram}[f]
-            g = kern(P, self.state_velocity(v), E, dt, sos)
-        else:
+        g = self.model.grams(P, self.state_velocity(v), E, dt, sos) if self.dynamic else None
+        if g is None:
             out = []
             # with load terms, samples slower than their sign's linear zone are left out of a static
             # map's fit: the velocity estimate cannot tell their direction (a sign error of up to 2 fs
             # there biased gravity against the spring by 3 % on the realistic joint)
             keep = None
-            if self.load is not None and not self.load.empty and not sos.shape[0]:
+            if not self.dynamic and self.load is not None and not self.load.empty and not sos.shape[0]:
                 keep = np.abs(v) >= self.load.eps
             for theta in P:
                 phi = self.features(theta, v, dt)
@@ -262,11 +253,7 @@ class FitSpec:
             if x is not None and np.isfinite(x) and x > 0:
                 self.lower[i], self.upper[i] = float(x) * 0.999, float(x) * 1.001
         names = self.linear_all
-        constraints = []
-        if self.family == "lugre" and fs > 0:
-            constraints.append((np.array([1.0 if n == "fs" else 0.0 for n in names]), fs))
-        elif self.family == "gms" and fs > 0:
-            constraints.append((np.array([1.0 if n.startswith("beta") else 0.0 for n in names]), fs))
+        constraints = self.model.steady_state_constraints(names, fs) if fs > 0 else []
         if self.viscous and "fv" in static:
             constraints.append((np.array([1.0 if n == "fv" else 0.0 for n in names]), float(static["fv"])))
         self.linear_constraints = constraints
@@ -281,56 +268,7 @@ class FitSpec:
         fv = lin.pop("fv", 0.0)
         for n in self.load_names:
             lin.pop(n)
-        f = self.family
-        if f == "coulomb":
-            c = {"fc": lin["fc"]}
-            if self.viscous:
-                c["fv"] = fv
-        elif f == "stribeck":
-            c = {
-                "fc": lin["fc"],
-                "fs": lin["fc"] + lin["dfs"],
-                "vs": theta[0],
-                "delta": theta[1],
-                "fv": fv,
-                "eps": theta[2],
-            }
-        elif f == "dahl":
-            c = {"fc": lin["fc"], "sigma": theta[0] * lin["fc"], "fv": fv}
-        elif f == "lugre":
-            r, vs, delta, s0 = theta
-            fs = lin["fs"]
-            c = {
-                "fc": r * fs,
-                "fs": fs,
-                "vs": vs,
-                "delta": delta,
-                "sigma0": s0 * fs,
-                "sigma1": lin["sigma1"],
-                "fv": fv,
-            }
-        elif f == "gms":
-            r, vs, delta, attraction_n = theta[:4]
-            xs = theta[4 : 4 + self.n_elements]
-            betas = np.array([lin[f"beta{i + 1}"] for i in range(self.n_elements)])
-            fs = float(betas.sum())
-            alpha = betas / fs if fs > 0 else np.full(self.n_elements, 1.0 / self.n_elements)
-            k = betas / xs  # k_i = alpha_i fs / x_i
-            order = np.argsort(xs)
-            c = {
-                "fc": r * fs,
-                "fs": fs,
-                "vs": vs,
-                "delta": delta,
-                "attraction": attraction_n * fs,
-                "fv": fv,
-                "k": k[order].tolist(),
-                "alpha": alpha[order].tolist(),
-            }
-            if self.damped:  # sigma1 = s sum_j k_j (stiffness-proportional presliding damping)
-                c["sigma1"] = float(theta[4 + self.n_elements] * k.sum())
-        else:  # pragma: no cover
-            raise ParameterError(f"unknown family {f!r}")
+        c = self.model.coefficients(theta, lin, fv if self.viscous else None)
         return {**c, "J": J}
 
     def load_coefficients(self, beta: np.ndarray) -> dict:
@@ -353,106 +291,34 @@ class FitSpec:
         return np.clip(theta, self.lower, self.upper)
 
 
-_MODEL_HELP = (
-    "coulomb, coulomb_viscous, stribeck, dahl, lugre, gms<N> (e.g. gms4), gms<N>d (with presliding "
-    "damping, e.g. gms4d), anfis, nusvr"
-)
 LEARNED = ("anfis", "nusvr")
 
 
 def spec_for(name: str, eps: float = DEFAULT_EPS, velocity_scale: float = 1.0) -> FitSpec:
-    """The FitSpec for a model name; ``gms<N>`` for a GMS with N elements (1..20), ``gms<N>d`` for
-    the same with presliding micro-damping (the library GMS's ``sigma1``, stiffness-proportional).
+    """The FitSpec of model ``name`` (any registered :class:`~.fit_model.FitModel`: ``gms<N>`` for a
+    GMS with N elements (1..20), ``gms<N>d`` with presliding damping ...; bounds in
+    :mod:`~friction_ros.core.identification.fit_families`).
 
-    The damped GMS has one more nonlinear coefficient, last in theta: the damping time constant
-    ``s = sigma1 / sum_j k_j`` [s], searched in log space over [1e-6, 0.1] s (1e-6 s is no damping
-    for any practical purpose); each element regressor becomes ``G_i + s dG_i/dt``, so the element
-    weights still enter linearly (see :mod:`kernels`).
-
-    Bounds of the dynamic models: fc/fs in [0.5, 1] (a static level at most twice the Coulomb
-    level) and vs >= 1e-3 rad/s; without them the sparsely visited low-speed sliding region lets
-    the fit grow an unphysical Stribeck spike that costs nothing in NMSE but ruins compensation.
-
-    ``velocity_scale`` (:mod:`~friction_ros.core.identification.data_scale`): the bounds above are
-    those of a unit-scale joint; a velocity or position bound is multiplied by it, an inverse
-    position bound (``sigma_n``, ``sigma0_n``) divided by it.
+    ``velocity_scale`` (:mod:`~friction_ros.core.identification.data_scale`): each nonlinear
+    coefficient's unit-scale bounds are multiplied by ``velocity_scale ** power`` (its
+    :class:`~.fit_model.Coef` power: a velocity or position bound by the scale, an inverse position
+    bound such as ``sigma_n``, ``sigma0_n`` divided by it), so the optimiser sees the same numbers for
+    a log re-expressed in other units.
     """
-    spec = _unit_spec(name, eps)
+    model = fit_model(name)
+    coefs = model.nonlinear()
+    spec = FitSpec(
+        model,
+        [c.name for c in coefs],
+        np.array([c.lo for c in coefs], dtype=float),
+        np.array([c.hi for c in coefs], dtype=float),
+        np.array([c.log for c in coefs], dtype=bool),
+        eps=eps,
+    )
     if velocity_scale != 1.0:
-        p = np.array(
-            [VELOCITY_POWER.get(n[0] if n[0] == "x" and n[1:].isdigit() else n, 0) for n in spec.nonlinear]
-        )
-        f = float(velocity_scale) ** p if p.size else np.ones(0)
+        f = float(velocity_scale) ** np.array([c.power for c in coefs], dtype=float)
         spec.lower, spec.upper, spec.unit = spec.lower * f, spec.upper * f, f
     return spec
-
-
-#: the power of the velocity scale in each nonlinear coefficient's unit (x = presliding distances)
-VELOCITY_POWER = {"vs": 1, "eps": 1, "x": 1, "sigma_n": -1, "sigma0_n": -1}
-
-
-def _unit_spec(name: str, eps: float) -> FitSpec:
-    """The FitSpec of a unit-scale joint (see :func:`spec_for`)."""
-    arr = np.array
-    if name == "coulomb":
-        return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=False, eps=eps)
-    if name == "coulomb_viscous":
-        return FitSpec(name, "coulomb", [], arr([]), arr([]), arr([], bool), ["fc"], viscous=True, eps=eps)
-    if name == "stribeck":
-        # seed 003 A.2.2: the linear-zone width eps is a coefficient of this model (fitted)
-        return FitSpec(
-            name,
-            "stribeck",
-            ["vs", "delta", "eps"],
-            arr([1e-4, 0.3, 1e-4]),
-            arr([2.0, 4.0, 0.5]),
-            arr([True, False, True]),
-            ["fc", "dfs"],
-            eps=eps,
-        )
-    if name == "dahl":
-        return FitSpec(
-            name, "dahl", ["sigma_n"], arr([1.0]), arr([1e6]), arr([True]), ["fc"], dynamic=True, eps=eps
-        )
-    if name == "lugre":
-        return FitSpec(
-            name,
-            "lugre",
-            ["r", "vs", "delta", "sigma0_n"],
-            arr([0.5, 1e-3, 0.3, 10.0]),
-            arr([1.0, 2.0, 4.0, 1e6]),
-            arr([False, True, False, True]),
-            ["fs", "sigma1"],
-            dynamic=True,
-            eps=eps,
-        )
-    if name.startswith("gms"):
-        body = name[3:].lstrip("_-")
-        damped = body.endswith("d")
-        body = body[:-1].rstrip("_-") if damped else body
-        try:
-            ne = int(body or "4")
-        except ValueError:
-            raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}") from None
-        if not 1 <= ne <= 20:
-            raise ParameterError(f"model = {name!r}: GMS element count {ne} is out of range: must be 1..20")
-        lo = [0.5, 1e-3, 0.3, 1.0] + [1e-6] * ne + [1e-6] * damped
-        hi = [1.0, 2.0, 4.0, 1e5] + [0.1] * ne + [0.1] * damped
-        lg = [False, True, False, True] + [True] * ne + [True] * damped
-        return FitSpec(
-            f"gms{ne}{'d' if damped else ''}",
-            "gms",
-            ["r", "vs", "delta", "attraction_n"] + [f"x{i + 1}" for i in range(ne)] + ["s_damp"] * damped,
-            arr(lo),
-            arr(hi),
-            arr(lg),
-            [f"beta{i + 1}" for i in range(ne)],
-            dynamic=True,
-            n_elements=ne,
-            damped=damped,
-            eps=eps,
-        )
-    raise ParameterError(f"model = {name!r} is not allowed: must be one of {_MODEL_HELP}")
 
 
 def check_model_names(models) -> list[str]:
@@ -463,7 +329,9 @@ def check_model_names(models) -> list[str]:
         if m in LEARNED:
             out.append(m)
         else:
-            out.append(spec_for(m).name)
+            out.append(fit_model(m).name)
     if not out:
-        raise ParameterError(f"models = [] is empty: must name at least one of {_MODEL_HELP}")
+        raise ParameterError(
+            f"models = [] is empty: must name at least one of {model_help()}, {', '.join(LEARNED)}"
+        )
     return list(dict.fromkeys(out))

@@ -268,22 +268,19 @@ def fit_records(
                 if not spec.dynamic:  # see static_linear_zone
                     static_linear_zone(spec, terms.eps)
             slowest_stribeck_velocity(spec, train)
-            if not spec.dynamic and static_from_plateaus and terms.empty:
+            if spec.model.plateau_shape and static_from_plateaus and terms.empty:
                 res = fit_static_plateaus(name, plateaus, train, eps, breakaways)
                 if progress:
                     progress(name, 1.0)
             else:
                 static0 = per = None
-                if (
-                    static_from_plateaus
-                    and "stribeck" in results
-                    and results["stribeck"].method == "plateaus"
-                ):
-                    static0 = results["stribeck"].coefficients
-                    per = results["stribeck"].extra.get("per_direction")
+                nested = results.get(spec.model.nested)  # its plateau fit: the measured steady state
+                if static_from_plateaus and nested is not None and nested.method == "plateaus":
+                    static0 = nested.coefficients
+                    per = nested.extra.get("per_direction")
                 fit_train = train
                 x0 = spec.initial_theta(static0) if static0 else None
-                if static0 and two_stage and spec.dynamic and "r" in spec.nonlinear:
+                if static0 and two_stage and spec.model.two_stage:
                     # two-stage identification (anchors 3.3): the steady-state curve from the plateaus
                     # is kept, only the presliding/dynamic coefficients are searched in the time domain
                     spec.fix_steady_state(static0)
@@ -293,17 +290,10 @@ def fit_records(
                         fit_train = [dataclasses.replace(r, torque=r.torque - d(r.velocity)) for r in train]
                 else:
                     per = None
-                if spec.family == "gms":  # start from a smaller GMS already fitted (elements repeated)
-                    smaller = [r for n, r in results.items() if n.startswith("gms") and "theta" in r.extra]
-                    if smaller:
-                        prev = smaller[-1]
-                        th = np.asarray(prev.extra["theta"])
-                        sp = spec_for(prev.name, eps, scale.velocity)
-                        xs = np.resize(th[4 : 4 + sp.n_elements], spec.n_elements)
-                        x0 = np.concatenate([th[:4], xs])
-                        if spec.damped:  # the smaller fit's damping, else the middle of its range
-                            sd = th[-1] if sp.damped else np.sqrt(spec.lower[-1] * spec.upper[-1])
-                            x0 = np.append(x0, sd)
+                fitted = [(n, np.asarray(r.extra["theta"])) for n, r in results.items() if "theta" in r.extra]
+                warm = spec.model.warm_start(spec, fitted)  # e.g. a GMS from a smaller GMS fitted before
+                if warm is not None:
+                    x0 = warm
                 mi = maxiter.get(name) if isinstance(maxiter, dict) else maxiter
                 fit = fit_time_domain(
                     spec,

@@ -5,6 +5,10 @@
 advances both for a sequence of control periods of ``n_sub`` semi-implicit Euler sub-steps each,
 with the equations of :mod:`friction_ros.core.plant.servo` (rigid or compliant transmission, current
 lag or armature circuit, static friction with stick logic, dynamic friction states).
+
+The friction comes from :func:`~friction_ros.core.friction._kernels.friction_eval` (every model kind,
+tabulated static maps included). numba's on-disk cache keys a compiled function on its own file
+only: a change of the friction kernels must touch this file too, or a stale plant loop stays cached.
 """
 
 from __future__ import annotations
