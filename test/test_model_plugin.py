@@ -75,8 +75,21 @@ class TanhCoulombFit(FitModel):
         return c["fc"] * np.tanh(v / c["vt"]) + c["fv"] * v
 
 
-register_fit_model(TanhCoulombFit, library_class=TanhCoulomb)
 # ---------------------------------------------------------------------------- end of the toy model
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _registered():
+    """Register the toy for this module's tests (one call, as a user's plugin module does at import)
+    and take it out again: the other test modules see the built-in models only."""
+    from friction_ros.core.friction import catalog, registry
+    from friction_ros.core.identification import fit_model as fit_model_module
+
+    register_fit_model(TanhCoulombFit, library_class=TanhCoulomb)
+    yield
+    fit_model_module._REGISTRY.pop(TanhCoulombFit.family, None)
+    registry.MODEL_CLASSES.pop(TanhCoulomb.name, None)
+    catalog.BASE_MODEL_CLASSES.pop(TanhCoulomb.name, None)
 
 
 def _log(seed: int = 0, seconds: float = 20.0) -> GauntletLog:
