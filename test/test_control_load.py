@@ -267,7 +267,7 @@ def test_residual_follows_the_gain_the_source_and_the_fallback():
     assert first(gain=0.5)[1] == 0.5 * r0
     assert first(source="none")[1] == 0.0 and first(gain=0.0)[1] == 0.0
     c, _ = first()
-    assert c._watch  # the residual is inside the loop: the limit-cycle detector watches it
+    assert c.watch.feedback_path  # the residual is inside the loop: the limit-cycle detector watches it
     c.compensation_fallback = True
     assert c.compute(1e-3, (0.0, 0.0, 0.0), (0.05, 0.1), 1e-3).learned_feedforward == 0.0
 

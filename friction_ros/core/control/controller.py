@@ -61,10 +61,10 @@ Safety (feedback paths only, i.e. sources feedback / blended / observer):
   f = 0.5): the presliding stiffness and damping fed back satisfy ``g w_fb k_hat <= f K_p`` and
   ``g w_fb sigma1 <= f K_d`` with (K_p, K_d) from :func:`loop_gains`; ``feedback_bound_note`` says
   what was limited ('' when nothing);
-* run-time limit-cycle detector (:mod:`.limit_cycle`, ``limit_cycle_*`` keys): when it fires, friction
-  compensation is switched off and latched (``compensation_fallback``, ``fallback_reason``, also in
-  :class:`ControllerTerms`) until the controller is rebuilt or reconfigured. The friction part of
-  ``tau_L`` and ``tau_r`` go with it; ``tau_load(theta)`` (a load, not friction) stays.
+* run-time compensation watch (:mod:`.compensation_watch`: limit cycles, over-compensation, an
+  unstable plain loop; ``limit_cycle_*`` keys): friction compensation switched off and latched
+  (``compensation_fallback``, ``fallback_reason``); the friction part of ``tau_L`` and ``tau_r`` go with
+  it, ``tau_load(theta)`` (a load, not friction) stays.
 
 The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`` and ``terms``
 (a :class:`ControllerTerms`, the fields of friction_msgs/ControllerState).
@@ -82,15 +82,16 @@ from friction_ros.core.control.command_safety import JointLimits, TermGuard, che
 from friction_ros.core.control.compensation import (
     FrictionCompensator,
 )
+from friction_ros.core.control.compensation_watch import CompensationWatch
 from friction_ros.core.control.controller_config import (
     CONFIG_SECTIONS,
     CONTROLLER_DEFAULTS,
     CONTROLLER_FIELDS,
     config_from_ros_parameters,
     default_config,
+    ros_parameter_error,
 )
 from friction_ros.core.control.controller_terms import ControllerTerms
-from friction_ros.core.control.limit_cycle import LimitCycleDetector
 from friction_ros.core.control.load_compensation import (
     LearnedFeedforward,
     LoadFeedforward,
@@ -120,21 +121,7 @@ def controller_from_ros_parameters(
     try:
         return CompensatingController(cfg), ref
     except ParameterError as exc:
-        text = str(exc)
-        for core, ros in (
-            ("controller.friction.model.", "friction."),
-            ("controller.friction.model", "friction.model"),
-            ("controller.friction.", "compensation."),
-            ("controller.friction:", "compensation:"),
-            ("controller.", ""),
-        ):
-            text = text.replace(core, ros)
-        model = (
-            str((values.get("friction") or {}).get("model", "") or "") if isinstance(values, Mapping) else ""
-        )
-        if model and text.startswith(f"{model}."):  # a coefficient, named by the model's library
-            text = "friction." + text[len(model) + 1 :]
-        raise ParameterError(text) from None
+        raise ParameterError(ros_parameter_error(str(exc), values)) from None
 
 
 class CompensatingController:
@@ -258,51 +245,42 @@ class CompensatingController:
         # stability bound of the feedback path against the loop's linear gains (loop_gains)
         self.loop_stiffness, self.loop_damping = loop_gains(mode, pid, scheme)
         self.feedback_bound_note = friction.bound_feedback(self.loop_stiffness, self.loop_damping)
-        self.limit_cycle = (
-            LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a, window=lc_w, hold=lc_h)
-            if lc_on
-            else None
-        )
-        self.compensation_fallback = False  # latched: friction compensation off after a limit cycle
-        self.loop_unstable = False  # latched: the loop oscillates without compensation (joint damped)
-        # after a fallback, a second detector watches the plain loop (armed from the fallback on)
-        self._loop_watch = (
-            LimitCycleDetector(min_frequency=lc_f, min_amplitude=lc_a, window=lc_w, hold=lc_h)
-            if lc_on
-            else None
-        )
         # only a feedback path puts the compensation inside the loop: a feedforward term is a function
-        # of the reference and cannot make the loop oscillate by itself (so it is not watched)
-        # (the load's friction part fed back from the measured velocity and the learned residual,
-        # a function of the measured motion, are such paths too)
-        self._watch = (
+        # of the reference and cannot make the loop oscillate by itself (so it is not watched for limit
+        # cycles); the load's friction part fed back from the measured velocity and the learned residual,
+        # a function of the measured motion, are such paths too. Over-compensation is watched whenever
+        # friction is compensated and the controller has a feedback law of its own.
+        feedback_path = (
             (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
         ) or self.residual is not None
-        self.fallback_reason = ""
-
-    def _on_limit_cycle(self, t: float, lc: LimitCycleDetector) -> None:
-        """First firing: friction compensation off (latched), and the detector watches on. A second
-        firing without compensation, with the command swinging over a quarter of its range or more,
-        means the loop itself is unstable (gains): the position feedback
-        stops and the joint is brought to rest by the loop's damping alone, ``u = tau_load - K_d v``
-        (the identified load and the constant load feedforward still held), until the controller is
-        rebuilt or reconfigured."""
-        what = f"({lc.frequency:.0f} Hz, error {lc.amplitude:.3g} RMS, not in the reference) at t = {t:.3f} s"
-        if not self.compensation_fallback:
-            self.compensation_fallback = True
-            self.fallback_reason = (
-                f"compensation-induced limit cycle {what}: friction compensation switched off"
-            )
-            return
-        if lc.command_amplitude < 0.25 * 0.5 * (self.u_clamp_max - self.u_clamp_min):
-            lc.reset()  # a small ring or chatter of the plain loop, not an unstable one: watch on
-            return
-        self.loop_unstable = True
-        self.pid.reset()
-        self.fallback_reason = (
-            f"the loop oscillates without friction compensation {what}: the gains make it unstable; "
-            "position feedback stopped, the joint damped to rest until the gains change"
+        self.watch = CompensationWatch(
+            enabled=lc_on,
+            limit_cycle={"min_frequency": lc_f, "min_amplitude": lc_a, "window": lc_w, "hold": lc_h},
+            feedback_path=feedback_path,
+            overcompensation=friction.model is not None and mode != "compensation_only",
+            command_range=umax - umin,
         )
+
+    # the watch's latched state (see compensation_watch)
+    @property
+    def limit_cycle(self):
+        return self.watch.limit_cycle
+
+    @property
+    def compensation_fallback(self) -> bool:
+        return self.watch.fallback
+
+    @compensation_fallback.setter
+    def compensation_fallback(self, value: bool) -> None:
+        self.watch.fallback = bool(value)
+
+    @property
+    def loop_unstable(self) -> bool:
+        return self.watch.loop_unstable
+
+    @property
+    def fallback_reason(self) -> str:
+        return self.watch.reason
 
     @property
     def residual_nonfinite(self) -> int:
@@ -479,15 +457,12 @@ class CompensatingController:
             prev = 0.0 if self._prev_cmd is None else self._prev_cmd
             cmd, sat = min(max(prev, self.u_clamp_min), self.u_clamp_max), True
         self._prev_cmd = cmd
-        lc = self.limit_cycle
-        if self.loop_unstable:  # the loop oscillates without compensation: damp the joint to rest
+        if self.watch.loop_unstable:  # the loop oscillates without compensation: damp the joint to rest
             hold = tau_l + (self.load_feedforward if on else 0.0) - self.loop_damping * vel
             cmd, sat = min(max(hold, self.u_clamp_min), self.u_clamp_max), True
-        elif lc is not None and not self.compensation_fallback:
-            if self._watch and lc.update(t, e, cmd, r_vel, pos, dt, r_pos):
-                self._on_limit_cycle(t, lc)
-        elif lc is not None and self._loop_watch.update(t, e, cmd, r_vel, pos, dt, r_pos):
-            self._on_limit_cycle(t, self._loop_watch)
+            self.pid.reset()
+        else:
+            self.watch.update(t, e, cmd, r_vel, pos, dt, r_pos, f_ff + f_fb + s_fb, p_t + i_t + d_t)
         self.terms = ControllerTerms(
             time=float(t),
             mode=self.mode,

@@ -237,3 +237,20 @@ def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any
 def default_config() -> dict[str, Any]:
     """A deep copy of :data:`CONTROLLER_DEFAULTS`."""
     return copy.deepcopy(CONTROLLER_DEFAULTS)
+
+
+def ros_parameter_error(text: str, values: Mapping[str, Any]) -> str:
+    """A core controller error renamed to the ROS layout the user wrote (``compensation.gain``,
+    ``friction.fc``), not the core's section names (``controller.friction.gain``)."""
+    for core, ros in (
+        ("controller.friction.model.", "friction."),
+        ("controller.friction.model", "friction.model"),
+        ("controller.friction.", "compensation."),
+        ("controller.friction:", "compensation:"),
+        ("controller.", ""),
+    ):
+        text = text.replace(core, ros)
+    model = str((values.get("friction") or {}).get("model", "") or "") if isinstance(values, Mapping) else ""
+    if model and text.startswith(f"{model}."):  # a coefficient, named by the model's library
+        text = "friction." + text[len(model) + 1 :]
+    return text
