@@ -53,10 +53,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from friction_ros.core.can.axis import DriveAxis, frame_router
+from friction_ros.core.can.axis import DriveAxis
 from friction_ros.core.can.axis_config import AXIS_SCHEMA, axis_config
 from friction_ros.core.can.axis_health import AxisHealth
-from friction_ros.core.can.drive_set import axis_values, changed_values, check_distinct_ids, check_joint_names
+from friction_ros.core.can.drive_set import (
+    axis_values,
+    changed_values,
+    check_distinct_ids,
+    check_joint_names,
+    frame_router,
+)
 from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten
