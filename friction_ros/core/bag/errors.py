@@ -23,6 +23,15 @@ class UnsupportedBagError(BagError):
     """Valid input in a format this reader does not handle (sqlite3 storage, file compression ...)."""
 
 
+class DiskFullError(BagError):
+    """Writing stopped because the disk is full (no space, quota or file size limit); the bag was
+    closed with what reached the disk. ``kept``/``lost``: messages in the closed bag / not written."""
+
+    def __init__(self, message: str, kept: int = 0, lost: int = 0):
+        super().__init__(message)
+        self.kept, self.lost = kept, lost
+
+
 class TopicNotFoundError(BagError, KeyError):
     """A requested topic is not in the bag."""
 
