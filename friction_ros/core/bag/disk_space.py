@@ -43,6 +43,8 @@ def mount_point(path: str | os.PathLike) -> Path:
 def describe(exc: OSError, path: str | os.PathLike) -> str:
     """``"no space left on /mnt/data (2.0 MiB file system, 0 B free)"``: the error and the disk."""
     where = mount_point(path)
+    if exc.errno == errno.EFBIG:  # a limit on one file's size: the disk's free space does not matter
+        return f"{_WHAT[exc.errno]} on {where}"
     try:
         st = os.statvfs(where)
         size = f" ({_size(st.f_blocks * st.f_frsize)} file system, {_size(st.f_bavail * st.f_frsize)} free)"

@@ -217,6 +217,8 @@ class BagWriter:
                 f"({again.strerror}): {advice(exc)}, then read it with 'friction-bag recover'",
                 0,
                 self._count,
+                where,
+                advice(exc),
             ) from None
         by_id = {c.id: c.topic for c in channels}
         counts = {by_id[c]: n for c, n in found.counts().items() if c in by_id}
@@ -233,6 +235,8 @@ class BagWriter:
             f"messages written before{note}, {self._count - kept} not written; {advice(exc)}",
             kept,
             self._count - kept,
+            where,
+            advice(exc),
         ) from None
 
     # ------------------------------------------------------------------ topics and messages
@@ -384,6 +388,9 @@ class BagWriter:
                 f"disk full: {describe(exc, self.path)} while writing bag {self.path}: the MCAP file is "
                 f"complete ({self._count} messages) but metadata.yaml could not be written",
                 self._count,
+                0,
+                describe(exc, self.path),
+                advice(exc),
             ) from None
 
     def _write_yaml(self, info: dict) -> None:
