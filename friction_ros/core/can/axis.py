@@ -123,7 +123,9 @@ class DriveAxis:
     def cfg(self, config: AxisConfig) -> None:
         """A new configuration (run-time parameter change) also moves the telemetry gate's bounds."""
         self._cfg, self.conv = config, config.conversion
-        self.gate.limits = config.plausibility()
+        self.gate.limits, c = config.plausibility(), self.conv
+        self._turn = c.direction * od.TWO_PI / c.ratio  # joint units per motor turn (fast path)
+        self._amp = c.direction * c.torque_constant * c.ratio  # joint effort per A
 
     def _gated(self, ok: bool, t: float) -> bool:
         """Keep the gate's log line (lock held); ``ok`` passes through."""
@@ -162,20 +164,20 @@ class DriveAxis:
         if kind is not None and len(data) == 8 and not (is_remote or is_extended or is_error):
             a, b = _F2.unpack_from(data)
             if a - a == 0.0 and b - b == 0.0:  # both finite (inf - inf and NaN - NaN are NaN)
-                tel, c, conv = self.telemetry, self.counters, self.conv
+                tel, c = self.telemetry, self.counters
                 with self._lock:
                     self.decoder.stats.decoded += 1
                     c.frames_rx += 1
                     if kind == 0:
-                        q, v = conv.joint_position(a * od.TWO_PI), conv.joint_velocity(b * od.TWO_PI)
-                        if not self._gated(self.gate.motion(q, v, t), t):
+                        k = self._turn
+                        q = a * k - self.conv.zero_offset
+                        if not self._gated(self.gate.motion(q, b * k, t), t):
                             return
                         tel.motor_position, tel.motor_velocity = a * od.TWO_PI, b * od.TWO_PI
                         tel.encoder_time = t
                         c.encoder_frames += 1
                     else:
-                        i_joint = conv.joint_torque_from_current
-                        if not self._gated(self.gate.effort(t, i_joint(a), i_joint(b)), t):
+                        if not self._gated(self.gate.effort(t, a * self._amp, b * self._amp), t):
                             return
                         tel.current_setpoint, tel.current_measured, tel.iq_time = a, b, t
                         if self.cfg.effort_source == "current":

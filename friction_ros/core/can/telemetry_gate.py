@@ -66,6 +66,21 @@ class TelemetryGate:
         self.reset()
 
     @property
+    def limits(self) -> TelemetryLimits:
+        return self._limits
+
+    @limits.setter
+    def limits(self, lim: TelemetryLimits) -> None:
+        self._limits = lim
+        self._qmax, self._vmax, self._emax, self._period = (
+            lim.max_position,
+            lim.max_velocity,
+            lim.max_effort,
+            lim.period,
+        )
+        self._slack = lim.max_velocity * lim.period + lim.resolution  # one period's travel + quantum
+
+    @property
     def total(self) -> int:
         return self.log.total
 
@@ -90,16 +105,33 @@ class TelemetryGate:
     # -- per report ----------------------------------------------------------------------------------
     def motion(self, position: float, velocity: float, t: float) -> bool:
         """Position and velocity received at ``t`` [s]."""
-        why = self._motion_fault(position, velocity, t)
-        if why:
-            return self._reject((MOTION,), why[0], why[1], t)
+        ref, vmax = self._ref, self._vmax
+        if not (  # the usual case first, in a few comparisons; the full check only when it fails
+            abs(position) <= self._qmax
+            and abs(velocity) <= vmax
+            and (
+                ref is None or abs(position - ref) <= vmax * max(t - self._ref_t, self._period) + self._slack
+            )
+        ):
+            why = self._motion_fault(position, velocity, t)
+            if why:
+                return self._reject((MOTION,), why[0], why[1], t)
         self._ref, self._ref_t = position, t
-        return self._accept((MOTION,))
+        if self.runs[MOTION] or self.log._streak:
+            return self._accept((MOTION,))
+        self.log_line = None
+        return True
 
-    def effort(self, t: float, *efforts: float) -> bool:
-        """Efforts (e.g. the current setpoint and measurement, as joint effort) received at ``t``."""
-        why = self._effort_fault(efforts)
-        return self._reject((EFFORT,), *why, t) if why else self._accept((EFFORT,))
+    def effort(self, t: float, a: float, b: float = 0.0) -> bool:
+        """One or two efforts (e.g. the current setpoint and measurement, as joint effort) at ``t``."""
+        m = self._emax
+        if not (abs(a) <= m and abs(b) <= m):
+            why = self._effort_fault((a, b))
+            return self._reject((EFFORT,), *why, t)
+        if self.runs[EFFORT] or self.log._streak:
+            return self._accept((EFFORT,))
+        self.log_line = None
+        return True
 
     def reading(self, position: float, velocity: float, effort: float, t: float) -> bool:
         """One report carrying both (MIT reply): accepted whole or rejected whole."""
