@@ -72,7 +72,6 @@ class DriveAxis:
 
     def __init__(self, config: AxisConfig):
         self.gate = TelemetryGate(config.plausibility(), f"telemetry of drive id {config.node_id}")
-        self._gate_events: list[FaultEvent] = []  # rejection lines, logged at the next period
         self.cfg = config
         self._lock = threading.Lock()
         self.telemetry = Telemetry()
@@ -127,12 +126,6 @@ class DriveAxis:
         self._turn = c.direction * od.TWO_PI / c.ratio  # joint units per motor turn (fast path)
         self._amp = c.direction * c.torque_constant * c.ratio  # joint effort per A
 
-    def _gated(self, ok: bool, t: float) -> bool:
-        """Keep the gate's log line (lock held); ``ok`` passes through."""
-        if line := self.gate.log_line:
-            self._gate_events.append(FaultEvent(t, "info" if ok else "warning", "telemetry_rejected", line))
-        return ok
-
     def _admit(self, msg, t: float) -> bool:
         """Pass a decoded encoder/effort report through the telemetry gate (lock held)."""
         c, gate = self.conv, self.gate
@@ -149,7 +142,7 @@ class DriveAxis:
             ok = gate.effort(t, c.joint_torque(msg.target), c.joint_torque(msg.estimate))
         else:
             return True
-        return self._gated(ok, t)
+        return ok
 
     # ---- inputs ------------------------------------------------------------------------------------
     @property
@@ -171,13 +164,13 @@ class DriveAxis:
                     if kind == 0:
                         k = self._turn
                         q = a * k - self.conv.zero_offset
-                        if not self._gated(self.gate.motion(q, b * k, t), t):
+                        if not self.gate.motion(q, b * k, t):
                             return
                         tel.motor_position, tel.motor_velocity = a * od.TWO_PI, b * od.TWO_PI
                         tel.encoder_time = t
                         c.encoder_frames += 1
                     else:
-                        if not self._gated(self.gate.effort(t, a * self._amp, b * self._amp), t):
+                        if not self.gate.effort(t, a * self._amp, b * self._amp):
                             return
                         tel.current_setpoint, tel.current_measured, tel.iq_time = a, b, t
                         if self.cfg.effort_source == "current":
@@ -190,7 +183,6 @@ class DriveAxis:
             if channel is not None and self.decoder.stats.rejected > rejected:
                 with self._lock:
                     self.gate.undecodable(channel, self.decoder.stats.last_reject_reason, t)
-                    self._gated(False, t)
             return
         tel = self.telemetry
         with self._lock:
@@ -356,7 +348,8 @@ class DriveAxis:
                 reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}"
                 if self.enabled or self.enable_requested:
                     self._latch(FAULT_DRIVE_ERROR, reasons[FAULT_DRIVE_ERROR])
-            if self.gate.implausible:
+            implausible = self.gate.implausible
+            if implausible:
                 flags |= FAULT_TELEMETRY_IMPLAUSIBLE
                 reasons[FAULT_TELEMETRY_IMPLAUSIBLE] = self.gate.reason()
                 if self.enabled or self.enable_requested:
@@ -435,7 +428,7 @@ class DriveAxis:
             self.counters.frames_tx += len(frames)
             self._last_flags = flags
             active = flags & (FAULT_COMMAND_WATCHDOG | FAULT_LIMIT | FAULT_DRIVE_ERROR)
-            if self.gate.implausible:
+            if implausible:
                 active |= FAULT_TELEMETRY_IMPLAUSIBLE
             if stale:
                 active |= FAULT_TELEMETRY_STALE
@@ -451,8 +444,13 @@ class DriveAxis:
                 else f"no joint_commands for {cfg.command_timeout * 1e3:g} ms: zero torque"
             )
             reasons[FAULT_LIMIT] = "torque command limited (torque, current or velocity limit)"
-            events = self._gate_events + self.faults.update(t, active, self.latched, reasons, DISABLE_ACTION)
-            self._gate_events = []
+            events = self.faults.update(t, active, self.latched, reasons, DISABLE_ACTION)
+            if self.gate.lines:  # rejection lines of the frames since the last period
+                kind = "telemetry_rejected"
+                events[:0] = [
+                    FaultEvent(t, "info" if ok else "warning", kind, x) for ok, x in self.gate.lines
+                ]
+                self.gate.lines.clear()
             self.counters.stale_faults = self.faults.starts[FAULT_TELEMETRY_STALE]
             return CycleResult(frames, sample, flags, cmd, events)
 

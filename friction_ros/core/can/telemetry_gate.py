@@ -53,15 +53,15 @@ class TelemetryLimits(NamedTuple):
 class TelemetryGate:
     """Gate of one axis; :meth:`motion`/:meth:`effort`/:meth:`reading` return True to accept.
 
-    ``log_line`` holds the line to log after a call (None: nothing, or rate-limited); ``total``
-    and ``log.counts`` count the rejections per reason.
+    ``lines`` collects the lines to log, ``(accepted, text)``, rate-limited (the caller takes and
+    clears them); ``total`` and ``log.counts`` count the rejections per reason.
     """
 
     def __init__(self, limits: TelemetryLimits, what: str = "telemetry"):
         self.limits = limits
         self.log = RejectionLog(what, GATE_DEFAULTS["log_period"], REASONS)
         self.runs = [0, 0]  # consecutive rejections per channel
-        self.log_line: str | None = None
+        self.lines: list[tuple[bool, str]] = []
         self.last_detail = ""
         self.reset()
 
@@ -79,6 +79,7 @@ class TelemetryGate:
             lim.period,
         )
         self._slack = lim.max_velocity * lim.period + lim.resolution  # one period's travel + quantum
+        self._run_limit = lim.reject_run
 
     @property
     def total(self) -> int:
@@ -87,7 +88,8 @@ class TelemetryGate:
     @property
     def implausible(self) -> bool:
         """``reject_run`` consecutive rejections on a channel, not yet followed by an accepted report."""
-        return max(self.runs) >= self.limits.reject_run
+        n = self._run_limit
+        return self.runs[MOTION] >= n or self.runs[EFFORT] >= n
 
     def reason(self) -> str:
         """What makes the telemetry implausible now (the fault's start line)."""
@@ -119,7 +121,6 @@ class TelemetryGate:
         self._ref, self._ref_t = position, t
         if self.runs[MOTION] or self.log._streak:
             return self._accept((MOTION,))
-        self.log_line = None
         return True
 
     def effort(self, t: float, a: float, b: float = 0.0) -> bool:
@@ -130,7 +131,6 @@ class TelemetryGate:
             return self._reject((EFFORT,), *why, t)
         if self.runs[EFFORT] or self.log._streak:
             return self._accept((EFFORT,))
-        self.log_line = None
         return True
 
     def reading(self, position: float, velocity: float, effort: float, t: float) -> bool:
@@ -180,12 +180,16 @@ class TelemetryGate:
     def _accept(self, channels) -> bool:
         for c in channels:
             self.runs[c] = 0
-        self.log_line = self.log.recovered() if self.log._streak else None
+        line = self.log.recovered() if self.log._streak else None
+        if line:
+            self.lines.append((True, line))
         return True
 
     def _reject(self, channels, reason: str, detail: str, t: float) -> bool:
         for c in channels:
             self.runs[c] += 1
         self.last_detail = f"{reason}: {detail}"
-        self.log_line = self.log.reject(reason, detail, t)
+        line = self.log.reject(reason, detail, t)
+        if line:
+            self.lines.append((False, line))
         return False
