@@ -3,6 +3,8 @@
 Usage: python test/can_stack.py --channel CH --log FILE [--emulator JSON] [--silent-after S]
        [--error-after S] -- <ROS args for drive_interface>
 
+SIGUSR1 makes the drive go quiet; SIGUSR2 starts a spoofer (:func:`spoof`, ODrive) on a fourth bus.
+
 python-can's virtual bus only connects buses of one process, so the emulator and the node share
 this process; the test talks to the node over DDS (joint_commands / joint_states) and reads the bus
 log written by a third bus (sniffer) on the same channel.
@@ -12,13 +14,17 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import signal
+import struct
 import sys
 import threading
+import time
 
 import can
 from can_support import make_plant
 
+from friction_ros.core.can import odrive as od
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.can.mit import MitRanges
@@ -36,6 +42,32 @@ class Sniffer(can.Listener):
 
     def stop(self):
         self.fh.close()
+
+
+def spoof(bus, emu, node_id, log, isolated=20, burst=12):
+    """Absurd encoder frames of drive ``node_id``: ``isolated`` single frames 20 ms apart among the
+    drive's own, then (the drive drowned out) ``burst`` in a row; NaN, 3.2e33 rad and a 30 rad jump
+    from the drive's position, in turn. Each frame sent is written to ``log`` (time, position)."""
+    enc_id = (node_id << 5) | od.Cmd.GET_ENCODER_ESTIMATES
+
+    def send(k):
+        pos = (math.nan, 3.2e33, emu.motor_position + 30.0)[k % 3]
+        data = struct.pack("<ff", pos / od.TWO_PI, 0.0)
+        bus.send(can.Message(arbitration_id=enc_id, data=data, is_extended_id=False))
+        log.write(f"{time.time():.6f},{pos}\n")
+        log.flush()
+
+    for k in range(isolated):
+        send(k)
+        time.sleep(0.02)
+    emu.set_silent()
+    time.sleep(0.01)  # the drive's frames in flight are through
+    for k in range(burst):
+        send(k)
+    time.sleep(0.005)
+    emu.set_silent(False)  # sane frames return
+    log.write("done\n")
+    log.flush()
 
 
 def main():
@@ -67,20 +99,29 @@ def main():
     if a.error_after is not None:
         timers.append(threading.Timer(a.error_after, emu.inject_axis_error))
     signal.signal(signal.SIGUSR1, lambda *_: emu.set_silent())  # the test makes the drive go quiet
+    spoof_bus = can.Bus(interface="virtual", channel=a.channel)
+    spoof_log = open(a.log + ".spoof", "w")  # noqa: SIM115
+    node_id = emu_kw.get("node_id", 0)
+    signal.signal(
+        signal.SIGUSR2,
+        lambda *_: threading.Thread(
+            target=spoof, args=(spoof_bus, emu, node_id, spoof_log), daemon=True
+        ).start(),
+    )
     for t in timers:
         t.daemon = True
         t.start()
     try:
         rc = drive_interface.main(["drive_interface", "--ros-args", *ros])
     finally:
-        import time
-
         time.sleep(0.05)
         emu.stop()
         notifier.stop()
         sniffer.stop()
         emu_bus.shutdown()
         sniff_bus.shutdown()
+        spoof_bus.shutdown()
+        spoof_log.close()
     sys.exit(rc)
 
 

@@ -7,12 +7,12 @@ import math
 import pytest
 from can_support import StandInPlant
 
-from friction_ros.core.can import axis as ax
 from friction_ros.core.can import axis_config, faults
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.axis import DriveAxis
 from friction_ros.core.can.axis_config import AxisConfig
+from friction_ros.core.can.drive_set import frame_router
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
 from friction_ros.core.can.joint import JointConversion
 from friction_ros.core.validation import ParameterError
@@ -65,6 +65,7 @@ def test_fault_constants_match_drive_state_msg():
         "COMMAND_REJECTED",
         "LIMIT",
         "BUS",
+        "TELEMETRY_IMPLAUSIBLE",
     ):
         assert getattr(faults, f"FAULT_{name}") == getattr(DriveState, f"FAULT_{name}")
 
@@ -544,7 +545,7 @@ def test_frame_router_sends_each_drives_frames_to_its_axis(protocol):
     """Several drives on one bus: frames go to the axis of their drive; unknown drives and the single
     drive case go to the first axis (whose decoder counts them as ignored)."""
     axes = [DriveAxis(AxisConfig(protocol=protocol, node_id=n)) for n in (1, 2, 5)]
-    route = ax.frame_router(axes)
+    route = frame_router(axes)
     if protocol == "odrive_cansimple":
         for n, axis in zip((1, 2, 5), axes):
             f = od.encode_encoder_estimates(n, 0.5, 0.0)
@@ -556,5 +557,5 @@ def test_frame_router_sends_each_drives_frames_to_its_axis(protocol):
             reply = mitc.MitCodec(n).encode_reply(0.1, 0.2, 0.3)
             assert route(reply.arbitration_id, reply.data) is axis
         assert route(0, b"") is axes[0] and route(0, bytes([9, 0, 0, 0, 0, 0])) is axes[0]
-    single = ax.frame_router(axes[1:2])
+    single = frame_router(axes[1:2])
     assert single(0x7FF, b"") is axes[1]

@@ -6,7 +6,9 @@
                                             a damaged bag) as a finished bag (summary, statistics,
                                             metadata.yaml)
 
-Unreadable input prints one line ``error: ...`` and exits with code 2 (no traceback).
+Unreadable input prints one line ``error: ...`` and exits with code 2 (no traceback); a full output
+disk prints one line naming it and exits with code 1 (nothing is written: the output is built in a
+temporary folder next to it).
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from friction_ros.core.bag import BagWriter, bag_files, bag_info, iter_messages
+from friction_ros.core.bag import BagWriter, DiskFullError, bag_files, bag_info, iter_messages
 
 
 def _info(path: str) -> int:
@@ -121,6 +123,13 @@ def main(argv: list[str] | None = None) -> int:
         if ns.cmd == "info":
             return _info(ns.bag)
         return _recover(ns.bag, ns.output, ns.overwrite)
+    except DiskFullError as exc:  # not bad input: the output disk filled
+        print(
+            f"error: disk full: {exc.where} while writing {ns.output}: nothing written (the input is "
+            f"unchanged); {exc.advice}",
+            file=sys.stderr,
+        )
+        return 1
     except (ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -384,6 +384,7 @@ def _remove_if_empty(out: Path, created: str, events_topic: str) -> bool:
     if not created or not out.is_dir():
         return False
     from friction_ros.core.bag import bag_info
+    from friction_ros.core.bag.writer import RESERVE_NAME
 
     try:
         info = bag_info(out).info
@@ -391,7 +392,7 @@ def _remove_if_empty(out: Path, created: str, events_topic: str) -> bool:
             return False
     except (ValueError, OSError):  # a bag the recorder could not even start: its own files only
         pass
-    ours = {f"{out.name}_0.mcap", "metadata.yaml", "metadata.yaml.tmp"}
+    ours = {f"{out.name}_0.mcap", "metadata.yaml", "metadata.yaml.tmp", RESERVE_NAME}
     files = list(out.iterdir())
     if not {f.name for f in files} <= ours or any(not f.is_file() for f in files):
         return False

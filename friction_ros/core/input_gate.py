@@ -73,10 +73,10 @@ class RejectionLog:
     :meth:`recovered` returns one line when samples are accepted again after logged rejections.
     """
 
-    def __init__(self, what: str, period: float = 1.0):
+    def __init__(self, what: str, period: float = 1.0, reasons: tuple[str, ...] = REASONS):
         self.what = what
         self.period = period
-        self.counts: dict[str, int] = dict.fromkeys(REASONS, 0)
+        self.counts: dict[str, int] = dict.fromkeys(reasons, 0)
         self.total = 0
         self.last_reason = ""
         self._last_log: dict[str, float] = {}

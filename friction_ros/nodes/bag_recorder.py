@@ -29,11 +29,16 @@ SIGINT/SIGTERM: the recorder stops subscribing, takes every message still queued
 MCAP file (summary, statistics) and writes metadata.yaml. SIGKILL: every completed chunk is
 recoverable by ``friction_ros.core.bag.read_bag``; at most the last ``flush_interval`` seconds (or
 ``chunk_size`` bytes, whichever comes first) are lost.
+
+Disk full (no space left, quota exceeded or the file size limit): the recorder logs one error line
+naming the disk and the bag, leaves the bag closed (MCAP summary and metadata.yaml for the messages
+that reached the disk: all but those of the open chunk) and exits with code 1.
 """
 
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import time
 
@@ -42,7 +47,7 @@ from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
-from friction_ros.core.bag import BagWriter, run_metadata
+from friction_ros.core.bag import BagWriter, DiskFullError, run_metadata
 from friction_ros.core.bag.writer import COMPRESSIONS
 from friction_ros.core.config import Field, Schema
 from friction_ros.nodes.bag_common import (
@@ -193,9 +198,10 @@ class BagRecorder(ParameterNode):
         self.subs: dict[str, object] = {}
         self.stats: dict[str, TopicStats] = {}
         self.closed = False
+        self.failed = ""  # the disk-full line, once writing stopped
         self.create_timer(p["discovery_period"], self.discover)
         poll = min(max(p["flush_interval"] / 4.0, 0.005), 0.1)
-        self.create_timer(poll, self.writer.poll)
+        self.create_timer(poll, self._poll)
         self.diag = DiagnosticsPublisher(self, "bag_recorder", str(self.writer.path))
         self.create_timer(p["diagnostics_period"], self.report)
         self.started = time.monotonic()
@@ -269,7 +275,11 @@ class BagRecorder(ParameterNode):
             return
         recv = int(info.get("received_timestamp") or 0) or time.time_ns()
         sent = int(info.get("source_timestamp") or 0) or recv
-        self.writer.write(topic, data, recv, sent)
+        try:
+            self.writer.write(topic, data, recv, sent)
+        except DiskFullError as exc:
+            self._disk_full(exc)
+            return
         st = self.stats[topic]
         st.received += 1
         seq = info.get("publication_sequence_number")
@@ -283,6 +293,21 @@ class BagRecorder(ParameterNode):
             elif seq > last + 1:
                 st.gaps += seq - last - 1
             # a lower number: the publisher was replaced, its numbers start again
+
+    def _poll(self) -> None:
+        """Complete a chunk that waited ``flush_interval`` (timer)."""
+        if self.closed:
+            return
+        try:
+            self.writer.poll()
+        except DiskFullError as exc:
+            self._disk_full(exc)
+
+    def _disk_full(self, exc: DiskFullError) -> None:
+        """Stop recording: the writer closed the bag; one error line, the process exits with code 1."""
+        self.closed = True
+        self.failed = str(exc)
+        self.get_logger().error(self.failed)
 
     @property
     def message_count(self) -> int:
@@ -331,8 +356,12 @@ class BagRecorder(ParameterNode):
             for name, st in self.stats.items():
                 record[f"received:{name}"] = st.received
                 record[f"dropped:{name}"] = st.dropped
-            self.writer.add_metadata(RECORDING_METADATA_NAME, record)
-            self.writer.close()
+            try:
+                self.writer.add_metadata(RECORDING_METADATA_NAME, record)
+                self.writer.close()
+            except DiskFullError as exc:
+                self._disk_full(exc)
+                return
             log = self.get_logger().warning if self.dropped else self.get_logger().info
             log(self.summary())
 
@@ -371,9 +400,14 @@ def main(argv: list[str] | None = None) -> int:
     if stop is None:
         return 2
     cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file size limit: EFBIG, handled as disk full
     node = None
     try:
         node = BagRecorder(overrides=cli)
+    except DiskFullError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        rclpy.try_shutdown()
+        return 1
     except (ValueError, OSError) as exc:
         if node is not None:
             node.close()
@@ -383,7 +417,7 @@ def main(argv: list[str] | None = None) -> int:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     try:
-        while not stop.is_set() and rclpy.ok() and not node.expired():
+        while not stop.is_set() and rclpy.ok() and not node.expired() and not node.failed:
             executor.spin_once(timeout_sec=0.05)
         # Drain: take everything already delivered to our subscriptions before closing the file.
         idle_since = time.monotonic()
@@ -400,7 +434,7 @@ def main(argv: list[str] | None = None) -> int:
         executor.remove_node(node)
         node.destroy_node()
         rclpy.try_shutdown()
-    return 0
+    return 1 if node.failed else 0
 
 
 if __name__ == "__main__":

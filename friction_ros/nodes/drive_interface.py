@@ -28,7 +28,12 @@ telemetry older than the timeout (``telemetry_timeout``, default 3 T plus a 0.5 
 healthy emulator process on a loaded 2-core machine goes silent for up to ~0.3 s) is a fault:
 zero torque + IDLE, logged, at the first control period after the timeout; the fault
 stays latched when telemetry returns (logged: "cleared ...; drive stays disabled until ~/enable"),
-``~/enable`` resets it. Every fault of a drive is logged once when it starts and once when it clears
+``~/enable`` resets it. Encoder and effort frames pass a plausibility gate
+(:mod:`friction_ros.core.can.telemetry_gate`: NaN/inf, beyond ``telemetry_gate.limit_factor`` x the
+velocity or current limit, a position jump beyond what that speed covers): a rejected frame is never
+published, is counted (diagnostics ``telemetry_rejected.<reason>``) and logged at most once a second;
+``telemetry_gate.reject_run`` in a row latch the ``telemetry_implausible`` fault (zero torque + IDLE
+until ``~/enable``). Every fault of a drive is logged once when it starts and once when it clears
 (:class:`friction_ros.core.can.faults.FaultLog`); diagnostics carry ``stale_faults``,
 ``telemetry_age_max_ms`` (per diagnostics period) and ``telemetry_timeout_ms``. ``joint_commands``
 messages for none of the node's joints or with mismatched arrays are ignored, counted
@@ -53,10 +58,16 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from friction_ros.core.can.axis import DriveAxis, frame_router
+from friction_ros.core.can.axis import DriveAxis
 from friction_ros.core.can.axis_config import AXIS_SCHEMA, axis_config
 from friction_ros.core.can.axis_health import AxisHealth
-from friction_ros.core.can.drive_set import axis_values, changed_values, check_distinct_ids, check_joint_names
+from friction_ros.core.can.drive_set import (
+    axis_values,
+    changed_values,
+    check_distinct_ids,
+    check_joint_names,
+    frame_router,
+)
 from friction_ros.core.can.faults import FAULT_BUS
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.config import Field, Schema, flatten

@@ -21,6 +21,7 @@ from .digest import content_digest
 from .errors import (
     BagError,
     CdrError,
+    DiskFullError,
     NotMcapError,
     SchemaError,
     TopicNotFoundError,
@@ -37,6 +38,7 @@ __all__ = [
     "BagError",
     "BagWriter",
     "CdrError",
+    "DiskFullError",
     "JointSeries",
     "MsgDef",
     "NotMcapError",

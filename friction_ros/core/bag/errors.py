@@ -23,6 +23,16 @@ class UnsupportedBagError(BagError):
     """Valid input in a format this reader does not handle (sqlite3 storage, file compression ...)."""
 
 
+class DiskFullError(BagError):
+    """Writing stopped because the disk is full (no space, quota or file size limit); the bag was
+    closed with what reached the disk. ``kept``/``lost``: messages in the closed bag / not written;
+    ``where``: the error and the disk (e.g. "no space left on /data"); ``advice``: what to do."""
+
+    def __init__(self, message: str, kept: int = 0, lost: int = 0, where: str = "", advice: str = ""):
+        super().__init__(message)
+        self.kept, self.lost, self.where, self.advice = kept, lost, where, advice
+
+
 class TopicNotFoundError(BagError, KeyError):
     """A requested topic is not in the bag."""
 

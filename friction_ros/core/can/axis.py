@@ -11,7 +11,9 @@ the frames to send, with every safety rule of the drive interface in one place:
 * stale telemetry (no frame within the stale timeout, see below) -> while enabled a latched fault
   that disables the drive;
 * drive error (ODrive axis_error, MIT error code) -> latched fault, drive disabled;
-* bus fault reported by the adapter -> latched fault.
+* bus fault reported by the adapter -> latched fault;
+* encoder/effort reports pass :class:`~friction_ros.core.can.telemetry_gate.TelemetryGate` (a rejected
+  one is dropped, counted, logged); ``reject_run`` in a row -> latched fault, drive disabled.
 
 Stale timeout (:attr:`AxisConfig.stale_after`): ``telemetry_timeout`` when set, else derived from
 the telemetry period T (the drive's encoder/effort frame period): ``STALE_PERIODS`` x T plus
@@ -33,13 +35,11 @@ from __future__ import annotations
 import math
 import struct
 import threading
-from collections.abc import Callable
-from dataclasses import dataclass
-from typing import NamedTuple
 
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.axis_config import AxisConfig
+from friction_ros.core.can.axis_records import AxisCounters, CycleResult, JointSample, Telemetry
 from friction_ros.core.can.faults import (
     DISABLE_ACTION,
     FAULT_BUS,
@@ -49,65 +49,15 @@ from friction_ros.core.can.faults import (
     FAULT_HOLD,
     FAULT_LIMIT,
     FAULT_NAMES,
+    FAULT_TELEMETRY_IMPLAUSIBLE,
     FAULT_TELEMETRY_STALE,
     FaultEvent,
     FaultLog,
 )
 from friction_ros.core.can.frame import DecodeStats, Frame
+from friction_ros.core.can.telemetry_gate import EFFORT, MOTION, TelemetryGate
 
 _F2 = struct.Struct("<ff")
-
-
-class JointSample(NamedTuple):
-    position: float  # rad
-    velocity: float  # rad/s
-    effort: float  # N*m joint torque
-    stamp: float  # time of the newest frame used [s, same clock as the caller]
-
-
-@dataclass
-class Telemetry:
-    """Latest motor-side values as reported by the drive (NaN until received)."""
-
-    motor_position: float = math.nan
-    motor_velocity: float = math.nan
-    encoder_time: float | None = None
-    current_setpoint: float = math.nan
-    current_measured: float = math.nan
-    iq_time: float | None = None
-    torque_target: float = math.nan
-    torque_estimate: float = math.nan
-    torque_time: float | None = None
-    bus_voltage: float = math.nan
-    axis_state: int = 0
-    axis_error: int = 0
-    heartbeat_time: float | None = None
-
-
-@dataclass
-class AxisCounters:
-    frames_rx: int = 0
-    encoder_frames: int = 0
-    effort_frames: int = 0
-    heartbeat_frames: int = 0
-    frames_tx: int = 0
-    commands: int = 0
-    commands_rejected: int = 0
-    watchdog_trips: int = 0
-    fault_trips: int = 0
-    limit_hits: int = 0
-    bus_errors: int = 0
-    stale_faults: int = 0  # stale-telemetry episodes (condition starts)
-    late_periods: int = 0  # periods with telemetry older than late_after (zero torque, no sample)
-    telemetry_age_max: float = 0.0  # [s] largest age of the newest telemetry seen at a period
-
-
-class CycleResult(NamedTuple):
-    frames: list[Frame]
-    sample: JointSample | None
-    flags: int
-    joint_torque_command: float  # what was sent this cycle [N*m joint], 0 when disabled
-    events: list[FaultEvent] = []  # fault start / clear lines to log
 
 
 class DriveAxis:
@@ -121,8 +71,8 @@ class DriveAxis:
     ENABLE_ATTEMPTS = 2
 
     def __init__(self, config: AxisConfig):
+        self.gate = TelemetryGate(config.plausibility(), f"telemetry of drive id {config.node_id}")
         self.cfg = config
-        self.conv = config.conversion
         self._lock = threading.Lock()
         self.telemetry = Telemetry()
         self.counters = AxisCounters()
@@ -157,9 +107,42 @@ class DriveAxis:
                 (config.node_id << 5) | od.Cmd.GET_ENCODER_ESTIMATES: 0,
                 (config.node_id << 5) | od.Cmd.GET_IQ: 1,
             }
+            gated = {od.Cmd.GET_ENCODER_ESTIMATES: MOTION, od.Cmd.GET_IQ: EFFORT, od.Cmd.GET_TORQUES: EFFORT}
+            self._channel = {(config.node_id << 5) | c: ch for c, ch in gated.items()}
         else:
             self.mit = mitc.MitCodec(config.node_id, config.mit_ranges, config.mit_master_id)
             self.decoder = mitc.MitDecoder(self.mit, role="host")
+            self._channel = {config.mit_master_id: MOTION}
+
+    @property
+    def cfg(self) -> AxisConfig:
+        return self._cfg
+
+    @cfg.setter
+    def cfg(self, config: AxisConfig) -> None:
+        """A new configuration (run-time parameter change) also moves the telemetry gate's bounds."""
+        self._cfg, self.conv = config, config.conversion
+        self.gate.limits, c = config.plausibility(), self.conv
+        self._turn = c.direction * od.TWO_PI / c.ratio  # joint units per motor turn (fast path)
+        self._amp = c.direction * c.torque_constant * c.ratio  # joint effort per A
+
+    def _admit(self, msg, t: float) -> bool:
+        """Pass a decoded encoder/effort report through the telemetry gate (lock held)."""
+        c, gate = self.conv, self.gate
+        if isinstance(msg, od.EncoderEstimates):
+            ok = gate.motion(c.joint_position(msg.position), c.joint_velocity(msg.velocity), t)
+        elif isinstance(msg, mitc.MitReply):
+            q, v = c.joint_position(msg.position), c.joint_velocity(msg.velocity)
+            ok = gate.reading(q, v, c.joint_torque(msg.torque), t)
+        elif isinstance(msg, od.Iq):
+            ok = gate.effort(
+                t, c.joint_torque_from_current(msg.setpoint), c.joint_torque_from_current(msg.measured)
+            )
+        elif isinstance(msg, od.Torques):
+            ok = gate.effort(t, c.joint_torque(msg.target), c.joint_torque(msg.estimate))
+        else:
+            return True
+        return ok
 
     # ---- inputs ------------------------------------------------------------------------------------
     @property
@@ -179,20 +162,33 @@ class DriveAxis:
                     self.decoder.stats.decoded += 1
                     c.frames_rx += 1
                     if kind == 0:
+                        k = self._turn
+                        q = a * k - self.conv.zero_offset
+                        if not self.gate.motion(q, b * k, t):
+                            return
                         tel.motor_position, tel.motor_velocity = a * od.TWO_PI, b * od.TWO_PI
                         tel.encoder_time = t
                         c.encoder_frames += 1
                     else:
+                        if not self.gate.effort(t, a * self._amp, b * self._amp):
+                            return
                         tel.current_setpoint, tel.current_measured, tel.iq_time = a, b, t
                         if self.cfg.effort_source == "current":
                             c.effort_frames += 1
                 return
+        rejected = self.decoder.stats.rejected
         msg = self.decoder.decode(arb_id, data, is_remote, is_extended, is_error)
         if msg is None:
+            channel = self._channel.get(arb_id)
+            if channel is not None and self.decoder.stats.rejected > rejected:
+                with self._lock:
+                    self.gate.undecodable(channel, self.decoder.stats.last_reject_reason, t)
             return
         tel = self.telemetry
         with self._lock:
             self.counters.frames_rx += 1
+            if not self._admit(msg, t):
+                return
             if isinstance(msg, od.EncoderEstimates):
                 tel.motor_position, tel.motor_velocity, tel.encoder_time = msg.position, msg.velocity, t
                 self.counters.encoder_frames += 1
@@ -269,6 +265,7 @@ class DriveAxis:
             self.enable_requested = True
             self.telemetry.axis_error = 0  # cleared by the Clear_Errors frame sent on enable
             self._ignore_errors_until = math.inf
+            self.gate.reset()  # an operator's enable adopts the next plausible position (re-homing)
 
     def request_disable(self) -> list[Frame]:
         with self._lock:
@@ -351,6 +348,12 @@ class DriveAxis:
                 reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}"
                 if self.enabled or self.enable_requested:
                     self._latch(FAULT_DRIVE_ERROR, reasons[FAULT_DRIVE_ERROR])
+            implausible = self.gate.implausible
+            if implausible:
+                flags |= FAULT_TELEMETRY_IMPLAUSIBLE
+                reasons[FAULT_TELEMETRY_IMPLAUSIBLE] = self.gate.reason()
+                if self.enabled or self.enable_requested:
+                    self._latch(FAULT_TELEMETRY_IMPLAUSIBLE, reasons[FAULT_TELEMETRY_IMPLAUSIBLE])
             flags |= self.latched
             if self.latched:
                 if self.enabled or self.enable_requested:
@@ -425,6 +428,8 @@ class DriveAxis:
             self.counters.frames_tx += len(frames)
             self._last_flags = flags
             active = flags & (FAULT_COMMAND_WATCHDOG | FAULT_LIMIT | FAULT_DRIVE_ERROR)
+            if implausible:
+                active |= FAULT_TELEMETRY_IMPLAUSIBLE
             if stale:
                 active |= FAULT_TELEMETRY_STALE
             if self._bus_reason:
@@ -440,6 +445,12 @@ class DriveAxis:
             )
             reasons[FAULT_LIMIT] = "torque command limited (torque, current or velocity limit)"
             events = self.faults.update(t, active, self.latched, reasons, DISABLE_ACTION)
+            if self.gate.lines:  # rejection lines of the frames since the last period
+                kind = "telemetry_rejected"
+                events[:0] = [
+                    FaultEvent(t, "info" if ok else "warning", kind, x) for ok, x in self.gate.lines
+                ]
+                self.gate.lines.clear()
             self.counters.stale_faults = self.faults.starts[FAULT_TELEMETRY_STALE]
             return CycleResult(frames, sample, flags, cmd, events)
 
@@ -484,20 +495,3 @@ class DriveAxis:
             self.enabled = False
             self.enable_requested = False
             return self.disable_frames()
-
-
-def frame_router(axes: list[DriveAxis]) -> Callable[[int, bytes], DriveAxis]:
-    """Received frame (arbitration id, data) -> the axis it belongs to, for several drives on one bus.
-
-    ODrive CANSimple: node id = arbitration id >> 5. MIT: a reply's first data byte is the motor id.
-    With one axis, or for a frame of no configured drive, the first axis: its decoder counts the
-    frame as ignored or rejected, as a single-drive node does.
-    """
-    first = axes[0]
-    if len(axes) == 1:
-        return lambda arb_id, data: first
-    if first.cfg.protocol == "odrive_cansimple":
-        by_id = {a.cfg.node_id: a for a in axes}
-        return lambda arb_id, data: by_id.get(arb_id >> 5, first)
-    by_motor = {a.cfg.node_id & 0xFF: a for a in axes}
-    return lambda arb_id, data: by_motor.get(data[0], first) if data else first

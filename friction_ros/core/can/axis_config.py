@@ -9,6 +9,7 @@ N*m; m and N on a ``joint_type: prismatic`` axis, which needs ``lead``, its trav
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -16,6 +17,7 @@ from typing import Any
 from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.can.telemetry_gate import TelemetryLimits
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
@@ -32,6 +34,8 @@ EFFORT_SOURCES = ("current", "torque_estimate")
 # stamps) pauses ~never, so a robot may set telemetry_timeout to a few periods for faster detection.
 STALE_PERIODS = 3
 JITTER_MARGIN = 0.5  # [s]
+ODRIVE_POSITION_TURNS = 2.0**24  # float32 turns: beyond this a position no longer resolves one turn
+MIT_POSITION_STEPS = (1 << 16) - 1  # 16-bit position field
 
 
 @dataclass(frozen=True)
@@ -49,6 +53,8 @@ class AxisConfig:
     telemetry_timeout: float = 0.0  # [s] 0 = STALE_PERIODS * telemetry_period + JITTER_MARGIN
     effort_source: str = "current"  # ODrive: Iq_Measured * k_t, or the drive's Torque_Estimate
     request_telemetry: bool = False  # ODrive: send RTR requests for encoder + effort every cycle
+    limit_factor: float = 10.0  # telemetry above this many times a configured limit is implausible
+    reject_run: int = 5  # consecutive implausible reports that latch a fault
 
     def __post_init__(self):
         check_choice("protocol", self.protocol, PROTOCOLS)
@@ -68,6 +74,8 @@ class AxisConfig:
         check_real("command_timeout", self.command_timeout, 0.0, lo_open=True, unit="s")
         check_real("telemetry_period", self.telemetry_period, 0.0, lo_open=True, unit="s")
         check_real("telemetry_timeout", self.telemetry_timeout, 0.0, unit="s (0 = automatic)")
+        check_real("telemetry_gate.limit_factor", self.limit_factor, 1.0)
+        check_int("telemetry_gate.reject_run", self.reject_run, 1, 1_000_000)
         if 0 < self.telemetry_timeout < 2 * self.telemetry_period:
             raise ParameterError(
                 f"telemetry_timeout = {self.telemetry_timeout * 1e3:g} ms is shorter than 2 telemetry "
@@ -88,6 +96,26 @@ class AxisConfig:
     def stale_after(self) -> float:
         """Effective stale-telemetry timeout [s]."""
         return self.telemetry_timeout if self.telemetry_timeout > 0 else self.auto_timeout
+
+    def plausibility(self) -> TelemetryLimits:
+        """Joint-side bounds of plausible telemetry (:mod:`~friction_ros.core.can.telemetry_gate`):
+        ``limit_factor`` x the velocity limit and x the effort the current limit gives
+        (``current_limit * k_t * ratio``); position within the protocol's range (ODrive: 2^24 float32
+        turns, MIT: its p range, whose 16-bit step is the resolution)."""
+        conv, f = self.conversion, self.limit_factor
+        if self.protocol == "mit":
+            r = self.mit_ranges
+            motor_max, step = max(abs(r.p_min), abs(r.p_max)), (r.p_max - r.p_min) / MIT_POSITION_STEPS
+        else:
+            motor_max, step = ODRIVE_POSITION_TURNS * 2.0 * math.pi, 0.0
+        return TelemetryLimits(
+            max_position=motor_max / conv.ratio + abs(conv.zero_offset),
+            max_velocity=f * self.velocity_limit,
+            max_effort=f * self.current_limit * conv.torque_constant * conv.ratio,
+            period=self.telemetry_period,
+            resolution=step / conv.ratio,
+            reject_run=self.reject_run,
+        )
 
     def stale_rule(self) -> str:
         if self.telemetry_timeout > 0:
@@ -194,6 +222,27 @@ AXIS_SCHEMA = Schema(
             hi=10.0,
             unit="s",
         ),
+        Schema(
+            "telemetry_gate",
+            [
+                Field(
+                    "limit_factor",
+                    10.0,
+                    "encoder/effort reports above this many times velocity_limit (speed, and position "
+                    "jump per elapsed time) or the effort of current_limit are dropped as implausible",
+                    lo=1.0,
+                ),
+                Field(
+                    "reject_run",
+                    5,
+                    "consecutive implausible encoder or effort reports that latch a fault (drive "
+                    "disabled until ~/enable)",
+                    lo=1,
+                    hi=1000000,
+                ),
+            ],
+            doc="plausibility gate of the drive's telemetry",
+        ),
     ],
     doc="one drive on the CAN bus and its joint",
 )
@@ -237,4 +286,6 @@ def _axis_config(v: Mapping[str, Any], control_rate_hz: float, lead: float) -> A
         telemetry_timeout=v["telemetry_timeout"],
         effort_source=v["effort_source"],
         request_telemetry=v["request_telemetry"],
+        limit_factor=v["telemetry_gate.limit_factor"],
+        reject_run=v["telemetry_gate.reject_run"],
     )

@@ -7,9 +7,14 @@ own ``<joint>.<key>`` (for the per-drive ``keys``) goes on top.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.validation import ParameterError
+
+if TYPE_CHECKING:
+    from friction_ros.core.can.axis import DriveAxis
 
 JOINT_NAME = re.compile(r"[A-Za-z][A-Za-z0-9_]*\Z")
 
@@ -66,3 +71,20 @@ def changed_values(
                 vals[k[len(joint) + 1 :]] = val
         new_values.append(vals)
     return new_values, shared
+
+
+def frame_router(axes: list[DriveAxis]) -> Callable[[int, bytes], DriveAxis]:
+    """Received frame (arbitration id, data) -> the axis it belongs to, for several drives on one bus.
+
+    ODrive CANSimple: node id = arbitration id >> 5. MIT: a reply's first data byte is the motor id.
+    With one axis, or for a frame of no configured drive, the first axis: its decoder counts the
+    frame as ignored or rejected, as a single-drive node does.
+    """
+    first = axes[0]
+    if len(axes) == 1:
+        return lambda arb_id, data: first
+    if first.cfg.protocol == "odrive_cansimple":
+        by_id = {a.cfg.node_id: a for a in axes}
+        return lambda arb_id, data: by_id.get(arb_id >> 5, first)
+    by_motor = {a.cfg.node_id & 0xFF: a for a in axes}
+    return lambda arb_id, data: by_motor.get(data[0], first) if data else first
