@@ -3,9 +3,8 @@ probe values), and the node parameter values that carry both."""
 
 from __future__ import annotations
 
-import yaml
-
 from friction_ros.core.validation import ParameterError
+from friction_ros.core.yaml_files import YamlLimitError, parse_yaml
 
 
 def parse_sets(items: list[str]) -> dict[str, object]:
@@ -15,8 +14,10 @@ def parse_sets(items: list[str]) -> dict[str, object]:
             raise ParameterError(f"--set {item!r} must be KEY=VALUE, e.g. plateaus.v_max=2.0")
         key, raw = item.split("=", 1)
         try:
-            out[key.strip()] = yaml.safe_load(raw)
-        except yaml.YAMLError:
+            out[key.strip()] = parse_yaml(raw, f"--set {item!r}")
+        except YamlLimitError:
+            raise
+        except ParameterError:
             raise ParameterError(f"--set {item!r}: cannot parse the value {raw!r}") from None
     return out
 

@@ -181,11 +181,11 @@ def _from_urdf(text: str, joint: str | None, where: str) -> tuple[str | None, st
 
 def _from_parameter_file(text: str, joint: str | None, where: str) -> tuple[str | None, str]:
     """``joint_type`` set in an embedded ROS parameter file (node level or ``gains.<joint>``)."""
-    import yaml
+    from friction_ros.core.yaml_files import parse_yaml
 
     try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError:
+        doc = parse_yaml(text, where)
+    except ValueError:
         return None, ""
     found = set()
     for sec in (doc or {}).values() if isinstance(doc, Mapping) else ():
@@ -232,11 +232,11 @@ def _bag_custom_data(path: Path) -> dict:
     meta = path / "metadata.yaml"
     if not meta.is_file():
         return {}
-    import yaml
+    from friction_ros.core.yaml_files import load_yaml
 
     try:
-        info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
-    except (OSError, yaml.YAMLError, KeyError, TypeError):
+        info = load_yaml(meta, "bag metadata")["rosbag2_bagfile_information"]
+    except (ValueError, KeyError, TypeError):
         return {}
     custom = info.get("custom_data") if isinstance(info, Mapping) else None
     return dict(custom) if isinstance(custom, Mapping) else {}

@@ -72,7 +72,8 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    stop = start_process([sys.argv[0]])  # no global ROS arguments: each node has its own
+    # no global ROS arguments: each node has its own (their parameter files are checked first)
+    stop = start_process([sys.argv[0]], [args for _, args in sections])
     if stop is None:
         return 2
     nodes = []

@@ -1,10 +1,12 @@
-"""Process runtime of a node: rclpy start-up, ``main()``, executor, real-time scheduling."""
+"""Process runtime of a node: rclpy start-up, ``main()``, executor, real-time scheduling.
+
+Stopping (SIGINT/SIGTERM within 1 s at any moment, start-up included) is :mod:`.stopping`.
+"""
 
 from __future__ import annotations
 
 import gc
 import os
-import signal
 import sys
 import tempfile
 import threading
@@ -17,7 +19,9 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from friction_ros.core.validation import ParameterError
+from friction_ros.nodes import stopping
 from friction_ros.nodes.loops import DeadlineLoop
+from friction_ros.nodes.stopping import StopRequested, interruptible
 
 
 def set_realtime_priority(priority: int, logger=None) -> bool:
@@ -104,20 +108,22 @@ def _parameter_files(args: list[str]) -> list[str | None]:
     return files
 
 
-def init_ros(args: list[str] | None = None) -> str | None:
+def init_ros(args: list[str] | None = None, node_args: list[list[str]] = ()) -> str | None:
     """``rclpy.init`` for a node process; returns None, or one line saying why it cannot start.
 
     Parameter files are checked first (exists, YAML, node -> ``ros__parameters`` mappings:
     :func:`~friction_ros.core.yaml_files.check_parameter_file`); anything rcl still refuses is
     reported from rcl's own message, with rcl's log output held back so the reason is the one line
-    the user sees. SIGINT/SIGTERM are left to the caller (rclpy installs no handlers).
+    the user sees. ``node_args``: the arguments of nodes built later in this process (composition),
+    whose parameter files are checked too. SIGINT/SIGTERM are left to the caller (rclpy installs
+    no handlers).
     """
 
     from friction_ros.core.yaml_files import check_parameter_file
 
     args = list(sys.argv if args is None else args)
     try:
-        for f in _parameter_files(args):
+        for f in [f for a in (args, *node_args) for f in _parameter_files(a)]:
             if f is None:
                 raise ParameterError("--params-file needs a file name")
             check_parameter_file(f)
@@ -145,31 +151,33 @@ def init_ros(args: list[str] | None = None) -> str | None:
     return f"ROS arguments refused: {failure.split(', at ')[0]}"
 
 
-_STOP = threading.Event()  # set by SIGINT, SIGTERM or request_stop(): the node process ends
-
-
 def request_stop() -> None:
     """End this node process from inside the node, as SIGTERM would: :func:`run_node` leaves its
     loop, calls the node's ``on_shutdown()`` and returns its exit code."""
-    _STOP.set()
+    stopping.STOP.set()
 
 
-def start_process(args: list[str] | None = None) -> threading.Event | None:
-    """Start a node process: SIGINT/SIGTERM handlers first, then :func:`init_ros`.
+def start_process(args: list[str] | None = None, node_args: list[list[str]] = ()) -> threading.Event | None:
+    """Start a node process: SIGINT/SIGTERM handlers first (:func:`.stopping.install`), then
+    :func:`init_ros`.
 
     Returns the stop event (set by SIGINT, SIGTERM or :func:`request_stop`), or None after printing
-    the one line that says why rclpy cannot start (the caller exits with code 2). Our own signal
-    handling (rclpy installs none) keeps the context alive until the node has zeroed its outputs,
-    and a stop that arrives while the node is being built ends it quietly once it is built.
+    the one line that says why rclpy cannot start (the caller exits with code 2). A signal during
+    :func:`init_ros` (a large parameter file being checked) ends the process at once with code 0
+    (SystemExit). Our own signal handling (rclpy installs none) keeps the context alive until the
+    node has zeroed its outputs.
     """
-    _STOP.clear()
-    signal.signal(signal.SIGTERM, lambda _signum, _frame: _STOP.set())
-    signal.signal(signal.SIGINT, lambda _signum, _frame: _STOP.set())
-    reason = init_ros(args)
+    stop = stopping.install()
+    try:
+        with interruptible(immediate=True):
+            reason = init_ros(args, node_args)
+    except StopRequested:
+        rclpy.try_shutdown()
+        raise SystemExit(0) from None
     if reason is not None:
         print(f"error: {reason}", file=sys.stderr)
         return None
-    return _STOP
+    return stop
 
 
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
@@ -180,14 +188,20 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     refuses to start), spins until Ctrl-C/SIGTERM, then calls the node's ``on_shutdown()`` (which
     must leave actuators safe: zero torque, drive idle) before destroying it. SIGINT/SIGTERM are
     handled from before rclpy starts: a stop that arrives while the node is being built ends it
-    quietly once it is built (on_shutdown() runs, no KeyboardInterrupt traceback).
+    quietly once it is built (on_shutdown() runs, no KeyboardInterrupt traceback), or, if building
+    takes longer than :data:`.stopping.ESCALATE_S` more, interrupts the constructor (exit code 0;
+    a constructor commands no actuator before it returns).
     """
     stop = start_process(args)
     if stop is None:
         return 2
     node = None
     try:
-        node = factory()
+        with interruptible():
+            node = factory()
+    except StopRequested:
+        rclpy.try_shutdown()
+        return 0
     except (ParameterError, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
@@ -199,7 +213,8 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
 def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
     """Spin ``nodes`` on one executor until ``stop`` (a real-time plant's deadline loop paces it),
     then call each node's ``on_shutdown()`` in the given order (torque commanders first) and destroy
-    them; rclpy is shut down at the end."""
+    them; rclpy is shut down at the end. A callback still running :data:`.stopping.ESCALATE_S`
+    after the stop signal is interrupted; ``on_shutdown()`` runs all the same."""
     # Everything built so far (modules, nodes, core objects) lives for the whole run: keep it out of
     # the cyclic collector so a full collection does not scan it (multi-ms pauses in the loop).
     gc.collect()
@@ -209,12 +224,13 @@ def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
         executor.add_node(node)
     loops = [n.loop for n in nodes if isinstance(getattr(n, "loop", None), DeadlineLoop)]
     try:
-        if loops:
+        with interruptible():
+            if loops:
+                while not stop.is_set() and rclpy.ok():
+                    loops[0].run_once(executor)
             while not stop.is_set() and rclpy.ok():
-                loops[0].run_once(executor)
-        while not stop.is_set() and rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
-    except rclpy.executors.ExternalShutdownException:
+                executor.spin_once(timeout_sec=0.05)
+    except (rclpy.executors.ExternalShutdownException, StopRequested):
         pass
     finally:
         for node in nodes:

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import yaml
 
+from friction_ros.core.yaml_files import parse_yaml
+
 from .errors import BagError
 
 # rmw enum values (rmw/types.h) <-> v9 names
@@ -72,9 +74,9 @@ def parse_qos(text: str | list | None) -> list[dict]:
     if not text:
         return []
     try:
-        items = yaml.safe_load(text) if isinstance(text, str) else text
-    except yaml.YAMLError as exc:
-        raise BagError(f"offered_qos_profiles is not valid YAML: {exc}") from None
+        items = parse_yaml(text, "offered_qos_profiles") if isinstance(text, str) else text
+    except ValueError as exc:
+        raise BagError(str(exc)) from None
     if not isinstance(items, list) or not all(isinstance(i, dict) for i in items):
         raise BagError(f"offered_qos_profiles must be a list of mappings, got {type(items).__name__}")
     return [normalize_qos(i) for i in items]

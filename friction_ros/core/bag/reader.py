@@ -28,7 +28,8 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
-import yaml
+
+from friction_ros.core.yaml_files import load_yaml
 
 from .cdr import decode_batch
 from .contents import Bag, JointSeries, RawMessage, TopicData, TopicInfo
@@ -63,10 +64,8 @@ def storage_of(path: str | os.PathLike) -> str:
     meta = p / "metadata.yaml"
     if meta.is_file():
         try:
-            storage = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"].get(
-                "storage_identifier"
-            )
-        except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+            storage = load_yaml(meta, "bag metadata")["rosbag2_bagfile_information"].get("storage_identifier")
+        except (ValueError, KeyError, TypeError, AttributeError):
             storage = None
         if storage:
             return "sqlite3" if storage == "sqlite3" else "mcap"
@@ -91,7 +90,7 @@ def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
     files: list[Path] = []
     if meta.is_file():
         try:
-            info = yaml.safe_load(meta.read_text())["rosbag2_bagfile_information"]
+            info = load_yaml(meta, "bag metadata")["rosbag2_bagfile_information"]
             storage = info.get("storage_identifier", "")
             if storage and storage != "mcap":
                 raise UnsupportedBagError(
@@ -103,7 +102,9 @@ def bag_files(path: str | os.PathLike) -> tuple[Path, list[Path]]:
                     "files first; MCAP chunk compression is supported"
                 )
             files = [p / f for f in info.get("relative_file_paths", [])]
-        except (yaml.YAMLError, KeyError, TypeError, AttributeError):
+        except UnsupportedBagError:
+            raise
+        except (ValueError, KeyError, TypeError, AttributeError):
             files = []
         files = [f for f in files if f.is_file()]
     if not files:
