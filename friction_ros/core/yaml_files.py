@@ -32,6 +32,8 @@ from yaml.constructor import SafeConstructor
 from yaml.nodes import MappingNode, SequenceNode
 from yaml.resolver import Resolver
 
+from friction_ros.core.validation import ParameterError
+
 try:  # libyaml's event parser (C, ~4x faster); composing stays in Python, where the limits are checked
     from yaml._yaml import CParser as _EventParser
 except ImportError:  # pragma: no cover - PyYAML without libyaml
@@ -43,7 +45,6 @@ except ImportError:  # pragma: no cover - PyYAML without libyaml
             Scanner.__init__(self)
             Parser.__init__(self)
 
-from friction_ros.core.validation import ParameterError
 
 MAX_FILE_BYTES = 1 << 20  # 1 MiB: the largest parameter file shipped is ~10 kB
 MAX_DEPTH = 64  # nesting levels (a parameter file uses ~6)

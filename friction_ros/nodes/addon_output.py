@@ -19,6 +19,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from friction_ros.nodes.commands import stamp_to_ns
 from friction_ros.nodes.qos import COMMAND_QOS
+from friction_ros.nodes.safe_subscription import safe_subscription
 
 
 class AddonOutput:
@@ -41,7 +42,7 @@ class AddonOutput:
         self._pending_ns: int | None = None
         self.last_state_ns: int | None = None
         if sum_base:
-            node.create_subscription(JointState, "base_command", self._on_base_command, COMMAND_QOS)
+            safe_subscription(node, JointState, "base_command", self._on_base_command, COMMAND_QOS)
             self.sum_pub = node.create_publisher(Float64MultiArray, "commands", COMMAND_QOS)
             self._sum = Float64MultiArray()
             self._sum.layout.dim = list(dim)

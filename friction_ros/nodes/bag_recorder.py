@@ -58,6 +58,7 @@ from friction_ros.nodes.bag_common import (
 from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.runtime import start_process
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 SCHEMA = Schema(
     "bag_recorder",
@@ -260,14 +261,15 @@ class BagRecorder(ParameterNode):
             def lost(info, st=st) -> None:
                 st.lost = int(info.total_count)
 
-            self.subs[name] = self.create_subscription(
+            self.subs[name] = safe_subscription(
+                self,
                 cls,
                 name,
                 lambda data, info, topic=name: self._on_message(topic, data, info),
                 qos,
-                raw=True,
+                decode=BYTES,
                 event_callbacks=SubscriptionEventCallbacks(message_lost=lost),
-            )
+            ).subscription
             self.get_logger().info(f"recording {name} [{msgtype}]")
 
     def _on_message(self, topic: str, data: bytes, info) -> None:

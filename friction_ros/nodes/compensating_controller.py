@@ -96,6 +96,7 @@ from friction_ros.nodes.parameters import (
 )
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
@@ -195,13 +196,13 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
         self._decoder = JointStateDecoder()
         self._by_joint = {ch.joint: ch for ch in self.channels}
         # raw: joint states decoded by the wire module's JointStateDecoder (no message object per period)
-        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
-        self.create_subscription(JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
-        self.create_subscription(JointState, "desired_joint_states", self._on_desired, STATE_QOS)
+        safe_subscription(self, JointState, "joint_states", self._on_state, STATE_QOS, decode=BYTES)
+        safe_subscription(self, JointTrajectory, "reference", self._on_trajectory, STATE_QOS)
+        safe_subscription(self, JointState, "desired_joint_states", self._on_desired, STATE_QOS)
         # raw: an estimator publishes per joint (700 messages/s for 7 joints at publish_every 10);
         # they are deserialised only while a joint adopts them
-        self.create_subscription(
-            FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, raw=True
+        safe_subscription(
+            self, FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, decode=BYTES
         )
         self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
         self.owner = CommandOwnerWatch(self, "joint_commands", role="commands")

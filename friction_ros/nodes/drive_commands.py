@@ -14,6 +14,7 @@ from friction_ros.core.can.joint_commands import route_efforts
 from friction_ros.core.wire import JointStateDecoder
 from friction_ros.nodes.command_owner import CommandOwnerWatch
 from friction_ros.nodes.qos import COMMAND_QOS
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 
 class CommandIntake:
@@ -36,9 +37,10 @@ class CommandIntake:
         self._decoder = JointStateDecoder()
         self._pending: collections.deque = collections.deque(maxlen=1)
         self.owner = CommandOwnerWatch(node, "joint_commands")  # one command source per joint
-        self.subscription = node.create_subscription(
-            JointState, "joint_commands", self.on_bytes, COMMAND_QOS, raw=True
+        self.guard = safe_subscription(
+            node, JointState, "joint_commands", self.on_bytes, COMMAND_QOS, decode=BYTES
         )
+        self.subscription = self.guard.subscription
 
     def on_bytes(self, data: bytes) -> None:
         """Subscription callback: keep the newest message for the period.
@@ -60,7 +62,8 @@ class CommandIntake:
         t = now if t > now else lo if t < lo else t
         try:
             cmd = self._decoder.decode(data)
-        except Exception:  # undecodable: rejected like a NaN command (zero torque) on every drive
+        except Exception as exc:  # undecodable: rejected like a NaN command (zero torque) on every drive
+            self.guard.report_undecodable(exc)  # counted, logged at most once a second
             self.apply((), (math.nan,) * len(self.axes), t)
             return
         if self.owner.conflict:  # two command sources: follow neither (command_owner policy)

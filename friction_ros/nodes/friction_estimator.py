@@ -72,6 +72,7 @@ from friction_ros.nodes.parameters import (
 )
 from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 NODE_FIELDS = [
     Field(
@@ -195,7 +196,7 @@ class FrictionEstimatorNode(ParameterNode):
         self._layout_key: tuple = ()
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         # raw: joint states decoded by the wire module's JointStateDecoder (no message object per sample)
-        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS, raw=True)
+        safe_subscription(self, JointState, "joint_states", self._on_state, STATE_QOS, decode=BYTES)
         self.diag = DiagnosticsPublisher(self, "friction_estimator", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self._publish_every = self.values["publish_every"]

@@ -71,6 +71,7 @@ from friction_ros.nodes.joint_parameters import declare_joint_config, declare_jo
 from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import request_stop, run_node
+from friction_ros.nodes.safe_subscription import safe_subscription
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
 # s of wall time the recorders must stay matched before the program starts: the plant's state
@@ -249,7 +250,7 @@ class IdentificationExperiment(ParameterNode):
             self.joint = self.values["joint_name"]
             self.commands = CommandPublisher(self, self.joint)
         self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", RECORDED_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_state, STATE_QOS)
+        safe_subscription(self, JointState, "joint_states", self._on_state, STATE_QOS)
         self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(0.05, self._check_exit)

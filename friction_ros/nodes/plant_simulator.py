@@ -68,6 +68,7 @@ from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
 from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 NODE_FIELDS = [
     Field(
@@ -229,7 +230,7 @@ class PlantSimulator(ParameterNode):
                 durability=COMMAND_QOS.durability,
             )
         )
-        self.create_subscription(JointState, "joint_commands", self._on_command, qos, raw=True)
+        safe_subscription(self, JointState, "joint_commands", self._on_command, qos, decode=BYTES)
         self.owner = CommandOwnerWatch(self, "joint_commands")  # one command source per joint
         # realtime mode is the clock source: wall time without an rclpy Time object per cycle
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
