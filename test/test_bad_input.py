@@ -47,6 +47,9 @@ def _files(tmp: Path, bag: Path) -> dict[str, Path]:
         "random_yaml": d / "random.yaml",
         "list_yaml": d / "list.yaml",
         "rcl_bad": d / "mixed_list.yaml",
+        "bomb": d / "bomb.yaml",
+        "deep": d / "deep.yaml",
+        "huge": d / "huge.yaml",
     }
     shutil.copytree(bag, f["bag"])
     f["empty"].write_bytes(b"")
@@ -60,6 +63,12 @@ def _files(tmp: Path, bag: Path) -> dict[str, Path]:
     f["random_yaml"].write_bytes(bytes(range(256)) * 4)
     f["list_yaml"].write_text("- plant_simulator\n- mode: lockstep\n")
     f["rcl_bad"].write_text("plant_simulator:\n  ros__parameters:\n    x: [1, 'a', 2.0]\n")  # YAML, not ROS
+    # ~1 kB of nested aliases: 4^30 nodes once expanded, each level a valid "namespace: node" mapping
+    bomb = ["n0: &n0 {plant_simulator: {ros__parameters: {x: 1}}}"]
+    bomb += [f"n{i}: &n{i} {{a: *n{i - 1}, b: *n{i - 1}, c: *n{i - 1}, d: *n{i - 1}}}" for i in range(1, 30)]
+    f["bomb"].write_text("\n".join(bomb) + "\n")
+    f["deep"].write_text("plant_simulator:\n  ros__parameters:\n    x: " + "[" * 5000 + "]" * 5000 + "\n")
+    f["huge"].write_text("plant_simulator:\n  ros__parameters:\n    x: '" + "x" * (1 << 20) + "'\n")
     return f
 
 
@@ -109,6 +118,26 @@ CASES = {
             "simulated_drive", "identification_experiment", "bag_recorder", "bag_player",
         )
     },
+    # parameter files that would take unbounded time or memory: refused by the limit, never a hang
+    **{
+        f"{tool}-params-file-alias-bomb": (tool, [*pre, "--params-file", "{bomb}"], ["{bomb}", "aliases", "limit"])
+        for tool, pre in (
+            ("nodes.plant_simulator", ["--ros-args"]), ("nodes.compensating_controller", ["--ros-args"]),
+            ("nodes.friction_estimator", ["--ros-args"]), ("nodes.simulated_drive", ["--ros-args"]),
+            ("nodes.identification_experiment", ["--ros-args"]), ("nodes.bag_recorder", ["--ros-args"]),
+            ("nodes.bag_player", ["--ros-args"]),
+            ("nodes.composition", ["--node", "plant_simulator", "--ros-args"]),
+        )
+    },
+    "bringup-params-alias-bomb": ("bringup", ["--params", "{bomb}", "--duration", "1"], ["{bomb}", "aliases", "limit"]),
+    "experiment-params-alias-bomb": ("experiment", ["--params", "{bomb}", "-o", "{tmp}/o"], ["{bomb}", "aliases"]),
+    "experiment-preset-alias-bomb": ("experiment", ["--preset", "{bomb}", "-o", "{tmp}/o"], ["{bomb}", "aliases"]),
+    "plant_simulator-params-file-too-deep": (
+        "nodes.plant_simulator", ["--ros-args", "--params-file", "{deep}"], ["{deep}", "nested", "limit of 64"]
+    ),
+    "plant_simulator-params-file-too-large": (
+        "nodes.plant_simulator", ["--ros-args", "--params-file", "{huge}"], ["{huge}", "bytes", "limit of 1048576"]
+    ),
     "plant_simulator-params-file-rcl-refuses": (
         "nodes.plant_simulator", ["--ros-args", "--params-file", "{rcl_bad}"], ["params file", "same type"]
     ),
@@ -140,6 +169,6 @@ def test_bad_input_gives_one_line_exit_2_and_leaves_inputs_alone(case, small_bag
     assert len(err) == 1, proc.stderr
     assert "Traceback" not in proc.stderr
     for w in words:
-        assert w.lower() in err[0].lower(), err[0]
+        assert w.format(**subs).lower() in err[0].lower(), err[0]
     assert _digest(list(f.values())) == before
     assert not (tmp_path / "o").exists()  # nothing started, nothing created

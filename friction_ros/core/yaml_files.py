@@ -74,7 +74,7 @@ class _LimitedLoader(Composer, SafeConstructor, Resolver, _EventParser):
                 raise YamlLimitError(
                     f"nested deeper than the limit of {MAX_DEPTH} levels (line {mark.line + 1}, column {mark.column + 1})"
                 )
-            return super().compose_node(parent, index)
+            return Composer.compose_node(self, parent, index)
         finally:
             self._depth -= 1
 
