@@ -54,14 +54,13 @@ def _escalate() -> None:
 
 
 def _on_signal(_signum, _frame) -> None:
-    first = not STOP.is_set()
     STOP.set()
     if not _State.interruptible:
         return
     if _State.immediate or _State.overdue:
         _State.interruptible = False
         raise StopRequested
-    if first and _State.timer is None:
+    if _State.timer is None:
         _State.timer = threading.Timer(ESCALATE_S, _escalate)
         _State.timer.daemon = True
         _State.timer.start()
