@@ -1,8 +1,9 @@
 """One owner per joint command, over DDS: two controllers on one simulated joint (references 0 and
 0.5 rad) used to swing it -0.1..0.71 rad with commands of +-120 N*m and no log line. The plant now
-refuses to follow two sources (zero torque, ERROR naming both publishers), both controllers report
-the conflict in their log and diagnostics, and when one controller stops the conflict clears and
-the other one controls the joint."""
+refuses to follow two sources (zero torque, ERROR naming both), both controllers report the conflict
+in their log and diagnostics, and when one controller stops the conflict clears and the other one
+controls the joint. Two controllers each commanding its own joint of one plant are no conflict
+(test_plant_multi_joint)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ def test_two_controllers_on_one_joint_are_refused_and_reported(tmp_path):
             assert lis.wait_for(lambda: states[-1].position[0] > 0.3, 30, g), states[-1].position
             with Graph([second]) as g2:
                 assert lis.wait_for(
-                    lambda: "publishers on /joint_commands" in g.output("plant_simulator"), 30, g
+                    lambda: "commanded by 2 sources on /joint_commands" in g.output("plant_simulator"), 30, g
                 )
                 n = len(states)
                 time.sleep(1.5)
@@ -54,18 +55,18 @@ def test_two_controllers_on_one_joint_are_refused_and_reported(tmp_path):
                 # two references
                 assert max(held) - min(held) < 0.1, (min(held), max(held))
                 plant_log = g.output("plant_simulator")
-                line = next(ln for ln in plant_log.splitlines() if "publishers on /joint_commands" in ln)
+                line = next(ln for ln in plant_log.splitlines() if "commanded by 2 sources" in ln)
                 assert "ERROR" in line and "/ctrl_a" in line and "/ctrl_b" in line and "zero torque" in line
                 assert lis.wait_for(
                     lambda: any(
-                        s.level in (2, b"\x02") and "publishers on /joint_commands" in s.message
+                        s.level in (2, b"\x02") and "two command sources on /joint_commands" in s.message
                         for m in diags
                         for s in m.status
                     ),
                     10,
                     g2,
                 ), "no diagnostics ERROR from a controller"
-                assert "publishers on /joint_commands" in g2.output("ctrl_b")
+                assert "commanded by 2 sources" in g2.output("ctrl_b")
             # the second controller stopped: cleared, the first one controls again
             assert lis.wait_for(lambda: "cleared" in g.output("plant_simulator"), 30, g)
             assert lis.wait_for(lambda: abs(states[-1].position[0] - 0.5) < 0.05, 30, g), states[-1].position

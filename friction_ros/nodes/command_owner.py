@@ -1,14 +1,11 @@
-"""One owner per joint command: a watch of the publishers of a command topic.
+"""One owner per joint command (policy in README "Safety"), for the nodes that follow commands
+(plant_simulator, drive_interface) and the ones that send them (compensating_controller).
 
-Policy (README "Safety"): a joint follows one command source. Two publishers on a joint's
-``joint_commands`` (two controllers, a controller and a replayed bag, a test publisher) are a
-fault: the drive interface and the plant simulator stop following commands and hold zero torque
-until one publisher is left; a controller that sees another publisher on the topic it commands
-keeps running but reports it. The fault is logged (ERROR) when it starts, naming the publishers,
-and (INFO) when it clears; diagnostics show it meanwhile.
-
-The watch polls the ROS graph (``get_publishers_info_by_topic``) every ``period`` seconds: no
-per-message cost.
+Sources are told apart by ``header.frame_id`` (:mod:`friction_ros.core.command_sources`; the project's
+command publishers set it to their node's name, :func:`command_source`). A follower applies zero
+torque to a joint commanded by two sources until one has been alone for 0.5 s; a controller that sees
+another source command one of its joints on the topic it publishes reports it (log and diagnostics).
+Each conflict is logged (ERROR) when it starts, naming the sources, and (INFO) when it clears.
 """
 
 from __future__ import annotations
@@ -16,51 +13,75 @@ from __future__ import annotations
 import time
 
 from rclpy.node import Node
+from sensor_msgs.msg import JointState
+
+from friction_ros.core.command_sources import CommandSources
+from friction_ros.core.wire import JointStateDecoder
+from friction_ros.nodes.qos import COMMAND_QOS
+from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
+
+
+def command_source(node: Node) -> str:
+    """The ``header.frame_id`` a node puts on the commands it publishes: its fully qualified name."""
+    return node.get_fully_qualified_name()
 
 
 class CommandOwnerWatch:
-    """See the module docstring; ``conflict`` is True while the topic has more than one publisher."""
+    """See the module docstring. ``role``: ``follows`` (zero torque on a conflicted joint) or
+    ``commands`` (a controller: ``watch_topic`` subscribes to its own output to see other sources)."""
 
-    def __init__(self, node: Node, topic: str, *, period: float = 0.2, role: str = "follows"):
-        """``role``: ``follows`` (a drive or plant: commands are refused during a conflict) or
-        ``commands`` (a controller: reported only)."""
+    def __init__(self, node: Node, joints, *, role: str = "follows", topic: str = "joint_commands"):
         self.node = node
-        self.topic = node.resolve_topic_name(topic)
         self.role = role
-        self.conflict = False
-        self.publishers: list[str] = []
-        self.conflicts = 0  # how many times a conflict started
-        self._since, self._logged = 0.0, False
-        self.timer = node.create_timer(period, self.check)
+        self.topic = node.resolve_topic_name(topic)
+        self.sources = CommandSources(joints)
+        self._index = {j: i for i, j in enumerate(self.sources.joints)}
+        self.conflicts = 0  # how many conflicts started
+        node.create_timer(0.2, self._expire)
+        if role == "commands":
+            self._own = command_source(node)
+            self._decoder = JointStateDecoder()
+            safe_subscription(node, JointState, topic, self._on_own_topic, COMMAND_QOS, decode=BYTES)
 
-    def check(self) -> bool:
-        """Poll the graph now; returns ``conflict``. The ERROR is logged once the publishers' node
-        names are discovered (DDS announces an endpoint before its node's name), at most 1 s late."""
-        infos = self.node.get_publishers_info_by_topic(self.topic)
-        names = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}" for i in infos)
-        conflict = len(infos) > 1
-        log = self.node.get_logger()
-        now = time.monotonic()
-        if conflict and not self.conflict:
-            self.conflicts += 1
-            self._since, self._logged = now, False
-        if conflict and not self._logged:
-            known = not any("_UNKNOWN_" in n for n in names)
-            if known or now - self._since >= 1.0:
-                self._logged = True
-                what = (
-                    "refusing to follow two sources: zero torque until one publisher is left"
-                    if self.role == "follows"
-                    else "the joints get two commands: stop one of the controllers"
-                )
-                log.error(f"{len(infos)} publishers on {self.topic} ({', '.join(names)}): {what}")
-        elif self.conflict and not conflict:
-            log.info(f"one publisher on {self.topic} again ({', '.join(names) or 'none'}): cleared")
-        self.conflict, self.publishers = conflict, names
-        return conflict
+    @property
+    def conflict(self) -> bool:
+        return any(self.sources.in_conflict(i) for i in range(len(self.sources.joints)))
+
+    def admit(self, source: str, names) -> set[int]:
+        """A command from ``source`` naming joints ``names`` (the follower's joints among them count);
+        returns the indices of the follower's joints in conflict (their torque must be zero)."""
+        idx = [self._index[n] for n in names if n in self._index]
+        out = self.sources.admit(source, idx, time.monotonic())
+        self._log()
+        return out
 
     def status(self) -> str:
-        """'' or the diagnostics text of the conflict."""
-        if not self.conflict:
-            return ""
-        return f"{len(self.publishers)} publishers on {self.topic}: {', '.join(self.publishers)}"
+        """'' or the diagnostics text of the conflicts."""
+        s = self.sources
+        parts = [f"{j} from {', '.join(s.sources(i))}" for i, j in enumerate(s.joints) if s.in_conflict(i)]
+        return f"two command sources on {self.topic}: " + "; ".join(parts) if parts else ""
+
+    def _on_own_topic(self, data: bytes) -> None:
+        msg = self._decoder.decode(data)
+        self.admit(msg.frame_id, msg.name)
+
+    def _expire(self) -> None:
+        self.sources.expire(time.monotonic())
+        self._log()
+
+    def _log(self) -> None:
+        s, log = self.sources, self.node.get_logger()
+        what = (
+            "following neither: zero torque until one source is left"
+            if self.role == "follows"
+            else "the joint gets two commands: stop one of the controllers"
+        )
+        for joint, names in s.started:
+            self.conflicts += 1
+            log.error(
+                f"{joint}: commanded by {len(names)} sources on {self.topic} ({', '.join(names)}): {what}"
+            )
+        for joint, name in s.cleared:
+            log.info(f"{joint}: one command source on {self.topic} again ({name or 'none'}): cleared")
+        s.started.clear()
+        s.cleared.clear()

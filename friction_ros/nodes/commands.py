@@ -22,7 +22,8 @@ class CommandPublisher:
 
         self.joint = joint
         self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
-        self._encoder = JointStateEncoder([joint], ("effort",))
+        # header.frame_id = this node: followers tell command sources apart by it (command_owner)
+        self._encoder = JointStateEncoder([joint], ("effort",), frame_id=node.get_fully_qualified_name())
         self.last: bytes | None = None
 
     def publish(self, stamp, torque: float) -> None:

@@ -78,7 +78,7 @@ from friction_ros.core.wire import (
     JointStateEncoder,
 )
 from friction_ros.nodes.addon_output import AddonOutput
-from friction_ros.nodes.command_owner import CommandOwnerWatch
+from friction_ros.nodes.command_owner import CommandOwnerWatch, command_source
 from friction_ros.nodes.controller_inputs import ReferenceInputs
 from friction_ros.nodes.controller_joints import JointChannel
 from friction_ros.nodes.diagnostics import ERROR, DiagnosticsPublisher
@@ -189,7 +189,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             )
         self.joint = self.joints[0]
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
-        self._cmd_encoder = JointStateEncoder(self.joints, ("effort",))
+        # header.frame_id = this node: plants and drives tell command sources apart by it (command_owner)
+        self._cmd_encoder = JointStateEncoder(self.joints, ("effort",), frame_id=command_source(self))
         self.commands = self.create_publisher(JointState, "joint_commands", COMMAND_QOS)
         self.last_command: bytes | None = None
         self.state_pub = self.create_publisher(ControllerState, "controller_state", RECORDED_QOS)
@@ -205,7 +206,7 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             self, FrictionEstimate, "friction_estimate", self._on_estimate, STATE_QOS, decode=BYTES
         )
         self.create_service(SetBool, "~/set_feedforward_control", self._on_set_feedforward)
-        self.owner = CommandOwnerWatch(self, "joint_commands", role="commands")
+        self.owner = CommandOwnerWatch(self, self.joints, role="commands")
         self.sum_base = bool(self.values["sum_base_command"])
         if self.sum_base and not self.addon:
             raise ParameterError("sum_base_command = true needs mode compensation_only (an add-on)")
@@ -463,11 +464,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
         for ch in self.channels:
             log = lambda text, ch=ch: self.get_logger().error(self._label(ch) + text)  # noqa: E731
             statuses.append((ch.joint, *ch.status(self.counts, compute, self.addon, log)))
-        if self.owner.conflict:  # another publisher commands these joints too
-            statuses = [
-                (j, ERROR, self.owner.status(), {**v, "command_publishers": len(self.owner.publishers)})
-                for j, _, _, v in statuses
-            ]
+        if self.owner.conflict:  # another source commands these joints too
+            statuses = [(j, ERROR, self.owner.status(), v) for j, _, _, v in statuses]
         if self.single:
             self.diag.publish(*statuses[0][1:])
         else:

@@ -36,7 +36,7 @@ class CommandIntake:
         self._ignored_last: dict[str, float] = {}
         self._decoder = JointStateDecoder()
         self._pending: collections.deque = collections.deque(maxlen=1)
-        self.owner = CommandOwnerWatch(node, "joint_commands")  # one command source per joint
+        self.owner = CommandOwnerWatch(node, self.joints)  # one command source per joint
         self.guard = safe_subscription(
             node, JointState, "joint_commands", self.on_bytes, COMMAND_QOS, decode=BYTES
         )
@@ -66,8 +66,12 @@ class CommandIntake:
             self.guard.report_undecodable(exc)  # counted, logged at most once a second
             self.apply((), (math.nan,) * len(self.axes), t)
             return
-        if self.owner.conflict:  # two command sources: follow neither (command_owner policy)
-            self.apply(cmd.name, (0.0,) * len(cmd.effort), t)
+        conflicted = self.owner.admit(cmd.frame_id, cmd.name)
+        if conflicted:  # a joint with two command sources: follow neither (command_owner policy)
+            bad = {self.joints[i] for i in conflicted}
+            names = cmd.name
+            efforts = [0.0 if k < len(names) and names[k] in bad else e for k, e in enumerate(cmd.effort)]
+            self.apply(names, efforts, t)
             return
         self.apply(cmd.name, cmd.effort, t)
 

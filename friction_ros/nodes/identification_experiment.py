@@ -220,7 +220,7 @@ class ArmCommandPublisher:
     def __init__(self, node, joints: list[str], topic: str = "joint_commands"):
         self.joints = list(joints)
         self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
-        self._encoder = JointStateEncoder(self.joints, ("effort",))
+        self._encoder = JointStateEncoder(self.joints, ("effort",), frame_id=node.get_fully_qualified_name())
         self.last: bytes | None = None
 
     def publish(self, stamp, torques) -> None:

@@ -62,10 +62,11 @@ from friction_ros.core.plant.servo import MAX_COMMAND
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.command_owner import CommandOwnerWatch
-from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints
 from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
 from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
+from friction_ros.nodes.plant_health import PlantHealth
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
@@ -180,7 +181,7 @@ def parameter_schema(with_joints: bool = True) -> Schema:
     return Schema("plant_simulator", [*joints, *NODE_FIELDS, *sections, *SCHEDULING])
 
 
-class PlantSimulator(ParameterNode):
+class PlantSimulator(PlantHealth, ParameterNode):
     """Thin adapter: commands in, GearheadServoPlant.step (one plant per joint), joint states out."""
 
     def __init__(self, **kwargs):
@@ -231,7 +232,7 @@ class PlantSimulator(ParameterNode):
             )
         )
         safe_subscription(self, JointState, "joint_commands", self._on_command, qos, decode=BYTES)
-        self.owner = CommandOwnerWatch(self, "joint_commands")  # one command source per joint
+        self.owner = CommandOwnerWatch(self, self.joints)  # one command source per joint
         # realtime mode is the clock source: wall time without an rclpy Time object per cycle
         self._sim_clock = bool(self.get_parameter("use_sim_time").value)
         hardware = self.preset.name if not self.multi else ",".join(pr.name for pr in self.presets)
@@ -358,8 +359,9 @@ class PlantSimulator(ParameterNode):
         efforts = self._select(msg)
         if efforts is None:
             return
-        if self.owner.conflict:  # two command sources: follow neither (command_owner policy)
-            efforts = dict.fromkeys(efforts, 0.0)
+        conflicted = self.owner.admit(msg.frame_id, msg.name)
+        if conflicted:  # a joint with two command sources: follow neither (command_owner policy)
+            efforts = {i: (0.0 if i in conflicted else e) for i, e in efforts.items()}
         if self.lockstep:
             if msg.stamp_ns != self._t_ns:
                 self._commands_ignored += 1  # duplicate or stale answer
@@ -433,95 +435,6 @@ class PlantSimulator(ParameterNode):
         self._advance(torques)
         self._t_ns = self._now_ns()
         self._publish_pending()
-
-    # -- health ---------------------------------------------------------------------------------------
-    def _publish_diagnostics(self) -> None:
-        values = {
-            "mode": self.p["mode"],
-            "steps": self._steps,
-            "sim_time": self.plant.time,
-            "commands_rejected": self._commands_rejected,
-            "commands_ignored": self._commands_ignored,
-            **self._rejections.values(),
-        }
-        if self.multi:
-            values["unknown_joint_names"] = self._unknown_names
-        level, text = OK, "running"
-        if self.loop is not None:
-            s = self.loop.stats
-            values.update(
-                cycles=s.cycles,
-                overruns=s.overruns,
-                missed_commands=self._missed,
-                max_lateness_s=s.max_lateness,
-            )
-            with self._lock:
-                now = time.monotonic()
-                fresh = [now - w <= self.p["command_timeout"] for w in self._command_wall]
-            if not all(fresh):
-                level = WARN
-                if self.multi:
-                    stale = ", ".join(j for j, f in zip(self.joints, fresh, strict=True) if not f)
-                    text = f"no fresh command for {stale}: applying zero torque to them"
-                else:
-                    text = "no fresh command: applying zero torque"
-            if self._latency.n:
-                values.update(
-                    latency_p50_s=self._latency.percentile(50), latency_p99_s=self._latency.percentile(99)
-                )
-        if self.multi:
-            for i, j in enumerate(self.joints):
-                values[f"{j}.preset"] = self.presets[i].name
-                values[f"{j}.commands_rejected"] = self._rejected_by_joint[i]
-                if self.loop is not None:
-                    values[f"{j}.command_fresh"] = fresh[i]
-        new = self._rejections.total - self._diag_rejected
-        self._diag_rejected = self._rejections.total
-        if new:
-            level = max(level, WARN)
-            text = (
-                f"{new} joint_commands rejected since the last status (last: {self._rejections.last_reason})"
-            )
-        self.diag.publish(level if level != ERROR else ERROR, text, values)
-
-    def loop_statistics(self) -> dict:
-        """Loop rate, overruns, missed commands and state-to-command latency percentiles.
-
-        Rates and counts cover the statistics window (from the first command + ``stats_delay``);
-        ``*_total`` figures cover the whole run including start-up.
-        """
-        now = time.monotonic()
-        total = now - self._start_wall
-        wall = now - self._stats_wall0
-        out = {
-            "mode": self.p["mode"],
-            "steps": self._steps,
-            "sim_time": self.plant.time,
-            "wall_time_total": total,
-            "sim_seconds_per_wall_second_total": self.plant.time / total if total > 0 else 0.0,
-            "window_wall_time": wall,
-            "window_steps": self._steps - self._stats_steps0,
-            "sim_seconds_per_wall_second": (self.plant.time - self._stats_sim0) / wall if wall > 0 else 0.0,
-            "commands_rejected": self._commands_rejected,
-        }
-        if self.loop is not None:
-            s = self.loop.stats
-            out.update(
-                cycles=s.cycles,
-                overruns=s.overruns,
-                missed_commands=self._missed,
-                rate_hz=s.cycles / wall if wall > 0 else 0.0,
-                max_lateness_s=s.max_lateness,
-                mean_lateness_s=s.total_lateness / s.cycles if s.cycles else 0.0,
-            )
-            if self._latency.n:
-                out.update(
-                    latency_samples=self._latency.n,
-                    latency_p50_s=self._latency.percentile(50),
-                    latency_p99_s=self._latency.percentile(99),
-                    latency_max_s=self._latency.max,
-                )
-        return out
 
     def on_shutdown(self) -> None:
         if self.loop is not None:
