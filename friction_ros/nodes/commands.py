@@ -1,4 +1,4 @@
-"""``joint_commands`` publisher of one joint and the header stamp helper."""
+"""``joint_commands`` publishers (one joint; several joints in one message) and the header stamp helper."""
 
 from __future__ import annotations
 
@@ -37,6 +37,27 @@ class CommandPublisher:
 
     def republish(self) -> bool:
         """Send the last command again; False if there is none yet."""
+        if self.last is None:
+            return False
+        self.pub.publish(self.last)
+        return True
+
+
+class ArmCommandPublisher:
+    """``joint_commands`` of several joints: one message with every joint's effort (same interface
+    as :class:`~friction_ros.nodes.commands.CommandPublisher`: ``last``, ``republish``)."""
+
+    def __init__(self, node, joints: list[str], topic: str = "joint_commands"):
+        self.joints = list(joints)
+        self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
+        self._encoder = JointStateEncoder(self.joints, ("effort",), frame_id=node.get_fully_qualified_name())
+        self.last: bytes | None = None
+
+    def publish(self, stamp, torques) -> None:
+        self.last = self._encoder.pack(stamp.sec, stamp.nanosec, *(float(x) for x in torques))
+        self.pub.publish(self.last)
+
+    def republish(self) -> bool:
         if self.last is None:
             return False
         self.pub.publish(self.last)

@@ -64,12 +64,11 @@ from friction_ros.core.experiment.excitation_config import DEFAULTS, PROFILES, S
 from friction_ros.core.input_gate import select_sample
 from friction_ros.core.joint_config import GAINS, name_joint_error
 from friction_ros.core.validation import ParameterError
-from friction_ros.core.wire import JointStateEncoder
-from friction_ros.nodes.commands import CommandPublisher, stamp_to_ns
+from friction_ros.nodes.commands import ArmCommandPublisher, CommandPublisher, stamp_to_ns
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN, DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints, values_of_joint
 from friction_ros.nodes.parameters import ParameterNode, declare_config
-from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import request_stop, run_node
 from friction_ros.nodes.safe_subscription import safe_subscription
 
@@ -211,27 +210,6 @@ def parameter_schema(profile: str = "default", arm: bool = False) -> Schema:
     ]
     sections = [Schema.from_defaults(s, base[s], f"{s} parameter", read_only=True) for s in SECTIONS]
     return Schema("identification_experiment", [*fields, *(ARM_FIELDS if arm else []), *sections])
-
-
-class ArmCommandPublisher:
-    """``joint_commands`` of several joints: one message with every joint's effort (same interface
-    as :class:`~friction_ros.nodes.commands.CommandPublisher`: ``last``, ``republish``)."""
-
-    def __init__(self, node, joints: list[str], topic: str = "joint_commands"):
-        self.joints = list(joints)
-        self.pub = node.create_publisher(JointState, topic, COMMAND_QOS)
-        self._encoder = JointStateEncoder(self.joints, ("effort",), frame_id=node.get_fully_qualified_name())
-        self.last: bytes | None = None
-
-    def publish(self, stamp, torques) -> None:
-        self.last = self._encoder.pack(stamp.sec, stamp.nanosec, *(float(x) for x in torques))
-        self.pub.publish(self.last)
-
-    def republish(self) -> bool:
-        if self.last is None:
-            return False
-        self.pub.publish(self.last)
-        return True
 
 
 class IdentificationExperiment(ParameterNode):
