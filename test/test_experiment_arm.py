@@ -194,17 +194,21 @@ def test_cli_sizes_each_joint_to_its_plant_with_per_joint_sets(tmp_path):
 
 def test_commands_carry_every_joint():
     from friction_ros.core.wire import JointStateDecoder
-    from friction_ros.nodes.identification_experiment import ArmCommandPublisher
+    from friction_ros.nodes.commands import ArmCommandPublisher
 
     class _Node:
         def create_publisher(self, *a):
             return type("P", (), {"publish": lambda self, m: None})()
+
+        def get_fully_qualified_name(self):
+            return "/arm/experiment"
 
     pub = ArmCommandPublisher(_Node(), ["j1", "j2", "j3"])
     pub.publish(type("S", (), {"sec": 3, "nanosec": 7})(), [0.5, -1.0, 0.0])
     msg = JointStateDecoder().decode(pub.last)
     assert list(msg.name) == ["j1", "j2", "j3"] and list(msg.effort) == [0.5, -1.0, 0.0]
     assert (msg.sec, msg.nanosec) == (3, 7) and len(msg.position) == 0
+    assert msg.frame_id == "/arm/experiment"  # the command source (one owner per joint)
 
 
 def test_node_names_a_bad_per_joint_value(tmp_path):
