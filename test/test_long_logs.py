@@ -140,7 +140,7 @@ def test_fit_on_decimated_long_log_matches_truth_and_whole_log():
         assert abs(c[k] / truth - 1) <= abs(w[k] / truth - 1) + 0.02, (k, c[k], w[k])
 
 
-def _write_bag(path, n: int = 3000, chunk_size: int = 4096):
+def _write_bag(path, n: int = 3000, chunk_size: int = 4096, sim_clock: bool = False):
     from friction_ros.core.bag import BagWriter, encode, load_installed, make_qos
 
     defs = load_installed("sensor_msgs/msg/JointState")
@@ -151,6 +151,9 @@ def _write_bag(path, n: int = 3000, chunk_size: int = 4096):
         w.add_topic("/experiment_events", "friction_msgs/msg/ExperimentEvent", qos_profiles=[make_qos()])
         for k in range(n):
             ns = 1_700_000_000_000_000_000 + k * 1_000_000
+            # a simulated clock: the first 16 states (a lockstep plant's initial state, sent again
+            # until the first command) are stamped 0 s, then 1 ms, 2 ms ... (log time stays wall time)
+            stamp = max(k - 15, 0) * 1_000_000 if sim_clock else ns
             if k in (500, 900):
                 ev = {
                     "header": {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}, "frame_id": ""},
@@ -163,7 +166,7 @@ def _write_bag(path, n: int = 3000, chunk_size: int = 4096):
                 }
                 w.write("/experiment_events", encode(ev_defs, "friction_msgs/msg/ExperimentEvent", ev), ns)
             msg = {
-                "header": {"stamp": {"sec": ns // 10**9, "nanosec": ns % 10**9}},
+                "header": {"stamp": {"sec": stamp // 10**9, "nanosec": stamp % 10**9}},
                 "name": ["a", "b"],
                 "position": list(rng.normal(size=2)),
                 "velocity": list(rng.normal(size=2)),
@@ -182,6 +185,12 @@ def test_streamed_bag_reading_equals_reading_it_whole(tmp_path):
     for k in ("stamps", "position", "velocity", "effort"):
         assert np.array_equal(getattr(s, k), getattr(f, k)), k
     assert s.events == f.events and len(s.events) == 2
+    # a simulated clock whose first chunk holds only states stamped 0 s: the stamps, not the log
+    # times, in both readers (a per-chunk choice once took that chunk for an unstamped log)
+    sim = _write_bag(tmp_path / "sim", chunk_size=1024, sim_clock=True)
+    args = (sim, "/joint_states", "b", "/experiment_events", None, None)
+    s, f = bl._read_streamed(*args), bl._read_full(*args)
+    assert np.array_equal(s.stamps, f.stamps) and s.stamps.max() < 3.0 and np.sum(s.stamps == 0) == 16
     with pytest.raises(Exception, match="choose one with --joint"):
         bl._read_streamed(path, "/joint_states", None, None, None, None)
 

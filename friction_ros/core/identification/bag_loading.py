@@ -73,16 +73,27 @@ def _events(ev, joint: str) -> list[Event]:
     return out
 
 
-def _stamps(series) -> np.ndarray:
+def _raw_stamps(series) -> np.ndarray:
+    """``header.stamp`` [s], or NaN where the type has none."""
     from friction_ros.core.bag import BagError
 
     try:
-        stamps = series.stamp
+        return np.asarray(series.stamp, dtype=float)
     except BagError:
-        stamps = series.time
+        return np.full(len(series.time), np.nan)
+
+
+def _choose_stamps(stamps: np.ndarray, log_time: np.ndarray) -> np.ndarray:
+    """The header stamps, or the log times when the log has no usable stamps at all (some not
+    finite, or every one zero). Decided over the whole log: a first chunk holding only the initial
+    state stamped 0 s of a simulated clock is not an unstamped log."""
     if not np.all(np.isfinite(stamps)) or np.all(stamps == 0):
-        stamps = series.time
+        return log_time
     return stamps
+
+
+def _stamps(series) -> np.ndarray:
+    return _choose_stamps(_raw_stamps(series), series.time)
 
 
 # ------------------------------------------------------------------------------------ reading
@@ -178,7 +189,7 @@ def _read_streamed(path: Path, topic, joint, events_topic, current_topic, curren
             series = td.joint(name)
         nan = np.full(len(td), np.nan)
         cols["time"].add(td.time)
-        cols["stamp"].add(_stamps(series) if series is not None else td.time)
+        cols["stamp"].add(_raw_stamps(series) if series is not None else td.time)
         for k in ("position", "velocity", "effort"):
             cols[k].add(getattr(series, k) if series is not None else nan)
         if current_field and not current_topic:
@@ -229,8 +240,9 @@ def _read_streamed(path: Path, topic, joint, events_topic, current_topic, curren
     if current_field:
         current, current_t = (cur.join(), cur_t.join()) if current_topic else (out["current"], out["time"])
         effort = None
+    stamps = _choose_stamps(out["stamp"], out["time"])
     return _JointColumns(
-        joint, out["stamp"], out["position"], out["velocity"], effort, current, current_t, events, warnings
+        joint, stamps, out["position"], out["velocity"], effort, current, current_t, events, warnings
     )
 
 
