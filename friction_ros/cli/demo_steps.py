@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from friction_ros.cli.demo_results import TrackingRun
+from friction_ros.nodes.terms_file import read_terms_file
 
 # s of wall time between seeing the controller's writer and starting the plant (its writer matches
 # this reader a moment later; the experiment node waits alike)
@@ -112,12 +113,11 @@ def track(
 ) -> TrackingRun:
     """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
 
-    Every controller_state of the run is read (a reliable subscription as deep as the publisher's
-    history); a run in which one control period is missing is repeated (up to TRACK_ATTEMPTS runs;
-    lockstep makes the repeat identical) and fails after that, so the figures never depend on what
-    a loaded machine happened to deliver. Measured under a load average of 9 on 2 cores: the
-    controller's writer had not yet matched this reader when the plant started (108 of 4001 states
-    missing at the start) although the reader already saw the writer.
+    The figures come from the controller's own terms file (``terms_file``: one row per computed
+    period, :mod:`friction_ros.nodes.terms_file`), not from a subscription that a busy machine can
+    leave behind: the lockstep graph computes every period exactly once, so the run's data are the
+    same bytes under any load. A run whose file misses a period (a controller killed before it
+    flushed) is repeated, up to TRACK_ATTEMPTS runs, and fails after that.
     """
     for attempt in range(1, TRACK_ATTEMPTS + 1):
         try:
@@ -141,10 +141,16 @@ def _track_once(
     from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
     from friction_ros.nodes.qos import RECORDED_QOS
 
+    # the figures come from the controller's own terms file: one row per computed period, whatever
+    # this process's subscription (progress only) manages to read on a busy machine
+    terms_path = Path(params_file).with_name(f"terms_{label}.csv")
     specs = [
         NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
         NodeSpec(
-            "compensating_controller", "", [str(params_file)], {"use_sim_time": True, "joint_name": joint}
+            "compensating_controller",
+            "",
+            [str(params_file)],
+            {"use_sim_time": True, "joint_name": joint, "terms_file": str(terms_path)},
         ),
     ]
     pin_latency_chain(specs)
@@ -206,21 +212,23 @@ def _track_once(
         f"{chr(13) if sys.stdout.isatty() else ''}[demo]   {label:<12} {duration:g} s simulated in {wall:.1f} s",
         flush=True,
     )
-    if not states:
-        raise MissingStates(f"tracking run {label}: no controller state was received")
-    # the lockstep clock starts at 0: index by simulated time, so states missed at the start count
-    t_first = min(_stamp(states[0]), period)
-    by_k: dict[int, object] = {}
-    for m in states:
-        by_k.setdefault(int(round((_stamp(m) - t_first) / period)), m)
+    rows = read_terms_file(str(terms_path)) if terms_path.exists() else {"stamp_ns": []}
+    if not rows["stamp_ns"]:
+        raise MissingStates(f"tracking run {label}: the controller wrote no terms")
+    # the lockstep clock starts at 0: index by simulated time
+    stamps = rows["stamp_ns"]
+    t_first = min(stamps[0] * 1e-9, period)
+    by_k: dict[int, int] = {}
+    for i, ns in enumerate(stamps):
+        by_k.setdefault(int(round((ns * 1e-9 - t_first) / period)), i)
     missing = [k for k in range(n_periods + 1) if k not in by_k]
     if missing:
         raise MissingStates(
-            f"tracking run {label}: {len(missing)} of {n_periods + 1} controller states were not received "
-            f"(first missing period {missing[0]}): the figures would not be of the whole run"
+            f"tracking run {label}: {len(missing)} of {n_periods + 1} control periods are not in the "
+            f"controller's terms (first missing period {missing[0]}): the figures would not be of the whole run"
         )
-    msgs = [by_k[k] for k in range(n_periods + 1)]
-    col = lambda name: np.array([getattr(m, name) for m in msgs])  # noqa: E731
+    index = [by_k[k] for k in range(n_periods + 1)]
+    col = lambda name: np.array([rows[name][i] for i in index])  # noqa: E731
     return TrackingRun(
         label=label,
         t=np.arange(n_periods + 1) * period,

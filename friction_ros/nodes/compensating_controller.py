@@ -17,17 +17,9 @@ its last command; after ``state_timeout`` with no valid state it gets zero torqu
 controlled.
 
 Add-on (``mode: compensation_only`` for every joint): the output is only the friction and load
-compensation, for an arm that already has a controller. Its desired motion comes from
-``reference`` (the JointTrajectory sent to the arm's trajectory controller), ``desired_joint_states``
-(the newest desired position/velocity per joint) or ``reference.*`` parameters; until one of them
-is there the output is 0. It is published as ``compensation_command`` (std_msgs/Float64MultiArray
-in ``joints`` order, every period) and as ``joint_commands`` (JointState effort:
-topic_based_ros2_control); with ``sum_base_command`` the arm controller's own command
-(``base_command``, JointState effort) is added and the sum is ``joint_commands`` and ``commands``
-(Float64MultiArray: remap it onto a ros2_controllers forward_command_controller's / effort
-controller's ``~/commands``). ``~/set_feedforward_control`` (std_srvs/SetBool, as ros2_controllers'
-pid_controller) switches the compensation on/off; ``compensation_scale`` (global, or per joint
-``gains.<joint>.compensation_scale``) scales it. The limit-cycle detector watches every joint.
+compensation for an arm that has its own controller, following ``reference``,
+``desired_joint_states`` or ``reference.*`` (see :mod:`friction_ros.nodes.addon_output`);
+``~/set_feedforward_control`` (std_srvs/SetBool) switches compensation on and off.
 
 Topics (all relative, so one namespace per joint or arm works):
 
@@ -97,9 +89,16 @@ from friction_ros.nodes.parameters import (
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
+from friction_ros.nodes.terms_file import TermsFile
 
 NODE_FIELDS = [
     Field("joint_name", "joint1", "joint to control (name in joint_states / joint_commands)", read_only=True),
+    Field(
+        "terms_file",
+        "",
+        "write every period's terms (controller_state fields) to this CSV file ('' = off)",
+        read_only=True,
+    ),
     JOINT_TYPE_FIELD,
     control_period_field("nominal control period (dt of the control law)"),
     Field("adopt_estimator_coefficients", False, "hot-swap the friction model with converged estimates"),
@@ -233,6 +232,7 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             "rejected_estimates": 0,
         }
         self._compute = compute_histogram()  # compute time per state since the last diagnostics
+        self.terms_file = TermsFile(self.values["terms_file"]) if self.values["terms_file"] else None
         apply_scheduling(self, self.values)
         for ch in self.channels:
             c = ch.controller
@@ -398,6 +398,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
                 self._publish_diagnostics()
             if listening:
                 self.state_pub.publish(ch.terms_message(msg.sec, msg.nanosec, terms))
+            if self.terms_file is not None:
+                self.terms_file.add(t_ns, ch.joint, terms)
         self._compute.add(time.perf_counter() - c0)
         self._last_ns = t_ns
         self._last_t = t
@@ -480,6 +482,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             stamp = self.get_clock().now().to_msg()
             self._publish_safe(stamp.sec, stamp.nanosec)
             time.sleep(0.01)
+        if self.terms_file is not None:
+            self.terms_file.close()
 
 
 def compute_histogram() -> LatencyHistogram:
