@@ -320,3 +320,26 @@ def test_a_model_that_explains_little_is_not_recommended_silently(tmp_path, caps
     assert rc == 0, text
     assert "explains little" in text, text
     assert "explains little" in (tmp_path / "f" / "report.md").read_text()
+
+
+def test_marked_plateaus_left_out_are_named_with_the_reason():
+    """A plateau at the commanded speed and one where the joint stuck: the second is left out, and
+    said so (the fit's warnings carry the line), never silently."""
+    dt = 1e-3
+    t = np.arange(0.0, 4.0, dt)
+    v = np.where(t < 2.0, 0.5, 0.0)  # the second plateau: commanded 0.5, the joint does not move
+    v = v + 1e-3 * np.sin(2 * np.pi * 7 * t)
+    pos = np.cumsum(v) * dt
+    tau = 0.3 * np.sign(v) + 0.05 * v
+    ev = [
+        Event(0.0, "plateau", "p1", 0, START, 0.5),
+        Event(1.9, "plateau", "p1", 0, END, 0.5),
+        Event(2.0, "plateau", "p2", 1, START, 0.5),
+        Event(3.9, "plateau", "p2", 1, END, 0.5),
+    ]
+    d = prepare(t, pos, v, tau, events=ev)
+    dropped: list[str] = []
+    pl = find_plateaus(d, dropped=dropped)
+    assert len(pl) == 1 and pl[0].velocity == pytest.approx(0.5, rel=1e-2)
+    assert len(dropped) == 1 and dropped[0].startswith("plateau +0.5 (t 2.00-3.90 s): mean speed")
+    assert "off the commanded speed" in dropped[0]

@@ -201,7 +201,11 @@ def fit_records(
         # dynamic states run through the whole record (one simulation); validation = outside the window
         return np.concatenate([model.predict(full)[keep] for full, keep in val_from])
 
-    plateaus = [p for r in records for p in find_plateaus(r)]
+    dropped: list[str] = []
+    plateaus = [p for r in records for p in find_plateaus(r, dropped=dropped)]
+    if dropped:  # every plateau left out is named with the reason
+        shown = "; ".join(dropped[:8]) + (f"; and {len(dropped) - 8} more" if len(dropped) > 8 else "")
+        warnings_pre.append(f"{len(dropped)} of {len(dropped) + len(plateaus)} plateaus left out: {shown}")
     chatter = chattering_plateaus(plateaus)
     if chatter:
         worst = max(p.torque_std / max(abs(p.torque), 1e-300) for p in chatter)

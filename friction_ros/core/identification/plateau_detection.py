@@ -41,8 +41,11 @@ def find_plateaus(
     min_duration: float = 0.3,
     rel_tol: float = 0.05,
     min_speed: float | None = None,
+    dropped: list[str] | None = None,
 ) -> list[Plateau]:
     """Constant-velocity plateaus: from ``plateau`` event markers if any, else automatic detection.
+
+    ``dropped``: if given, a line per marked plateau left out, with its speed, time and why.
 
     ``settle`` [s]: the transient discarded at each plateau's start; None = what each START marker
     says (``settle=<s>``: the experiment sizes it per plateau), else 0.2 s.
@@ -67,18 +70,30 @@ def find_plateaus(
                 np.searchsorted(data.t, s.time + (settle if settle is not None else start_settle(s, 0.2)))
             )
             i1 = int(np.searchsorted(data.t, e.time))
+
+            def drop(why: str, s=s, e=e) -> None:
+                if dropped is not None:
+                    at = f"{s.target:+.4g}" if math.isfinite(s.target) else "?"
+                    dropped.append(f"plateau {at} (t {s.time:.2f}-{e.time:.2f} s): {why}")
+
             if i1 - i0 < max(int(min_duration / dt / 3), 5):
+                drop("too short after its settling time")
                 continue
             vv, tt = v[i0:i1], tau[i0:i1]
             # not at the commanded speed (stuck or stick-slip below the breakaway): not a plateau
             if math.isfinite(s.target) and abs(vv.mean() - s.target) > 0.2 * abs(s.target):
+                drop(
+                    f"mean speed {vv.mean():.4g}, more than 20 % off the commanded speed (stuck or stick-slip)"
+                )
                 continue
             # stick-slip scatters the velocity by more than 60 % of its mean; when encoder quantization
             # alone would (a coarse encoder), only scatter beyond 3x that noise counts
             limit = 0.6 * abs(vv.mean())
             if vv.std() > (limit if q_noise < limit else 3.0 * q_noise):
+                drop(f"speed scatter {vv.std():.3g} over 60 % of its mean (stick-slip, not steady sliding)")
                 continue
             if q_noise < limit and _drifting(tt):  # a coarse encoder's plateaus keep the relaxed test
+                drop("its two halves' mean torques differ by more than 4 standard errors (not steady)")
                 continue
             out.append(
                 Plateau(
