@@ -132,6 +132,12 @@ def test_an_independent_lugre_joint_from_a_rosbags_bag(lugre_bag, tmp_path):
     lu = res.models["lugre"].steady_state
     v = np.concatenate([np.geomspace(speeds[0], speeds[-1], 100), -np.geomspace(speeds[0], speeds[-1], 100)])
     assert np.max(np.abs(lu(v) - st(v)) / np.abs(st(v))) < 0.005
+    # the held coefficients get no time-domain interval (it would collapse to a point around the
+    # plateau fit's value and claim a precision the time domain never had): the report says held
+    idf = res.models["lugre"].identifiability
+    assert {"vs", "delta", "fs", "fc"} <= set(idf["held"]) and not set(idf["held"]) & set(idf["ci95"])
+    report = (tmp_path / "fit" / "report.md").read_text()
+    assert report.count("held at the plateau fit") >= 4
 
 
 def test_an_asymmetric_joint_gets_direction_levels_in_every_model(tmp_path):

@@ -208,6 +208,16 @@ def wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> ModelR
             ident = identifiability.analyse(jac, res, names, values)
         except (np.linalg.LinAlgError, ValueError) as exc:
             notes.append(f"identifiability analysis failed: {exc}")
+    if held := held_coefficients(spec):  # pinned by the two-stage fit: a time-domain interval says nothing
+        for n in held:
+            ident.get("ci95", {}).pop(n, None)
+            ident.get("stderr", {}).pop(n, None)
+        ident["held"] = held
+        ident["useless_ci"] = [n for n in ident.get("useless_ci", []) if n not in held]
+        notes.append(
+            f"{', '.join(held)} held at the plateau fit's values (two-stage identification): their "
+            "uncertainty is the plateau fit's (see the static model's intervals), not a time-domain interval"
+        )
     if ident.get("not_identifiable"):
         notes.append("not separately identifiable from these data: " + ", ".join(ident["not_identifiable"]))
     useless = [n for n in ident.get("useless_ci", []) if n not in ident.get("not_identifiable", [])]
@@ -234,3 +244,15 @@ def wrap_dynamic(name, fit: DynamicFit, eps, grid, ident_check, train) -> ModelR
     m.extra["theta"] = fit.theta.tolist()
     m.extra["evaluations"] = fit.evaluations
     return m
+
+
+def held_coefficients(spec) -> list[str]:
+    """The coefficients a two-stage fit held at the plateau fit's values (FitSpec.fix_steady_state):
+    nonlinear ones with bounds pinned to +-0.1 %, linear ones fixed by a constraint."""
+    held = [n for n, lo, hi in zip(spec.nonlinear, spec.lower, spec.upper) if lo > 0 and hi <= lo * 1.0021]
+    names = spec.linear_all
+    for c, _ in spec.linear_constraints:
+        held += [names[i] for i in np.nonzero(np.asarray(c) != 0)[0] if names[i] not in held]
+    if "r" in held:  # r = fc / fs held: fc is held too
+        held.append("fc")
+    return held

@@ -218,7 +218,9 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
             if isinstance(v, dict):
                 L.append(f"| {k} | {json.dumps(_clean(v))} | {unit} | |")
                 continue
-            L.append(f"| {k} | {_fmt(v, 5)} | {unit} | {_fmt(ci.get(k), 4) if k in ci else ''} |")
+            held = k in (m.identifiability or {}).get("held", [])
+            cell = "held at the plateau fit" if held else (_fmt(ci.get(k), 4) if k in ci else "")
+            L.append(f"| {k} | {_fmt(v, 5)} | {unit} | {cell} |")
         if m.config:
             L += ["", f"Library config: `{json.dumps(_clean(m.config))}`"]
         idf = m.identifiability or {}
