@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Rewrite README.md's results block from bench/results/*.json (run by `make bench`).
+"""Rewrite the results block of docs/benchmarks.md from bench/results/*.json (run by `make bench`).
 
 Each benchmark stores the tables it printed, the command that produced them and the machine; this
 script copies them between the markers ``<!-- BENCH:BEGIN -->`` and ``<!-- BENCH:END -->``.
@@ -27,18 +27,18 @@ ORDER = [
     "bags",
 ]
 TITLES = {
-    "demo": "Main job: identify and compensate the simulated ABB M19-S joint (issue 9)",
-    "robustness": "Main job on every preset x 3 experiment seeds (issue 14)",
-    "models": "Friction models and plant speed (issue 3)",
-    "compensation": "Compensation experiments of the seeds (issue 4)",
-    "fitting": "Offline identification (issue 8)",
-    "loop": "Closed loop across processes over DDS (issue 5)",
-    "can": "CAN codec and drive node (issue 6)",
-    "drive_soak": "Drive node under load: stale telemetry and a killed drive (issue 15)",
-    "bags": "MCAP recording and reading (issue 7)",
-    "real_data": "Identification on a realistic synthetic joint and a real pendulum (issue 17)",
-    "learned_residual": "Learned residual on a physics backbone: candidates (issue 17)",
-    "manipulator": "A 7-joint arm: one node per role, the friction add-on on a plain PD (issue 18)",
+    "demo": "Main job: identify and compensate the simulated ABB M19-S joint",
+    "robustness": "Main job on every preset x 3 experiment seeds",
+    "models": "Friction models and plant speed",
+    "compensation": "Compensation experiments of the seeds",
+    "fitting": "Offline identification",
+    "loop": "Closed loop across processes over DDS",
+    "can": "CAN codec and drive node",
+    "drive_soak": "Drive node under load: stale telemetry and a killed drive",
+    "bags": "MCAP recording and reading",
+    "real_data": "Identification on a realistic synthetic joint and a real pendulum",
+    "learned_residual": "Learned residual on a physics backbone: candidates",
+    "manipulator": "A 7-joint arm: one node per role, the friction add-on on a plain PD",
 }
 BEGIN, END = "<!-- BENCH:BEGIN -->", "<!-- BENCH:END -->"
 
@@ -58,17 +58,17 @@ def main() -> int:
         for p in sorted((ROOT / "bench" / "results").glob("*.json"))
         if not p.stem.endswith("_quick")  # smoke runs (--quick) are not results
     }
-    readme = ROOT / "README.md"
+    readme = ROOT / "docs" / "benchmarks.md"
     text = readme.read_text()
     if BEGIN not in text or END not in text:
-        print("README.md has no BENCH markers", file=sys.stderr)
+        print(f"{readme} has no BENCH markers", file=sys.stderr)
         return 1
     kept = _sections(text.split(BEGIN, 1)[1].split(END, 1)[0])
     parts = []
     for name in ORDER + sorted(set(results) - set(ORDER)):
         r = results.get(name)
         if r is None or not r.get("tables"):
-            # no new figures for this benchmark here: keep the section README already has
+            # no new figures for this benchmark here: keep the section the page already has
             old = kept.get(TITLES.get(name, name))
             if old:
                 parts.append(old)
@@ -84,7 +84,7 @@ def main() -> int:
     _, tail = rest.split(END, 1)
     readme.write_text(head + BEGIN + "\n\n" + "\n".join(parts) + "\n" + END + tail)
     print(
-        f"README.md: results of {len(parts) and sum(1 for n in results if results[n].get('tables'))} benchmarks updated"
+        f"docs/benchmarks.md: results of {len(parts) and sum(1 for n in results if results[n].get('tables'))} benchmarks updated"
     )
     return 0
 
