@@ -252,3 +252,21 @@ def test_auto_load_terms_that_do_not_help_the_model_are_dropped():
         == bare.models["coulomb_viscous"].metrics["nmse_percent"]
     )
     assert res.options["verdict"]["explains_little"]
+
+
+def test_a_pendulum_log_fits_with_the_default_options(tmp_path):
+    """A hand-moved real pendulum (torque = gravity compensation): the default ``--load auto`` picks
+    gravity and the fit succeeds. Two rules used to defeat it: the log's steady stretches were taken
+    for an experiment's plateaus (auto then chose no load terms), and the check that the terms help
+    the recommended model failed outright when nothing could be fitted without them."""
+    import json
+
+    from friction_ros.cli.fit import main
+
+    out = tmp_path / "fit"
+    code = main([str(DATA / "control_method_gravity_compensation_first12s.csv"), "--out", str(out)]
+                + ["--models", "coulomb", "stribeck", "--residual", "none", "--no-plots", "--quiet"])  # fmt: skip
+    assert code in (0, None)
+    s = json.loads((out / "summary.json").read_text())
+    assert "gravity" in s["options"]["load_terms"]
+    assert s["recommended"] is not None

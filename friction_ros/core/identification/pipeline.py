@@ -378,10 +378,13 @@ def fit_records(
     rec0 = recommendation["model"] or next((n for n in names if n not in LEARNED), None)
     if load == "auto" and selection is not None and not terms.empty and rec0 is not None:
         # the terms were ranked on a linear backbone: they must also help the recommended model
-        alt = fit_records(
-            **{**call, "models": [rec0], "load": "none", "residual": "none", "progress": None},
-        )
-        without = float(alt.models[rec0].metrics.get("nmse_percent", math.inf))
+        try:
+            alt = fit_records(
+                **{**call, "models": [rec0], "load": "none", "residual": "none", "progress": None},
+            )
+            without = float(alt.models[rec0].metrics.get("nmse_percent", math.inf))
+        except ParameterError:  # nothing fits without the terms (a pendulum without gravity): keep them
+            without = math.inf
         with_terms = float(results[rec0].metrics.get("nmse_percent", math.inf))
         if without <= with_terms:
             res = fit_records(**{**call, "load": "none"})
