@@ -368,3 +368,12 @@ def test_a_per_joint_limit_stops_the_whole_arm_with_zero_torque(tmp_path):
     assert np.max(j2.effort[before]) > 1.5  # j2 was held against gravity (bias +2 N*m) ...
     assert j2.position[-1] < -0.5  # ... and falls once its torque is zero
     assert math.isfinite(j2.position[-1])
+
+
+def test_set_values_in_exponent_form_are_numbers():
+    """``--set breakaway.resolution=1e-4`` was refused as text (YAML 1.1 reads 1e-4 without a dot
+    as a string)."""
+    from friction_ros.cli.experiment_config import parse_sets
+
+    got = parse_sets(["breakaway.resolution=1e-4", "plateaus.v_max=2", "profile=quick", "x=[1, 2]"])
+    assert got == {"breakaway.resolution": 1e-4, "plateaus.v_max": 2, "profile": "quick", "x": [1, 2]}

@@ -14,7 +14,13 @@ def parse_sets(items: list[str]) -> dict[str, object]:
             raise ParameterError(f"--set {item!r} must be KEY=VALUE, e.g. plateaus.v_max=2.0")
         key, raw = item.split("=", 1)
         try:
-            out[key.strip()] = parse_yaml(raw, f"--set {item!r}")
+            value = parse_yaml(raw, f"--set {item!r}")
+            if isinstance(value, str):  # YAML 1.1 reads 1e-4 (no dot) as text: a number is meant
+                try:
+                    value = float(value)
+                except ValueError:
+                    pass
+            out[key.strip()] = value
         except YamlLimitError:
             raise
         except ParameterError:
