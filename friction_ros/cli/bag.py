@@ -110,11 +110,11 @@ def _recover(path: str, out: str, overwrite: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="friction-bag", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="friction-bag", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("info", help="describe a bag")
+    p = sub.add_parser("info", allow_abbrev=False, help="describe a bag")
     p.add_argument("bag")
-    p = sub.add_parser("recover", help="rewrite a truncated bag as a finished one")
+    p = sub.add_parser("recover", allow_abbrev=False, help="rewrite a truncated bag as a finished one")
     p.add_argument("bag")
     p.add_argument("output")
     p.add_argument("--overwrite", action="store_true")

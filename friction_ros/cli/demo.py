@@ -254,7 +254,9 @@ def run(args) -> DemoResult | dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="friction-demo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        allow_abbrev=False, prog="friction-demo", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("--preset", default="abb_m19s", help="plant preset (hidden truth), default abb_m19s")
     p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")

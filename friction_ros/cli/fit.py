@@ -29,7 +29,7 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="friction-fit", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="friction-fit", description=__doc__.splitlines()[0])
     p.add_argument(
         "bags",
         nargs="+",
@@ -67,10 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--models",
+        "--model",
+        dest="models",
         nargs="+",
         default=["coulomb", "stribeck", "lugre", "gms4"],
         help=(
-            "models: coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
+            "models (--model is the same option): coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
             "damping sigma1) anfis nusvr, or a model added as a plugin (docs/architecture.md) "
             "(default: coulomb stribeck lugre gms4)"
         ),
