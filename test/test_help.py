@@ -20,8 +20,8 @@ import time
 
 import pytest
 import rclpy
-
 from conftest import ROOT
+
 from friction_ros.nodes.node_help import help_requested, node_schema, parameter_lines
 
 _RECORDING: list[list[str]] = []
