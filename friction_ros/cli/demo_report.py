@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from friction_ros.cli.demo_results import DemoResult
+from friction_ros.cli.demo_results import DemoResult, refusal_warning
+from friction_ros.cli.reasons import footnotes, format_values
 
 
 def plot_tracking(result: DemoResult, path: Path) -> None:
@@ -91,25 +92,35 @@ def print_table(result: DemoResult) -> None:
     )
     if result.recommendation.get("rule"):
         print(f"  chosen by: {result.recommendation['rule']}")
-    print(f"  tracking gains {result.gains}; reference {result.reference.get('type')}")
+    print(f"  tracking gains {format_values(result.gains)}; reference {result.reference.get('type')}")
     print()
     print(
         "| compensation | state | RMS error [mrad] | max error [mrad] | RMS reduction [%] "
         "| stick fraction | hunting reversals |"
     )
     print("|---|---|---|---|---|---|---|")
+    refused = {label: run.reason for label, run in result.runs.items() if label != "none" and not run.enabled}
+    markers, notes = footnotes(refused, strip="refused: ")
     for label, run in result.runs.items():
-        state = "-" if label == "none" else ("enabled" if run.enabled else run.reason)
+        state = (
+            "-" if label == "none" else ("enabled" if run.enabled else f"refused {markers.get(label, '')}")
+        )
         print(
             f"| {label} | {state} | {run.rms * 1e3:.4f} | {run.max * 1e3:.4f} | {result.reduction(label):.1f} "
             f"| {run.metrics.get('stick_fraction', math.nan):.3f} | {run.metrics.get('hunting_reversals', 0)} |"
         )
+    shown = {refusal_warning(label, reason) for label, reason in refused.items()}
+    if notes:
+        print("\nrefused by the safety gate (the mode is written disabled):")
+        for line in notes:
+            print(f"  {line}")
     if result.best == "none":
         print("\nbest: no compensation mode is enabled for this joint")
     else:
         print(f"\nbest enabled mode: {result.best} ({result.reduction(result.best):.1f} % lower RMS error)")
     for w in result.warnings:
-        print(f"WARNING: {w}")
+        if w not in shown:  # a refusal is listed under the table already
+            print(f"WARNING: {w}")
 
 
 def json_default(x):
