@@ -1,7 +1,7 @@
 """friction-bag: inspect, check and repair MCAP bags without ROS tools.
 
     friction-bag info bags/run_1            topics, types, counts, duration, run metadata, problems;
-                                            status complete, TRUNCATED or DAMAGED (messages lost)
+                                            status complete, NOT CLOSED, TRUNCATED or DAMAGED
     friction-bag recover bags/run_1 out/    rewrite the readable messages of a killed recording (or of
                                             a damaged bag) as a finished bag (summary, statistics,
                                             metadata.yaml)
@@ -26,6 +26,8 @@ def _info(path: str) -> int:
     print(f"bag:      {bag.path}")
     print(f"files:    {', '.join(str(f.name) for f in bag.files)}")
     print(f"messages: {sum(counts.values())}")
+    if bag.duration is not None:
+        print(f"duration: {bag.duration:.3f} s")
     width = max((len(t) for t in counts), default=5)
     for t, i in sorted(bag.info.items()):
         print(
@@ -43,14 +45,17 @@ def _info(path: str) -> int:
 
 
 def _status(bag) -> str:
-    """``complete``, ``TRUNCATED ...`` and/or ``DAMAGED: <messages lost per topic>``."""
+    """``complete``, ``TRUNCATED ...`` (cut inside a record), ``NOT CLOSED ...`` (ends after a complete
+    record without its summary) and/or ``DAMAGED: <messages lost per topic>``."""
     from friction_ros.core.bag.damage import describe_loss
 
     parts = []
     if bag.damaged:
         parts.append(f"DAMAGED: {describe_loss(bag.lost)}")
-    if bag.truncated:
-        parts.append("TRUNCATED (recovered complete chunks)")
+    if bag.cut:
+        parts.append("TRUNCATED (recovered complete chunks; the last, incomplete chunk is lost)")
+    elif bag.truncated:
+        parts.append("NOT CLOSED (no summary/footer; every message was read; recover writes a closed copy)")
     return "; ".join(parts) or "complete"
 
 
@@ -100,7 +105,7 @@ def _recover(path: str, out: str, overwrite: bool) -> int:
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
-    notes = ["input was truncated"] if bag.truncated else []
+    notes = ["input was truncated" if bag.cut else "input was not closed"] if bag.truncated else []
     if bag.damaged:
         from friction_ros.core.bag.damage import describe_loss
 
@@ -110,11 +115,11 @@ def _recover(path: str, out: str, overwrite: bool) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="friction-bag", description=__doc__.split("\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, prog="friction-bag", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("info", help="describe a bag")
+    p = sub.add_parser("info", allow_abbrev=False, help="describe a bag")
     p.add_argument("bag")
-    p = sub.add_parser("recover", help="rewrite a truncated bag as a finished one")
+    p = sub.add_parser("recover", allow_abbrev=False, help="rewrite a truncated bag as a finished one")
     p.add_argument("bag")
     p.add_argument("output")
     p.add_argument("--overwrite", action="store_true")

@@ -305,6 +305,7 @@ def pin_latency_chain(specs: list[NodeSpec], cpus: list[int] | None = None) -> b
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="friction-bringup",
         description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawTextHelpFormatter,

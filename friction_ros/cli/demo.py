@@ -38,9 +38,11 @@ from friction_ros.cli.demo_results import (
     DemoResult,
     encoder_cap,
     map_error_vs_truth,
+    refusal_warning,
     run_metrics,
 )
 from friction_ros.cli.demo_steps import controller_document, fit, run_experiment, say, track
+from friction_ros.cli.reasons import grouped
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -124,10 +126,9 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     res.gate = {m: v.as_dict() for m, v in verdicts.items()}
     res.params_file = str(params_file)
     say(f"   recommended model: {name}; parameters -> {params_file}")
-    for m, v in verdicts.items():
-        say(f"   {m:<12} {v.reason}")
-        if not v.enabled:
-            res.warnings.append(f"{m} compensation refused by the safety gate: {v.reason}")
+    for modes, reason in grouped({m: v.reason for m, v in verdicts.items()}):
+        say(f"   {modes}: {reason}")
+    res.warnings += [refusal_warning(m, v.reason) for m, v in verdicts.items() if not v.enabled]
 
     say(
         f"3/4 tracking runs ({args.duration:g} s each, lockstep): none, "
@@ -254,7 +255,9 @@ def run(args) -> DemoResult | dict:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="friction-demo", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(
+        allow_abbrev=False, prog="friction-demo", description=__doc__.split("\n\n")[0]
+    )
     p.add_argument("--preset", default="abb_m19s", help="plant preset (hidden truth), default abb_m19s")
     p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")

@@ -14,6 +14,11 @@ from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
 GRAPH_PERIOD = DEFAULT_CONTROL_PERIOD
 
 
+def refusal_warning(mode: str, reason: str) -> str:
+    """The demo's warning for a compensation mode the safety gate refused (one wording, one place)."""
+    return f"{mode} compensation refused by the safety gate: {reason}"
+
+
 @dataclass
 class TrackingRun:
     """One closed-loop tracking run through the ROS graph (every control period, in order)."""

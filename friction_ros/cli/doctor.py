@@ -38,7 +38,9 @@ def _check(label: str, ok: bool, detail: str = "") -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="friction-doctor", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(
+        allow_abbrev=False, prog="friction-doctor", description=__doc__.splitlines()[0]
+    )
     parser.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for DDS (default 10)")
     args = parser.parse_args(argv)
     print("friction-doctor: checking the installation")

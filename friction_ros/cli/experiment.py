@@ -70,6 +70,7 @@ from friction_ros.cli.experiment_config import (
     typed_like_defaults,
 )
 from friction_ros.cli.experiment_summary import summarize
+from friction_ros.cli.state_watch import FirstStateWatch, no_state_reason
 from friction_ros.core.experiment.arm import SEQUENCES
 from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
 from friction_ros.core.experiment.excitation_config import PROFILES, PROGRAM_NAMES, resolve_config
@@ -79,6 +80,7 @@ from friction_ros.core.validation import ParameterError
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="friction-experiment",
         description=__doc__.split("\n\n")[0],
         formatter_class=argparse.RawTextHelpFormatter,
@@ -145,6 +147,12 @@ def build_parser() -> argparse.ArgumentParser:
     probe.add_argument("--resolution", type=float, help="encoder resolution at the joint [rad] (m) per count")
     p.add_argument("--diagnostics", action="store_true", help="also record /diagnostics")
     p.add_argument("--timeout", type=float, help="give up after this wall time (default 60 s + 10 x planned)")
+    p.add_argument(
+        "--state-timeout",
+        type=float,
+        help="give up when no joint state came this long after the nodes were started "
+        "(default 10 s on a real joint, 30 s simulated)",
+    )
     p.add_argument("--quiet", action="store_true", help="do not forward node output")
     return p
 
@@ -170,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
     try:
         sets = parse_sets(args.set)
         preset = None if args.no_sim else args.preset
+        if args.state_timeout is not None and not (
+            args.state_timeout > 0 and math.isfinite(args.state_timeout)
+        ):
+            raise ParameterError(f"--state-timeout {args.state_timeout:g}: must be > 0 s")
         if args.joint_gap < 0 or not math.isfinite(args.joint_gap):
             raise ParameterError(f"--joint-gap {args.joint_gap:g}: must be >= 0 s")
         arm = arm_setup(args, sets)
@@ -296,7 +308,11 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     t0 = time.monotonic()
+    simulated = any(s.node == "plant_simulator" for s in specs)
+    state_timeout = args.state_timeout or (30.0 if simulated else 10.0)
+    watch = FirstStateWatch(states)
     bring.start()
+    t_started = time.monotonic()
     procs = {s.node: p for s, p in bring.procs}
     exp = procs["identification_experiment"]
     status = "ok"
@@ -310,7 +326,10 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
         if time.monotonic() - t0 > timeout:
             status = "timeout"
             break
-        time.sleep(0.05)
+        if not watch.poll(0.05) and time.monotonic() - t_started > state_timeout:
+            status = "no_states"
+            break
+    watch.close()
     _stop_proc(exp)  # no-op when it exited by itself; else zero torque first
     time.sleep(0.5)  # last events/states reach the recorder
     first = bring.first_failure()
@@ -332,6 +351,8 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
         error = f"timed out after {wall:.1f} s wall (--timeout {timeout:g} s)" + _waiting_reason(
             bring, exp_label
         )
+    elif status == "no_states":
+        error = no_state_reason(states, state_timeout, simulated)
     elif status == "interrupted":
         error = f"interrupted after {wall:.1f} s wall"
     elif status == "failed":  # another node ended by itself (exit 0) before the program did

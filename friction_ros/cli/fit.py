@@ -29,7 +29,7 @@ import sys
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="friction-fit", description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(allow_abbrev=False, prog="friction-fit", description=__doc__.splitlines()[0])
     p.add_argument(
         "bags",
         nargs="+",
@@ -67,10 +67,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--models",
+        "--model",
+        dest="models",
         nargs="+",
         default=["coulomb", "stribeck", "lugre", "gms4"],
         help=(
-            "models: coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
+            "models (--model is the same option): coulomb coulomb_viscous stribeck dahl lugre gms<N> gms<N>d (GMS with presliding "
             "damping sigma1) anfis nusvr, or a model added as a plugin (docs/architecture.md) "
             "(default: coulomb stribeck lugre gms4)"
         ),
@@ -442,42 +444,9 @@ def main(argv: list[str] | None = None) -> int:
         print("friction-fit: interrupted", file=sys.stderr)
         return 130
 
-    def pct(x) -> str:
-        return "n/a" if x is None or x != x else f"{x:.4g}"
+    from friction_ros.cli.fit_summary import print_summary
 
-    print(
-        f"{'model':<16} {'NMSE %':>10} {'rel.err %':>10} {'NMSE high %':>12} {'NMSE low %':>12} "
-        f"{'params':>7} {'BIC':>14}"
-    )
-    for n, m in res.models.items():
-        mt = m.metrics
-        if m.status != "fitted":  # no figure from a model that failed or diverged
-            print(f"{n:<16} {m.status}: {m.reason}")
-            continue
-        mark = "  <- recommended" if n == res.recommended else ""
-        print(
-            f"{n:<16} {pct(mt.get('nmse_percent')):>10} {pct(mt.get('rel_error_percent')):>10} "
-            f"{pct(mt.get('nmse_high_percent')):>12} {pct(mt.get('nmse_low_percent')):>12} "
-            f"{mt.get('n_params', 0):>7d} {mt.get('bic', math.nan):>14.6g}{mark}"
-        )
-    rec = getattr(res, "recommendation", None) or {}
-    if rec.get("rule"):
-        print(f"recommended by: {rec['rule']}" + (f" ({rec['reason']})" if rec.get("reason") else ""))
-    if res.options.get("load_terms", "none") != "none":
-        print(f"load terms: {res.options['load_terms']}")
-    cv = res.options.get("cross_validation")
-    if cv:
-        print("cross-validation over runs (validation NMSE %, trained on the other runs):")
-        for f in cv["folds"]:
-            row = ", ".join(f"{n} {x:.4g}" for n, x in f["nmse_percent"].items())
-            print(f"  {f['validation']}: {row}")
-    for mode, v in (res.gate or {}).items():
-        print(f"compensation {mode:<12} {v.reason}")
-    for w in res.warnings:
-        print(f"warning: {w}")
-    for kind, path in res.files.items():
-        if not kind.startswith("plot:"):
-            print(f"wrote {kind}: {path}")
+    print_summary(res)
     return 0
 
 

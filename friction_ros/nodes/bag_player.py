@@ -174,9 +174,9 @@ class BagPlayer(ParameterNode):
         return self.published
 
 
-def _parse_cli(argv: list[str]) -> dict:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
-        prog="bag_player", description="Replay a bag (ROS parameters via --ros-args)."
+        allow_abbrev=False, prog="bag_player", description="Replay a bag (ROS parameters via --ros-args)."
     )
     ap.add_argument("bag", nargs="?", help="bag directory or .mcap file")
     ap.add_argument("-r", "--rate", type=float)
@@ -189,12 +189,16 @@ def _parse_cli(argv: list[str]) -> dict:
     ap.add_argument("--start-delay", dest="start_delay", type=float, help="s")
     ap.add_argument("--wait-for-subscribers", dest="wait_for_subscribers", type=int)
     ap.add_argument("--wait-timeout", dest="wait_timeout", type=float, help="s")
-    return {k: v for k, v in vars(ap.parse_args(argv)).items() if v is not None}
+    return ap
+
+
+def _parse_cli(argv: list[str]) -> dict:
+    return {k: v for k, v in vars(build_parser().parse_args(argv)).items() if v is not None}
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    stop = start_process(argv)
+    stop = start_process(argv, about=sys.modules[__name__], parser=build_parser())
     if stop is None:
         return 2
     node = None

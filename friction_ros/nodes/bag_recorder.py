@@ -368,8 +368,9 @@ class BagRecorder(ParameterNode):
             log(self.summary())
 
 
-def _parse_cli(argv: list[str]) -> dict:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
+        allow_abbrev=False,
         prog="bag_recorder",
         description="Record topics to a rosbag2 MCAP bag (ROS parameters via --ros-args).",
     )
@@ -389,7 +390,11 @@ def _parse_cli(argv: list[str]) -> dict:
     ap.add_argument(
         "--param-file", dest="parameter_files", action="append", help="embed this file (repeatable)"
     )
-    ns = ap.parse_args(argv)
+    return ap
+
+
+def _parse_cli(argv: list[str]) -> dict:
+    ns = build_parser().parse_args(argv)
     out = {k: v for k, v in vars(ns).items() if v is not None}
     if not out.get("topics"):
         out.pop("topics", None)
@@ -398,7 +403,7 @@ def _parse_cli(argv: list[str]) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
-    stop = start_process(argv)
+    stop = start_process(argv, about=sys.modules[__name__], parser=build_parser())
     if stop is None:
         return 2
     cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])

@@ -22,6 +22,7 @@ import sys
 import rclpy
 
 from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.node_help import help_requested, purpose
 from friction_ros.nodes.runtime import spin_until_stopped, start_process
 
 #: node module -> its node class
@@ -67,6 +68,11 @@ def node_class(module: str):
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if help_requested(["composition", *argv]):
+        print(
+            f"{purpose(sys.modules[__name__])}\n\nnodes: {', '.join(NODE_CLASSES)} (NODE --help: their parameters)"
+        )
+        return 0
     try:
         sections = split_sections(argv)
     except ParameterError as exc:

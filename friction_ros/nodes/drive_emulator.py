@@ -36,7 +36,9 @@ def emulated_drive(preset: str, direction: int = 1, zero_offset: float = 0.0, **
 
 
 def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="drive_emulator", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="drive_emulator", description=__doc__.split("\n\n")[0], allow_abbrev=False
+    )
     ap.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
     ap.add_argument("--channel", default="vcan0", help="CAN channel (default vcan0)")
     ap.add_argument("--bitrate", type=int, default=1_000_000)

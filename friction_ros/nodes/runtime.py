@@ -5,6 +5,7 @@ Stopping (SIGINT/SIGTERM within 1 s at any moment, start-up included) is :mod:`.
 
 from __future__ import annotations
 
+import argparse
 import gc
 import os
 import sys
@@ -21,6 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes import stopping
 from friction_ros.nodes.loops import DeadlineLoop
+from friction_ros.nodes.node_help import exit_if_help
 from friction_ros.nodes.stopping import StopRequested, interruptible
 
 
@@ -157,8 +159,15 @@ def request_stop() -> None:
     stopping.STOP.set()
 
 
-def start_process(args: list[str] | None = None, node_args: list[list[str]] = ()) -> threading.Event | None:
-    """Start a node process: SIGINT/SIGTERM handlers first (:func:`.stopping.install`), then
+def start_process(
+    args: list[str] | None = None,
+    node_args: list[list[str]] = (),
+    about: Any = None,
+    parser: argparse.ArgumentParser | None = None,
+) -> threading.Event | None:
+    """Start a node process: ``--help``/``-h`` first (:func:`.node_help.exit_if_help`: the purpose
+    and parameters of the node ``about``, its class or module, and the options of its ``parser``;
+    exit code 0, nothing started), then SIGINT/SIGTERM handlers (:func:`.stopping.install`), then
     :func:`init_ros`.
 
     Returns the stop event (set by SIGINT, SIGTERM or :func:`request_stop`), or None after printing
@@ -167,6 +176,7 @@ def start_process(args: list[str] | None = None, node_args: list[list[str]] = ()
     (SystemExit). Our own signal handling (rclpy installs none) keeps the context alive until the
     node has zeroed its outputs.
     """
+    exit_if_help(list(sys.argv if args is None else args), about, parser)
     stop = stopping.install()
     try:
         with interruptible(immediate=True):
@@ -183,7 +193,8 @@ def start_process(args: list[str] | None = None, node_args: list[list[str]] = ()
 def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Standard ``main()`` of a friction_ros node.
 
-    Starts rclpy (:func:`init_ros`: a bad parameter file prints one line, exit code 2), builds the
+    ``--help``/``-h`` prints the node's purpose and parameters (the schema of ``factory``'s module:
+    :mod:`.node_help`) and exits 0 without starting rclpy. Starts rclpy (:func:`init_ros`: a bad parameter file prints one line, exit code 2), builds the
     node (a ParameterError/ValueError there prints one clear line and exits with code 2: the node
     refuses to start), spins until Ctrl-C/SIGTERM, then calls the node's ``on_shutdown()`` (which
     must leave actuators safe: zero torque, drive idle) before destroying it. SIGINT/SIGTERM are
@@ -192,7 +203,7 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     takes longer than :data:`.stopping.ESCALATE_S` more, interrupts the constructor (exit code 0;
     a constructor commands no actuator before it returns).
     """
-    stop = start_process(args)
+    stop = start_process(args, about=factory)
     if stop is None:
         return 2
     node = None

@@ -25,6 +25,18 @@ import can
 from friction_ros.core.can.emulator import DriveEmulator
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.drive_emulator import emulated_drive
+from friction_ros.nodes.node_help import help_requested, parameter_lines
+
+
+def _drive_interface_parameters() -> str:
+    """The drive_interface parameters (ROS arguments after ``--``), for ``--help``."""
+    from friction_ros.nodes import drive_interface
+
+    lines = parameter_lines(drive_interface.parameter_schema())
+    return (
+        "drive_interface parameters after -- (interface, channel, protocol, node_id, gear_ratio,\n"
+        "torque_constant and control_rate_hz are set to match the emulated drive):\n" + "\n".join(lines)
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -32,7 +44,13 @@ def main(argv: list[str] | None = None) -> int:
     sep = "--" if "--" in argv else "--ros-args" if "--ros-args" in argv else None
     ros = argv[argv.index(sep) + (1 if sep == "--" else 0) :] if sep else []
     own = argv[: argv.index(sep)] if sep else argv
-    ap = argparse.ArgumentParser(prog="simulated_drive", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(
+        prog="simulated_drive",
+        description=__doc__.split("\n\n")[0],
+        allow_abbrev=False,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=_drive_interface_parameters() if help_requested(["simulated_drive", *own]) else None,
+    )
     ap.add_argument("--preset", default="abb_m19s", help="plant preset behind the emulated drive")
     ap.add_argument("--protocol", default="odrive_cansimple", choices=("odrive_cansimple", "mit"))
     ap.add_argument("--node-id", type=int, default=0, help="drive node id (default 0)")

@@ -145,11 +145,18 @@ class Bag:
     info: dict[str, TopicInfo]
     topics: dict[str, TopicData]
     metadata: dict[str, dict[str, str]]
-    truncated: bool = False
+    truncated: bool = False  # not finished (no valid summary/footer); see ``cut``
     warnings: list[str] = field(default_factory=list)
     skipped: dict[str, str] = field(default_factory=dict)
     damaged: bool = False  # a part of a file failed its check (see core.bag.damage)
     lost: dict[str, int | None] = field(default_factory=dict)  # messages lost per topic, None = unknown
+    cut: bool = False  # truncated inside a record: the messages of its last, incomplete chunk are lost
+    span: tuple[int, int] | None = None  # log times of the first and last message [ns] (bag_info)
+
+    @property
+    def duration(self) -> float | None:
+        """Seconds from the first to the last message's log time (None: not known or no message)."""
+        return None if self.span is None else (self.span[1] - self.span[0]) * 1e-9
 
     @property
     def lost_count(self) -> int | None:

@@ -59,7 +59,7 @@ class McapScan:
         self.metadata: dict[str, dict[str, str]] = {}
         self.segments: list[bytes] = []
         self.locs: dict[int, list[tuple[int, np.ndarray]]] = {}
-        self.truncated = False
+        self.truncated = self.cut = False  # not finished (no summary/footer); cut inside a record
         self.warnings: list[str] = []
         self.problems: list[Problem] = []
         self.expected: dict[int, int] | None = None  # messages per channel (intact summary statistics)
@@ -208,11 +208,14 @@ class McapScan:
         self._close(pos, n, finished, footer)
 
     def _close(self, pos: int, n: int, finished: bool, footer: bool) -> None:
-        if not finished:
-            self.truncated = True
+        if not finished:  # cut inside a record, or ended after a complete one without being closed
+            self.truncated, self.cut = True, pos < n
             self.warnings.append(
                 f"{self.path}: file is truncated at byte {pos} of {n} (recording was killed?): recovered "
                 "all complete chunks; messages of the last, incomplete chunk are lost"
+                if self.cut
+                else f"{self.path}: file was not closed (no summary or footer after its last record: the "
+                "recording was killed or is still running): every message in it was read"
             )
         elif not footer:
             self.truncated = True

@@ -149,11 +149,13 @@ class _Loaded:
         self.warnings: list[str] = []
         self.skipped: dict[str, str] = {}
         self.truncated = False
+        self.cut = False
         self.damaged = False
         self.lost: dict[str, int | None] = {}
         for f in self.files:
             scan = McapScan(f)
             self.truncated |= scan.truncated
+            self.cut |= scan.cut
             self._damage(f, scan)
             self.warnings += scan.warnings
             self.metadata.update(scan.metadata)
@@ -223,8 +225,19 @@ class _Loaded:
     def bag(self, topics: dict[str, TopicData]) -> Bag:
         return Bag(
             self.path, self.files, self.info, topics, self.metadata, self.truncated, self.warnings,
-            self.skipped, self.damaged, self.lost,
+            self.skipped, self.damaged, self.lost, cut=self.cut,
         )  # fmt: skip
+
+    def span(self) -> tuple[int, int] | None:
+        """Log times of the first and last message of every topic read [ns] (None: no message)."""
+        lo, hi = None, None
+        for parts in self.parts.values():
+            for big, offs in parts:
+                log = _gather(big, offs + 15, 8, "<u8").astype(np.int64)
+                if len(log):
+                    lo = int(log.min()) if lo is None else min(lo, int(log.min()))
+                    hi = int(log.max()) if hi is None else max(hi, int(log.max()))
+        return None if lo is None else (lo, hi)
 
     def records(self, topic: str):
         """(big, log_time, publish_time, data_start, data_len) sorted by log time, per file part."""
@@ -323,8 +336,10 @@ def bag_info(path: str | os.PathLike) -> Bag:
         from .rosbags_reader import sqlite_bag_info
 
         return sqlite_bag_info(path)
-    ld = _Loaded(path, [])
-    return ld.bag({})
+    ld = _Loaded(path, None)
+    bag = ld.bag({})
+    bag.span = ld.span()
+    return bag
 
 
 def iter_messages(path: str | os.PathLike, topics: Iterable[str] | None = None) -> Iterator[RawMessage]:

@@ -118,6 +118,7 @@ class _Sqlite:
         self.rows: dict[str, list[tuple[int, bytes]]] = {}
         self.metadata: dict[str, dict[str, str]] = {}
         self.skipped: dict[str, str] = {}
+        self.span: tuple[int, int] | None = None  # first and last log time [ns]
         for src in self.sources:
             try:
                 with Reader(src) as reader:
@@ -130,6 +131,11 @@ class _Sqlite:
                         self.metadata.setdefault("rosbag2_custom_data", {}).update(
                             {str(k): str(v) for k, v in custom.items()}
                         )
+                    if reader.message_count:
+                        first, last = int(reader.start_time), int(reader.end_time) - 1
+                        if self.span is not None:
+                            first, last = min(first, self.span[0]), max(last, self.span[1])
+                        self.span = (first, last)
                     conns = []
                     for c in reader.connections:
                         name = normalize_type(c.msgtype)
@@ -214,7 +220,7 @@ def sqlite_bag_info(path: str | os.PathLike) -> Bag:
     """Topics, types and counts of a SQLite3 bag without reading payloads (``Bag.topics`` empty)."""
     sq = _Sqlite(path, [], payloads=False)
     files = [f for s in sq.sources for f in ([s] if s.is_file() else sorted(s.glob("*.db3")))]
-    return Bag(sq.path, files, sq.info, {}, sq.metadata, False, [], sq.skipped)
+    return Bag(sq.path, files, sq.info, {}, sq.metadata, False, [], sq.skipped, span=sq.span)
 
 
 def iter_sqlite_messages(

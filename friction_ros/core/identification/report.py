@@ -25,7 +25,6 @@ import numpy as np
 
 from friction_ros.core.identification import export
 from friction_ros.core.identification.fit_units import coefficient_unit, fit_joint_type, units, units_note
-from friction_ros.core.identification.records import concat_records
 
 
 def _clean(x):
@@ -346,120 +345,6 @@ def _cross_validation_section(res) -> list[str]:
     return L + [""]
 
 
-def make_plots(res, out: Path) -> dict:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    out.mkdir(parents=True, exist_ok=True)
-    files = {}
-    names = [n for n, m in res.models.items() if m.status == "fitted"]  # no curve of a failed model
-    tr = concat_records(res.train)
-    va = concat_records(res.validation)
-    J = res.inertia
-    u = units(fit_joint_type(res))
-    effort = f"{'torque' if u['friction'] == 'N*m' else 'force'} [{u['friction']}]"
-    # 1 friction-velocity map
-    fig, ax = plt.subplots(figsize=(8, 5))
-    step = max(tr.n // 4000, 1)
-    ax.plot(
-        tr.velocity[::step],
-        (tr.torque - J * tr.acceleration)[::step],
-        ".",
-        ms=1.5,
-        color="0.7",
-        label="samples (tau - J a)",
-    )
-    if res.plateaus:
-        ax.errorbar(
-            [p.velocity for p in res.plateaus],
-            [p.torque for p in res.plateaus],
-            yerr=[p.torque_std for p in res.plateaus],
-            fmt="ko",
-            ms=4,
-            label="plateau means",
-        )
-    for n in names:
-        g = res.models[n].extra.get("steady_state_grid")
-        if g:
-            ax.plot(g["velocity"], g["friction"], label=n)
-    ax.set_xscale("symlog", linthresh=max(1e-3, float(np.min(np.abs(g["velocity"]))) if g else 1e-3))
-    ax.set_xlabel(f"velocity [{u['velocity']}]")
-    ax.set_ylabel(f"friction [{u['friction']}]")
-    ax.set_title("Steady-state friction-velocity map")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "friction_velocity.png", dpi=110)
-    plt.close(fig)
-    files["Friction-velocity map"] = "plots/friction_velocity.png"
-    # predictions on validation
-    preds = {n: res.models[n].extra["validation_prediction"] for n in names}
-    hm = res.high_threshold
-    from friction_ros.core.identification.velocity_regimes import velocity_envelope
-
-    env = velocity_envelope(va.velocity, va.dt)
-    low_idx = np.nonzero(env <= hm)[0]
-    high_idx = np.nonzero(env > hm)[0]
-    # 2 presliding hysteresis: friction vs position in a low-velocity window
-    fig, ax = plt.subplots(figsize=(7, 5))
-    if low_idx.size > 10:
-        i0 = int(low_idx[low_idx.size // 2])
-        sl = slice(max(i0 - int(1.0 / va.dt), 0), min(i0 + int(1.0 / va.dt), va.n))
-        x = va.position[sl] - va.position[sl].mean()
-        ax.plot(x * 1e3, (va.torque - J * va.acceleration)[sl], "k.", ms=2, label="measured")
-        for n in names:
-            m = res.models[n]
-            jm = m.coefficients.get("J", 0.0)
-            ax.plot(x * 1e3, (preds[n] - jm * va.acceleration)[sl], lw=1, label=n)
-    ax.set_xlabel(f"position - mean [m{u['position']}]")
-    ax.set_ylabel(f"friction [{u['friction']}]")
-    ax.set_title("Presliding hysteresis (2 s low-velocity window, validation)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "presliding.png", dpi=110)
-    plt.close(fig)
-    files["Presliding hysteresis"] = "plots/presliding.png"
-    # 3 time-domain validation
-    fig, axs = plt.subplots(2, 1, figsize=(9, 6))
-    for ax, idx, title in ((axs[0], high_idx, "high velocity"), (axs[1], low_idx, "low velocity")):
-        if idx.size > 10:
-            i0 = int(idx[idx.size // 2])
-            sl = slice(max(i0 - int(0.5 / va.dt), 0), min(i0 + int(0.5 / va.dt), va.n))
-            t = va.t[sl]
-            ax.plot(t, va.torque[sl], "k", lw=1.5, label="measured")
-            for n in names:
-                ax.plot(t, preds[n][sl], lw=0.8, label=n)
-        ax.set_title(f"validation, {title}")
-        ax.set_ylabel(effort)
-        ax.grid(True, alpha=0.3)
-    axs[1].set_xlabel("time [s]")
-    axs[0].legend(fontsize=7, ncol=3, loc="upper right")  # "best" scans every sample: seconds
-    fig.tight_layout()
-    fig.savefig(out / "validation.png", dpi=110)
-    plt.close(fig)
-    files["Time-domain validation"] = "plots/validation.png"
-    # 4 residuals
-    fig, axs = plt.subplots(1, 2, figsize=(10, 4))
-    for n in names:
-        e = preds[n] - va.torque
-        axs[0].plot(va.t, e, lw=0.5, label=n)
-        axs[1].hist(e, bins=80, histtype="step", label=n)
-    axs[0].set_xlabel("time [s]")
-    axs[0].set_ylabel(f"residual [{u['friction']}]")
-    axs[1].set_xlabel(f"residual [{u['friction']}]")
-    axs[0].legend(fontsize=7, loc="upper right")
-    for a in axs:
-        a.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(out / "residuals.png", dpi=110)
-    plt.close(fig)
-    files["Residuals"] = "plots/residuals.png"
-    return files
-
-
 def write_outputs(
     res, out_dir: Path, *, params_file=None, plots=True, sources=None, topic=None, joint=None
 ) -> dict:
@@ -467,7 +352,12 @@ def write_outputs(
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     files = {}
-    plot_files = make_plots(res, out_dir / "plots") if plots else {}
+    if plots:
+        from friction_ros.core.identification.report_plots import make_plots
+
+        plot_files = make_plots(res, out_dir / "plots")
+    else:
+        plot_files = {}
     for k, v in plot_files.items():
         files[f"plot:{k}"] = str(out_dir / v)
     js = summary(res, sources, topic, joint)
