@@ -126,6 +126,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     res.gate = {m: v.as_dict() for m, v in verdicts.items()}
     res.params_file = str(params_file)
     say(f"   recommended model: {name}; parameters -> {params_file}")
+    save_partial(res, results_dir, "")  # the experiment and the fit are kept whatever comes next
     for modes, reason in grouped({m: v.reason for m, v in verdicts.items()}):
         say(f"   {modes}: {reason}")
     res.warnings += [refusal_warning(m, v.reason) for m, v in verdicts.items() if not v.enabled]
@@ -151,7 +152,10 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             effort_limit=scale.torque_limit,
         )
         f.write_text(dump_yaml(doc))
-        run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)
+        try:
+            run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)
+        except (RuntimeError, ParameterError) as exc:  # what is done so far stays on disk, said so
+            raise RuntimeError(f"{exc}\n{save_partial(res, results_dir, f'tracking run {label}')}") from None
         if label != "none":
             run.enabled = bool(verdicts[label].enabled)
             run.reason = verdicts[label].reason
@@ -202,8 +206,27 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         str(results_dir / "friction_map.png"),
         str(results_dir / "demo_summary.json"),
     ]
-    (results_dir / "demo_summary.json").write_text(json.dumps(res.summary(), indent=2, default=json_default))
+    summary = {**res.summary(), "status": "complete"}
+    (results_dir / "demo_summary.json").write_text(json.dumps(summary, indent=2, default=json_default))
     return res
+
+
+def save_partial(res: DemoResult, results_dir: Path, failed: str) -> str:
+    """Write ``demo_summary.json`` with what is done so far (``status``: ``incomplete``, the step
+    that failed, or ``running``); returns a line saying what was kept."""
+    try:
+        doc = res.summary()
+    except (KeyError, ValueError, ZeroDivisionError):  # a summary of partial runs: the plain facts
+        doc = {"preset": res.preset, "bag": res.bag, "model": res.model, "params_file": res.params_file}
+    doc["status"] = f"incomplete: {failed} failed" if failed else "running"
+    doc["completed_runs"] = list(res.runs)
+    path = results_dir / "demo_summary.json"
+    path.write_text(json.dumps(doc, indent=2, default=json_default))
+    kept = ", ".join(
+        x for x in (res.bag and f"bag {res.bag}", res.params_file and f"fit {res.params_file}") if x
+    )
+    runs = f", tracking runs {', '.join(res.runs)}" if res.runs else ""
+    return f"kept: {kept}{runs} (summary {path})"
 
 
 def run(args) -> DemoResult | dict:
