@@ -37,6 +37,7 @@ from friction_ros.cli.demo_results import (
     GRAPH_PERIOD,
     DemoResult,
     encoder_cap,
+    excited_speeds,
     map_error_vs_truth,
     refusal_warning,
     run_metrics,
@@ -121,7 +122,12 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             note = model.metrics.get(f"nmse_{key}_note", "no signal above the noise in that subset")
             res.warnings.append(f"{text} NMSE not available: {note}")
     inertia = float(model.coefficients.get("J", 0.0) or scale.inertia)
-    res.map_error = map_error_vs_truth(model.steady_state, preset.joint_friction, fit_result.plateaus)
+    res.map_error = map_error_vs_truth(
+        model.steady_state,
+        preset.joint_friction,
+        fit_result.plateaus,
+        excited_speeds([*fit_result.train, *fit_result.validation]),
+    )
     verdicts = fit_result.gate
     res.gate = {m: v.as_dict() for m, v in verdicts.items()}
     res.params_file = str(params_file)

@@ -161,8 +161,11 @@ def encoder_cap(run: TrackingRun, resolution: float) -> float:
     return 100.0 * (1.0 - floor / run.rms)
 
 
-def map_error_vs_truth(fitted, truth, plateaus) -> dict:
+def map_error_vs_truth(fitted, truth, plateaus, excited: tuple[float, float] | None = None) -> dict:
     """Steady-state map of the fit against the preset's truth (both directions).
+
+    ``map_percent``: largest relative error over the whole speed range the log excited
+    (``excited`` = (slowest, fastest) moving speed, :func:`excited_speeds`), Stribeck region included.
 
     ``sliding_percent``: largest |f_fit(v) - f_true(v)| / |f_true(v)| over the plateau speed range
     (lowest to highest plateau speed); ``static_peak_percent``: signed relative error of the static
@@ -187,4 +190,26 @@ def map_error_vs_truth(fitted, truth, plateaus) -> dict:
         out["sliding_percent"] = 100.0 * max(slide)
     if peak:
         out["static_peak_percent"] = 100.0 * max(peak, key=abs)
+    if excited is not None and excited[1] > excited[0] > 0:
+        errs = []
+        for sign in (1.0, -1.0):
+            v = sign * np.geomspace(excited[0], excited[1], 400)
+            ft, ff = np.asarray(truth(v)), np.asarray(fitted(v))
+            ok = np.abs(ft) > 0
+            if ok.any():
+                errs.append(float(np.max(np.abs(ff[ok] - ft[ok]) / np.abs(ft[ok]))))
+        out["excited_v_min"], out["excited_v_max"] = excited
+        out["map_percent"] = 100.0 * max(errs) if errs else math.nan
     return out
+
+
+def excited_speeds(records) -> tuple[float, float]:
+    """(slowest, fastest) speed a log excited: the 1st and 99th percentiles of |v| over the moving
+    samples (|v| above 1e-3 of the 99th percentile)."""
+    v = np.abs(np.concatenate([np.asarray(r.velocity, dtype=float) for r in records]))
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return (math.nan, math.nan)
+    moving = v[v > 1e-3 * np.percentile(v, 99)]
+    lo, hi = np.percentile(moving, [1, 99]) if moving.size else (math.nan, math.nan)
+    return float(lo), float(hi)
