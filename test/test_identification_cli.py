@@ -343,3 +343,21 @@ def test_marked_plateaus_left_out_are_named_with_the_reason():
     assert len(pl) == 1 and pl[0].velocity == pytest.approx(0.5, rel=1e-2)
     assert len(dropped) == 1 and dropped[0].startswith("plateau +0.5 (t 2.00-3.90 s): mean speed")
     assert "off the commanded speed" in dropped[0]
+
+
+def test_the_safety_gate_uses_the_same_lags_as_the_demo_or_says_what_it_assumed():
+    """The demo refused feedback on a bag whose README recipe (no --delay) enabled it: the gate's
+    lags now come from --plant-preset when not given, and an assumed 0 is a warning."""
+    from friction_ros.cli.fit import build_parser, gate_options
+    from friction_ros.core.identification.gating import preset_lags
+    from friction_ros.core.presets import load_preset
+
+    parse = build_parser().parse_args
+    known = preset_lags(load_preset("abb_m19s"))
+    assert gate_options(parse(["b", "--plant-preset", "abb_m19s"])) == known
+    given = gate_options(parse(["b", "--plant-preset", "abb_m19s", "--delay", "0.004"]))
+    assert given == {"current_lag": known["current_lag"], "delay": 0.004}
+    bare = gate_options(parse(["b"]))
+    assert bare["current_lag"] == 0.0 and bare["delay"] == 0.0
+    assert "assumed --current-lag and --delay 0" in bare["assumed"]
+    assert "assumed" not in gate_options(parse(["b", "--current-lag", "0", "--delay", "0"]))

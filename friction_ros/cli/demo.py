@@ -44,6 +44,7 @@ from friction_ros.cli.demo_results import (
 )
 from friction_ros.cli.demo_steps import controller_document, fit, run_experiment, say, track
 from friction_ros.cli.reasons import grouped
+from friction_ros.core.identification.gating import preset_lags
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,18 +91,10 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     t = time.monotonic()
     fit_dir = results_dir / "fit"
     params_file = results_dir / "friction_params.yaml"
-    p = preset.params
     gains = tracking_gains(scale)
     reference = tracking_reference(scale, duration=max(args.duration, 1.0))
     res.gains, res.reference = dict(gains), dict(reference)
-    gate = {
-        "scale": scale,
-        "current_lag": p.current_time_constant if p.actuation == "current" else 0.0,
-        "delay": p.measurement_delay + p.actuation_delay,
-        "velocity_filter_hz": p.velocity_filter_hz,
-        "gains": gains,
-        "reference": reference,
-    }
+    gate = {"scale": scale, **preset_lags(preset), "gains": gains, "reference": reference}
     fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, preset_name, params_file, gate)
     res.timings["fit"] = time.monotonic() - t
     res.fit_dir = str(fit_dir)

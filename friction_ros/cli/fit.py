@@ -142,11 +142,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--current-lag",
         type=float,
-        default=0.0,
-        help="drive current-loop time constant [s] for the compensation safety gate (default 0)",
+        default=None,
+        help="drive current-loop time constant [s] for the compensation safety gate (default: the "
+        "--plant-preset's, else 0 with a warning)",
     )
     p.add_argument(
-        "--delay", type=float, default=0.0, help="pure measurement + actuation delay [s] for the safety gate"
+        "--delay",
+        type=float,
+        default=None,
+        help="pure measurement + actuation delay [s] for the safety gate (default: the --plant-preset's, "
+        "else 0 with a warning)",
     )
     p.add_argument(
         "--no-gate",
@@ -281,6 +286,28 @@ def check_outputs(args) -> None:
             )
 
 
+def gate_options(args) -> dict:
+    """The safety gate's lags: given, else the plant preset's (as the demo uses), else 0 with a warning
+    (the gate's verdicts depend on them)."""
+    lags = {"current_lag": args.current_lag, "delay": args.delay}
+    if args.plant_preset:
+        from friction_ros.core.identification.gating import preset_lags
+        from friction_ros.core.presets import load_preset
+
+        known = preset_lags(load_preset(args.plant_preset))
+        lags = {k: known[k] if v is None else v for k, v in lags.items()}
+        if args.current_lag is None and args.delay is None:
+            lags["velocity_filter_hz"] = known["velocity_filter_hz"]
+    missing = [f"--{k.replace('_', '-')}" for k, v in lags.items() if v is None]
+    lags = {k: 0.0 if v is None else v for k, v in lags.items()}
+    if missing:
+        lags["assumed"] = (
+            f"the safety gate assumed {' and '.join(missing)} 0 (not given): its verdicts hold only for a drive "
+            "without current-loop lag or delay; give your drive's values"
+        )
+    return lags
+
+
 def fit_options(args, columns) -> dict:
     """fit_bag's keyword arguments from the command line (but the output paths and progress)."""
     return dict(
@@ -294,7 +321,7 @@ def fit_options(args, columns) -> dict:
         plant_preset=args.plant_preset,
         train_seconds=args.train_seconds,
         train_window=args.train_window,
-        gate=None if args.no_gate else {"current_lag": args.current_lag, "delay": args.delay},
+        gate=None if args.no_gate else gate_options(args),
         optimizer=args.optimizer,
         maxiter=args.maxiter,
         seed=args.seed,

@@ -31,12 +31,14 @@ def gate_fit(
     velocity_filter_hz: float = 0.0,
     gains: dict | None = None,
     reference: dict | None = None,
+    assumed: str = "",
 ) -> dict[str, Verdict]:
     """Gate the recommended model of ``res`` (a FitResult); see the module docstring.
 
     ``scale``: a JointScale of the joint when known (a preset, a probe): its gains and reference
     are used, with the fitted inertia. ``current_lag``/``delay`` [s]: the drive's current-loop time
-    constant and pure delays (the control period is added by the loop itself).
+    constant and pure delays (the control period is added by the loop itself). ``assumed``: a
+    warning for the result when those were assumed rather than given.
     """
     from friction_ros.core.experiment.joint_scale import JointScale
     from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
@@ -97,4 +99,17 @@ def gate_fit(
             res.options["gate_reference"] = reference
     res.options.setdefault("gate_options", {"gate": verdicts})
     res.gate = verdicts
+    if assumed:
+        res.warnings.append(assumed)
     return verdicts
+
+
+def preset_lags(preset) -> dict:
+    """The gate's ``current_lag``, ``delay`` and ``velocity_filter_hz`` of a plant preset (a loaded
+    Preset): the same values wherever the gate runs (friction-fit --plant-preset, the demo)."""
+    p = preset.params
+    return {
+        "current_lag": p.current_time_constant if p.actuation == "current" else 0.0,
+        "delay": p.measurement_delay + p.actuation_delay,
+        "velocity_filter_hz": p.velocity_filter_hz,
+    }
