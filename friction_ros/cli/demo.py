@@ -45,6 +45,7 @@ from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMES = ("feedforward", "feedback", "blended")
+DEFAULT_MODELS = ["coulomb", "stribeck", "lugre", "gms4"]
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
 
@@ -205,10 +206,15 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     return res
 
 
-def run(args) -> DemoResult | dict:
-    """One preset (a DemoResult) or, with ``--all-presets``, every preset (a summary dict)."""
+def run(args):
+    """One preset (a DemoResult), with ``--all-presets`` every preset (a summary dict), a multi-joint
+    plant preset (``arm7_plant``) the arm demo (:mod:`friction_ros.cli.demo_arm`)."""
+    from friction_ros.cli.demo_arm import arm_plant_file, main_arm
     from friction_ros.core.presets import PRESET_NAMES, load_preset
 
+    if not args.all_presets and arm_plant_file(args.preset) is not None:
+        return main_arm(args)
+    args.models = args.models or DEFAULT_MODELS
     stamp = time.strftime("%Y%m%d_%H%M%S")
     if not args.all_presets:
         load_preset(args.preset)
@@ -255,13 +261,19 @@ def run(args) -> DemoResult | dict:
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="friction-demo", description=__doc__.split("\n\n")[0])
-    p.add_argument("--preset", default="abb_m19s", help="plant preset (hidden truth), default abb_m19s")
+    p.add_argument(
+        "--preset",
+        default="abb_m19s",
+        help="plant preset (hidden truth), default abb_m19s; a multi-joint plant (arm7_plant) runs the arm demo",
+    )
     p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")
     p.add_argument("--joint", default="joint1", help="joint name in the bag / graph (default joint1)")
     p.add_argument("--profile", default="quick", choices=("quick", "default"), help="experiment profile")
     p.add_argument(
-        "--models", nargs="+", default=["coulomb", "stribeck", "lugre", "gms4"], help="models to fit"
+        "--models",
+        nargs="+",
+        help="models to fit (default coulomb stribeck lugre gms4; a multi-joint preset: coulomb_viscous stribeck)",
     )
     p.add_argument(
         "--duration", type=float, default=10.0, help="simulated seconds per tracking run (default 10)"
