@@ -331,6 +331,8 @@ def controller_values(f: JointFit) -> dict:
         if f.verdict == "explains little" and f.document:
             values = dict(f.document["compensating_controller"]["ros__parameters"])
             values["compensation"] = {**values.get("compensation", {}), **disabled}
+            for key in ("load", "load_feedforward", "residual"):  # no feedforward of any fitted term
+                values.pop(key, None)
             values["compensation"].pop("gain", None)
             values["compensation"].pop("blend", None)
         else:
