@@ -66,6 +66,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early
+    args.models = args.models or DEFAULT_MODELS
     scale = JointScale.from_preset(preset, period=GRAPH_PERIOD)  # the ROS graph runs at 1 kHz
     res = DemoResult(preset=preset_name)
     results_dir.mkdir(parents=True, exist_ok=True)
@@ -214,7 +215,6 @@ def run(args):
 
     if not args.all_presets and arm_plant_file(args.preset) is not None:
         return main_arm(args)
-    args.models = args.models or DEFAULT_MODELS
     stamp = time.strftime("%Y%m%d_%H%M%S")
     if not args.all_presets:
         load_preset(args.preset)
