@@ -114,8 +114,17 @@ def test_file_layout_and_index(arm):
     cc = arm["doc"]["compensating_controller"]["ros__parameters"]
     assert cc["joints"] == ALL
     assert set(cc["friction"]) == set(ALL)  # a model per joint, none at node level
-    for j in ("gripper", "noise"):
-        assert cc["friction"][j] == {"model": "none"} and cc["compensation"][j] == {"source": "none"}
+    for j, why in (("gripper", "fit failed: "), ("noise", "the fit explains nothing ")):
+        comp = cc["compensation"][j]
+        assert cc["friction"][j] == {"model": "none"} and comp["source"] == "none"
+        # disabled with the reason, for every source (the node refuses them unless allow_refused)
+        assert comp["refused"] == ["feedforward", "feedback", "blended"]
+        assert len(comp["refused_reasons"]) == 3 and all(r.startswith(why) for r in comp["refused_reasons"])
+    # every joint carries its effort limit (the controller refuses to start without one): 1.5 x the
+    # log's peak |effort|, rounded up to two digits
+    for j in ALL:
+        assert cc["gains"][j]["effort_limit"] > 0.0, j
+    assert cc["gains"]["gripper"]["effort_limit"] == pytest.approx(0.015)  # its effort is 0.01
     assert "plant_simulator" not in arm["doc"]
     index = json.loads(arm["files"]["index.json"])
     verdicts = {j: v["verdict"] for j, v in index["joints"].items()}

@@ -14,6 +14,10 @@ Examples::
     # a 7-joint arm: one plant, a plain PD and the friction add-on (lockstep, composed)
     friction-bringup --config params/bringup_arm7.yaml --duration 20
 
+Before starting, every node is printed with its namespace, name, parameter files, remappings and
+parameter overrides; at the end of a run with controllers, one line per controller node from its
+last diagnostics status (level, text, compensation state per joint).
+
 ``--compose`` runs the nodes in one process with one executor (as composable components on a
 robot): fewer wake-ups per cycle on the plant -> controller -> plant chain.
 
@@ -373,12 +377,24 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     if stop.is_set():  # stopped while validating: nothing was started
         return 0
+    from friction_ros.cli.bringup_summary import DiagnosticsWatch, plan_lines
+
     bring = Bringup(specs, quiet=args.quiet)
     print(f"[bringup] starting {', '.join(s.label for s in specs)} (Ctrl-C stops them, controllers first)")
+    for line in plan_lines(specs):
+        print(f"[bringup] {line}")
+    watch = DiagnosticsWatch(specs)
+    watch.start()
     bring.start()
     bring.wait(args.duration, stop)
     first = bring.first_failure()
+    summary = watch.summary_lines()  # the statuses of the run, before the stop's zero-torque goodbyes
+    watch.stop()
     bring.stop()
+    if watch.nodes and first is None:
+        print("[bringup] controllers at the end of the run (last diagnostics status):")
+        for line in summary:
+            print(f"[bringup]   {line}")
     if first is None:
         return 0
     label, code, reason = first

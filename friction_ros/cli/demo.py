@@ -49,6 +49,7 @@ from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMES = ("feedforward", "feedback", "blended")
+DEFAULT_MODELS = ["coulomb", "stribeck", "lugre", "gms4"]
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
 
@@ -69,6 +70,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early
+    args.models = args.models or DEFAULT_MODELS
     scale = JointScale.from_preset(preset, period=GRAPH_PERIOD)  # the ROS graph runs at 1 kHz
     res = DemoResult(preset=preset_name)
     results_dir.mkdir(parents=True, exist_ok=True)
@@ -228,10 +230,14 @@ def save_partial(res: DemoResult, results_dir: Path, failed: str) -> str:
     return f"kept: {kept}{runs} (summary {path})"
 
 
-def run(args) -> DemoResult | dict:
-    """One preset (a DemoResult) or, with ``--all-presets``, every preset (a summary dict)."""
+def run(args):
+    """One preset (a DemoResult), with ``--all-presets`` every preset (a summary dict), a multi-joint
+    plant preset (``arm7_plant``) the arm demo (:mod:`friction_ros.cli.demo_arm`)."""
+    from friction_ros.cli.demo_arm import arm_plant_file, main_arm
     from friction_ros.core.presets import PRESET_NAMES, load_preset
 
+    if not args.all_presets and arm_plant_file(args.preset) is not None:
+        return main_arm(args)
     stamp = time.strftime("%Y%m%d_%H%M%S")
     if not args.all_presets:
         load_preset(args.preset)
@@ -280,13 +286,19 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         allow_abbrev=False, prog="friction-demo", description=__doc__.split("\n\n")[0]
     )
-    p.add_argument("--preset", default="abb_m19s", help="plant preset (hidden truth), default abb_m19s")
+    p.add_argument(
+        "--preset",
+        default="abb_m19s",
+        help="plant preset (hidden truth), default abb_m19s; a multi-joint plant (arm7_plant) runs the arm demo",
+    )
     p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")
     p.add_argument("--joint", default="joint1", help="joint name in the bag / graph (default joint1)")
     p.add_argument("--profile", default="quick", choices=("quick", "default"), help="experiment profile")
     p.add_argument(
-        "--models", nargs="+", default=["coulomb", "stribeck", "lugre", "gms4"], help="models to fit"
+        "--models",
+        nargs="+",
+        help="models to fit (default coulomb stribeck lugre gms4; a multi-joint preset: coulomb_viscous stribeck)",
     )
     p.add_argument(
         "--duration", type=float, default=10.0, help="simulated seconds per tracking run (default 10)"

@@ -214,9 +214,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             if self.addon
             else None
         )
-        self.diag = DiagnosticsPublisher(
-            self, "compensating_controller", self.joints[0] if self.single else ""
-        )
+        # the node's own name: a PD and an add-on in one namespace have their own statuses
+        self.diag = DiagnosticsPublisher(self, self.get_name(), self.joints[0] if self.single else "")
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(max(self.values["state_timeout"] / 2, 0.005), self._check_state_timeout)
 

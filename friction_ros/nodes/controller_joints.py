@@ -142,6 +142,9 @@ class JointChannel:
             log(ctrl.residual_note)
         if ctrl.residual_nonfinite and level == OK:
             level, text = WARN, ctrl.residual_note
+        # what compensates: the source with a friction model, else none (friction-bringup's summary)
+        fr = ctrl.friction
+        values["compensation"] = fr.source if fr.model is not None and fr.source != "none" else "none"
         values["compensation_fallback"] = int(ctrl.compensation_fallback)
         values["compensation_enabled"] = int(ctrl.compensation_enabled)
         values["feedback_bound_limited"] = int(bool(ctrl.feedback_bound_note))

@@ -10,10 +10,15 @@ The parameter file holds ``compensating_controller`` and ``friction_estimator`` 
 layout of :mod:`friction_ros.core.joint_config`: ``joints: [...]``, ``<section>.<joint>.<key>``
 (``friction.j3.model``, ``compensation.j3.source``, ``load.j3.gravity``, ``residual.j3.*``) and
 ``gains.<joint>.<key>`` for the PID keys and the plain keys (``gains.j3.p``, ``gains.j3.inertia``).
-Every joint has its own ``friction.<joint>.model`` (none at node level); a value is written at node
-level only when every joint has the same one. A joint whose fit failed, or whose recommended model
-explains nothing (validation NMSE >= 100 %, no better than a constant), is written with
-``friction.<joint>.model: none`` and ``compensation.<joint>.source: none`` and named in a warning.
+Every joint has its own ``friction.<joint>.model`` (none at node level) and its own
+``gains.<joint>.effort_limit`` (the controller refuses to start without one): the plant preset's
+torque limit, else 1.5 x the log's peak |effort| (:func:`~.data_scale.effort_limit_of_log`). A
+value is written at node level only when every joint has the same one. Compensation is written
+disabled (``compensation.<joint>.source: none``, the reason in ``refused_reasons`` for every
+source in ``refused``: the node refuses to run them unless ``allow_refused``) for a joint whose fit
+failed, whose recommended model explains nothing (validation NMSE >= 100 %, no better than a
+constant; ``friction.<joint>.model: none``) or explains little (NMSE above the verdict's threshold:
+the model is kept for inspection); each is named in a warning.
 ``OUT/index.md`` (and ``index.json``) tabulate every joint: model, validation NMSE, verdict.
 """
 
@@ -35,6 +40,8 @@ from friction_ros.core.validation import ParameterError
 ALL = "all"
 #: what a joint that is not compensated gets in the controller section
 NOT_COMPENSATED = {"friction": {"model": "none"}, "compensation": {"source": "none"}}
+#: the compensation sources written refused for a joint that is not compensated
+REFUSED_SOURCES = ("feedforward", "feedback", "blended")
 #: sections never written at node level (a per-joint model replaces the whole section)
 PER_JOINT_ONLY = ("friction",)
 
@@ -124,9 +131,11 @@ def requested_joints(text: str, available: Sequence[str]) -> list[str]:
 class JointFit:
     """What one joint's fit left for the multi-joint file and the index (plain data: crosses processes).
 
-    ``verdict``: ``ok``, ``explains little`` (compensated, with a warning, as the single-joint file),
-    ``explains nothing`` or ``fit failed`` (both written with ``friction.<joint>.model: none``).
-    ``document``: the single-joint parameter document (None when the fit failed).
+    ``verdict``: ``ok`` (compensated), ``explains little`` (its model written, compensation
+    disabled with the reason), ``explains nothing`` or ``fit failed`` (both written with
+    ``friction.<joint>.model: none``). ``document``: the single-joint parameter document (None when
+    the fit failed). ``reason``: why compensation is disabled ("" when compensated).
+    ``effort_limit``: the joint's torque (force) limit (nan when the log has no effort).
     """
 
     joint: str
@@ -141,10 +150,12 @@ class JointFit:
     files: dict = field(default_factory=dict)
     seconds: float = 0.0
     joint_type: str = "revolute"
+    reason: str = ""
+    effort_limit: float = math.nan
 
     @property
     def compensated(self) -> bool:
-        return self.verdict in ("ok", "explains little")
+        return self.verdict == "ok"
 
 
 def fit_one_joint(task: dict) -> JointFit:
@@ -171,6 +182,8 @@ def fit_one_joint(task: dict) -> JointFit:
             joint_type=fit_joint_type(
                 {"joint_type": task.get("joint_type") if task.get("joint_type") != "auto" else None}
             ),
+            reason=f"fit failed: {str(exc).splitlines()[0]}",
+            effort_limit=_effort_limit_without_fit(task),
         )
     rec = res.models[res.recommended]
     nmse = rec.metrics.get("nmse_percent")
@@ -191,11 +204,22 @@ def fit_one_joint(task: dict) -> JointFit:
         warnings=list(res.warnings) + [f"compensation {m}: {v.reason}" for m, v in (res.gate or {}).items()],
         files={k: v for k, v in res.files.items() if not k.startswith("plot:")},
         joint_type=fit_joint_type(res),
+        effort_limit=float(res.effort_limit),
     )
-    if out.compensated:
+    if label != "ok":
+        nm = "n/a" if nmse is None else f"{nmse:.1f} %"
+        from friction_ros.core.identification.recommendation import EXPLAINS_LITTLE_NMSE
+
+        out.reason = (
+            f"the fit {label} of the measured torque (validation NMSE {nm} > {EXPLAINS_LITTLE_NMSE:g} %): "
+            "do not compensate with it before checking"
+        )
+    if label != "explains nothing":
         cc = doc["compensating_controller"]["ros__parameters"]
         out.written_model = str(cc["friction"].get("model", "none"))
-        out.compensation = str(cc.get("compensation", {}).get("source", "none"))
+        out.compensation = (
+            str(cc.get("compensation", {}).get("source", "none")) if out.compensated else "none"
+        )
     out.seconds = time.perf_counter() - t0
     return out
 
@@ -274,17 +298,54 @@ def per_joint_section(values: dict[str, dict], layout: JointLayout) -> dict:
     return nested
 
 
+def _effort_limit_without_fit(task: dict) -> float:
+    """The effort limit of a joint whose fit failed: its plant preset's, else from its log (nan
+    when neither says)."""
+    from friction_ros.core.identification.data_scale import effort_limit_of_log
+    from friction_ros.core.identification.log_loading import load_log
+
+    if task.get("plant_preset"):
+        from friction_ros.core.experiment.joint_scale import JointScale
+        from friction_ros.core.presets import load_preset
+
+        return float(JointScale.from_preset(load_preset(task["plant_preset"])).torque_limit)
+    try:
+        topic = task.get("topic", "/joint_states")
+        return effort_limit_of_log([load_log(p, topic, task["joint"]) for p in task["bag_paths"]])
+    except (ParameterError, ValueError, OSError):
+        return math.nan
+
+
+def controller_values(f: JointFit) -> dict:
+    """One joint's compensating_controller values (module docstring): its fitted section when it is
+    compensated; else compensation disabled with the reason (the model kept when the fit explains
+    little), always with its effort limit."""
+    if f.compensated:
+        values = dict(f.document["compensating_controller"]["ros__parameters"])
+    else:
+        disabled = {
+            "source": "none",
+            "refused": list(REFUSED_SOURCES),
+            "refused_reasons": [f.reason or f"the fit {f.verdict}"] * len(REFUSED_SOURCES),
+        }
+        if f.verdict == "explains little" and f.document:
+            values = dict(f.document["compensating_controller"]["ros__parameters"])
+            values["compensation"] = {**values.get("compensation", {}), **disabled}
+            for key in ("load", "load_feedforward", "residual"):  # no feedforward of any fitted term
+                values.pop(key, None)
+            values["compensation"].pop("gain", None)
+            values["compensation"].pop("blend", None)
+        else:
+            values = {**NOT_COMPENSATED, "compensation": disabled, "joint_type": f.joint_type}
+    if math.isfinite(f.effort_limit):
+        values["effort_limit"] = float(f.effort_limit)
+    return values
+
+
 def joint_parameter_document(fits: Sequence[JointFit]) -> dict:
     """The multi-joint parameter document of ``fits`` (module docstring)."""
     joints = [f.joint for f in fits]
-    cc = {
-        f.joint: (
-            f.document["compensating_controller"]["ros__parameters"]
-            if f.compensated
-            else {**NOT_COMPENSATED, "joint_type": f.joint_type}
-        )
-        for f in fits
-    }
+    cc = {f.joint: controller_values(f) for f in fits}
     doc = {"compensating_controller": {"ros__parameters": per_joint_section(cc, controller_layout(joints))}}
     est = {
         f.joint: (f.document or {}).get("friction_estimator", {}).get("ros__parameters", {})
@@ -319,7 +380,12 @@ class MultiFit:
         for f in self.joints:
             if not f.compensated:
                 why = f.warnings[0] if f.verdict == "fit failed" else f"the fit {f.verdict}"
-                out.append(f"{f.joint}: {why}: written with friction.{f.joint}.model: none (no compensation)")
+                written = (
+                    f"compensation.{f.joint}.source: none (its model kept for inspection)"
+                    if f.written_model != "none"
+                    else f"friction.{f.joint}.model: none (no compensation)"
+                )
+                out.append(f"{f.joint}: {why}: written with {written}")
         for f in self.joints:
             skip = 1 if f.verdict == "fit failed" else 0
             out += [f"{f.joint}: {w}" for w in f.warnings[skip:] if not w.startswith("compensation ")]
