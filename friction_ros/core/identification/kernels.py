@@ -29,7 +29,8 @@ alpha``, see docs/coefficients.md); ``F_C = fc``, ``F_S = fs``, ``C = attraction
   (library GMS ``sigma1``, stiffness-proportional): ``F = sum_i beta_i (G_i + s dG_i/dt) + fv v``
   with one more nonlinear coefficient, the time constant ``s = sigma1 / sum_j k_j``.
 
-All kernels use ``prange`` over the population (both cores) and ``cache=True``.
+The Gram kernels use ``prange`` over the population (both cores) when it is large enough, a
+serial compilation of the same code otherwise (:func:`_two_versions`); all use ``cache=True``.
 """
 
 from __future__ import annotations
