@@ -18,7 +18,8 @@ Choice (``kind="auto"``): the exported candidate with the lowest validation NMSE
 a cheaper one (fewer multiply-adds) replaces it when within 5 % (relative); None when none beats
 r = 0. ``rff`` is fitted first (under a second on 10,000 samples); when it does not beat r = 0 the
 MLP (5-11 s of training, most of it on residuals that hold nothing to learn: the realistic and arm
-joints of ``bench/long_logs.py``) is not trained (``report["skipped"]`` says so). Timing is reported, not used (it would make the choice machine-dependent). Measured by
+joints of ``bench/_long_logs.py``) is not trained (``report["skipped"]`` says so). Timing is
+reported, not used (it would make the choice machine-dependent). Measured by
 ``bench/learned_residual.py`` (2-core machine shared with other jobs, Python 3.11; validation = last
 40 % of every run; torque NMSE %, physics alone -> physics + residual; step() median us/sample):
 

@@ -2,7 +2,7 @@
 
 Each row runs ``friction-fit`` with its default models and options in a fresh subprocess (a small
 wrapper process, so the peak RSS is that run's: with ``--jobs 2`` the largest of its processes).
-The logs are the long-log generator's (``bench/long_log_files.py``: the realistic joint's truth at
+The logs are the long-log generator's (``bench/_long_log_files.py``: the realistic joint's truth at
 1 kHz, speed varying over the log; a 7-joint arm bag), written to ``/tmp/long_logs`` when missing.
 
     .venv/bin/python bench/real_data.py --section long_logs
@@ -59,7 +59,7 @@ def ensure_logs() -> None:
     subprocess.check_call(
         [
             sys.executable,
-            str(ROOT / "bench" / "long_log_files.py"),
+            str(ROOT / "bench" / "_long_log_files.py"),
             str(LOGS),
             "--minutes",
             "1",
