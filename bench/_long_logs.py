@@ -83,6 +83,19 @@ def ensure_logs() -> None:
     )
 
 
+def warm_up() -> None:
+    """One short untimed fit: the compiled kernels are built (or loaded) into the numba cache once, as
+    after installing, so no row pays a compilation."""
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "friction_ros.cli.fit", str(LOGS / "arm7_21s"), "--joint", "joint1"]
+        subprocess.run(
+            [*cmd, "--max-samples", "8000", "--no-gate", "--no-plots", "--out", out, "--quiet"],
+            capture_output=True,
+            cwd=str(ROOT),
+            env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+        )
+
+
 def measure(log: str, extra: list[str]) -> dict:
     """One friction-fit run in a fresh process: seconds, peak RSS [MB], exit code, what was used."""
     with tempfile.TemporaryDirectory() as out:
@@ -106,6 +119,7 @@ def measure(log: str, extra: list[str]) -> dict:
 def run(print_table) -> dict:
     """Measure every row; print the table; return the figures for real_data.json."""
     ensure_logs()
+    warm_up()
     out, rows = {}, []
     load_start = os.getloadavg()
     for name, log, n, extra in ROWS:
