@@ -175,7 +175,7 @@ def run(print_table) -> dict:
     )
     for name, fig in out.items():  # what the fit kept of a long log (its own warning, first clause)
         if fig.get("used"):
-            print(f"{name}: {fig['used'].split(': used ', 1)[1].split(' (')[0]} samples used")
+            print(f"{name}: used {fig['used'].split(': used ', 1)[1].split(' (')[0]}")
     print(HOW)
     load_end = os.getloadavg()
     print(
