@@ -5,7 +5,7 @@ cd "$(dirname "$0")/.."
 ./scripts/bootstrap.sh
 mkdir -p bench/results
 for b in bench/*.py; do
-  [ "$(basename "$b")" = "_common.py" ] && continue
+  case "$(basename "$b")" in _*) continue ;; esac  # helper modules (sections, generators)
   echo "== $b"
   .venv/bin/python "$b" "$@"
 done

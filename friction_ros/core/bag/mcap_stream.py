@@ -20,8 +20,9 @@ import numpy as np
 from .contents import TopicData, TopicInfo
 from .errors import BagError
 from .mcap_index import index_matches
-from .mcap_records import CHANNEL, SCHEMA, RecordError, read_channel, read_schema
+from .mcap_records import RecordError
 from .mcap_scan import MAGIC, McapScan
+from .mcap_summary import Summary, parse_summary
 from .msgdef import normalize_type
 from .qos import parse_qos
 
@@ -54,21 +55,12 @@ class _Scan(McapScan):
         self._chunk_index = {}
         self._start_time = None
 
-    def _summary(self, summary: bytes) -> None:
-        """Schemas and channels of an intact summary section (positions relative to its start)."""
-        pos, end = 0, len(summary)
-        while pos + 9 <= end:
-            op, ln = _OPHDR.unpack_from(summary, pos)
-            body, stop = pos + 9, pos + 9 + ln
-            if stop > end:
-                raise RecordError(f"record at summary byte {pos} runs past its end")
-            if op == SCHEMA:
-                sid, schema = read_schema(summary, body, stop)
-                self.schemas[sid] = schema
-            elif op == CHANNEL:
-                cid, channel = read_channel(summary, body, stop)
-                self.channels[cid] = channel
-            pos = stop
+    def _summary(self, summary: bytes, start: int) -> None:
+        """Schemas and channels of an intact summary section (``start``: its offset in the file)."""
+        out = Summary(data_end=start)
+        parse_summary(summary, 0, len(summary), out, base=start)
+        self.schemas.update(out.schemas)
+        self.channels.update(out.channels)
 
     def chunks(self):
         """Yield (decompressed chunk as uint8 array, {channel id: record offsets}) in file order."""
@@ -89,7 +81,7 @@ class _Scan(McapScan):
             if crc and zlib.crc32(summary + foot[:25]) != crc:
                 raise NotStreamable("the summary fails its CRC check")
             try:
-                self._summary(summary)
+                self._summary(summary, start)
             except RecordError as exc:
                 raise NotStreamable(f"damaged summary ({exc})") from None
             if not self.channels:

@@ -74,7 +74,7 @@ def read_summary(data: bytes) -> tuple[Summary | None, str | None]:
     if not start:
         return out, None
     try:
-        _parse(data, start, offsets_start or foot, out)
+        parse_summary(data, start, offsets_start or foot, out)
     except RecordError as exc:
         return None, f"the summary section is damaged ({exc})"
     if out.counts is not None and out.total is not None and sum(out.counts.values()) != out.total:
@@ -82,13 +82,16 @@ def read_summary(data: bytes) -> tuple[Summary | None, str | None]:
     return out, None
 
 
-def _parse(data: bytes, pos: int, end: int, out: Summary) -> None:
+def parse_summary(data: bytes, pos: int, end: int, out: Summary, base: int = 0) -> None:
+    """The summary records in ``data[pos:end]`` into ``out``. ``base``: the file offset of ``data[0]``
+    (a summary section read on its own has ``base`` = its start in the file: byte numbers in errors
+    and the chunk index's bound ``out.data_end`` are the file's)."""
     while pos < end:
         op, ln = unpack(OPHDR, data, pos, end)
         body = pos + 9
         stop = body + ln
         if stop > end:
-            raise RecordError(f"record at byte {pos} runs past the summary's end")
+            raise RecordError(f"record at byte {base + pos} runs past the summary's end")
         if op == SCHEMA:
             sid, schema = read_schema(data, body, stop)
             out.schemas[sid] = schema

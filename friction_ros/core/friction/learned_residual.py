@@ -119,6 +119,9 @@ FEATURE_KEYS = (
 )
 
 
+PREDICT_BLOCK = 16384  # rows per block of predict_features (a 200-wide layer: 26 MB)
+
+
 def feature_settings(section: Mapping | None = None, prefix: str = "residual") -> dict:
     """The feature settings (defaults filled in, validated) from a ``residual`` section or a partial dict."""
     given = {k: v for k, v in (section or {}).items() if k in FEATURE_KEYS}
@@ -344,8 +347,13 @@ class LearnedResidual:
         return min(max(y, self.clip_low), self.clip_high)
 
     def predict_features(self, x: np.ndarray) -> np.ndarray:
-        """r for a feature matrix (shape (N, n)), the same arithmetic as :meth:`step`."""
+        """r for a feature matrix (shape (N, n)), the same arithmetic as :meth:`step` (in blocks of
+        PREDICT_BLOCK rows: a long record's hidden layers would otherwise take N x width floats each)."""
         x = np.asarray(x, dtype=float)
+        if x.shape[0] > PREDICT_BLOCK:
+            return np.concatenate(
+                [self.predict_features(x[i : i + PREDICT_BLOCK]) for i in range(0, x.shape[0], PREDICT_BLOCK)]
+            )
         e = np.maximum(x - self._hi[None, :], self._lo[None, :] - x)
         e = np.where(e > 0.0, e * self._inv_fade[None, :], 0.0)
         worst = e.max(axis=1)

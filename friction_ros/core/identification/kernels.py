@@ -29,15 +29,24 @@ alpha``, see docs/coefficients.md); ``F_C = fc``, ``F_S = fs``, ``C = attraction
   (library GMS ``sigma1``, stiffness-proportional): ``F = sum_i beta_i (G_i + s dG_i/dt) + fv v``
   with one more nonlinear coefficient, the time constant ``s = sigma1 / sum_j k_j``.
 
-All kernels use ``prange`` over the population (both cores) and ``cache=True``.
+The Gram kernels use ``prange`` over the population (both cores) when it is large enough, a
+serial compilation of the same code otherwise (:func:`_two_versions`); all use ``cache=True``.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import types
 
-import numpy as np
-from numba import njit, prange
+# Threads waiting for the next parallel batch sleep instead of spinning: the cores are shared (other
+# fits, other users), and a spinning OpenMP worker takes CPU from the thread that does the work
+# (GNU OpenMP reads this when numba first loads it; a value set by the user is kept).
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+import numba  # noqa: E402
+import numpy as np  # noqa: E402
+from numba import njit, prange  # noqa: E402
 
 
 @njit(cache=True, inline="always")
@@ -59,8 +68,9 @@ def _shape(v, r, vs, delta):
 
 
 @njit(cache=True, inline="always")
-def _accumulate(gram, feats, m):
-    for i in range(m):
+def _accumulate(gram, feats, nphi, m):
+    """Upper triangle of the rows 0..nphi-1 (the parameter-dependent regressors) of the Gram."""
+    for i in range(nphi):
         fi = feats[i]
         for j in range(i, m):
             gram[i, j] += fi * feats[j]
@@ -82,11 +92,35 @@ def _filter_feats(feats, nf, sos, zf):
         feats[i] = x
 
 
-@njit(cache=True, inline="always")
-def _symmetrise(gram, m):
-    for i in range(m):
-        for j in range(i):
-            gram[i, j] = gram[j, i]
+@njit(cache=True)
+def _finish(grams, E, nphi):
+    """Fill every Gram's block of the parameter-free columns ``E^T E`` (one product for the whole
+    population) and mirror the upper triangle."""
+    ete = E.T @ E
+    m = grams.shape[1]
+    for p in range(grams.shape[0]):
+        for i in range(nphi, m):
+            for j in range(i, m):
+                grams[p, i, j] = ete[i - nphi, j - nphi]
+        for i in range(m):
+            for j in range(i):
+                grams[p, i, j] = grams[p, j, i]
+    return grams
+
+
+def _two_versions(f):
+    """(serial, parallel) compilations of one population kernel (``prange`` is ``range`` in the
+    serial one). A parallel launch costs more than a one-candidate simulation of a few thousand
+    samples (Nelder-Mead's calls), and a process that shares the cores with other fits runs
+    one thread: both take the serial version (:func:`_pick`). Each version has its own cache entry."""
+    ser = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__, f.__closure__)
+    ser.__qualname__ = f.__qualname__ + "_serial"
+    return njit(cache=True)(ser), njit(cache=True, parallel=True)(f)
+
+
+def _pick(versions, npop: int):
+    """The parallel version for a population of at least two candidates per thread, else the serial."""
+    return versions[1] if npop >= 2 * numba.get_num_threads() > 2 else versions[0]
 
 
 # ---------------------------------------------------------------------------------- Dahl
@@ -106,13 +140,7 @@ def dahl_features(theta, v, dt):
     return out
 
 
-@njit(cache=True, parallel=True)
-def dahl_gram(P, vm, E, dt, sos):
-    """Gram of [L phi(vm), E]; the states are driven by the interval-mean velocity vm.
-
-    ``E`` (n x q): the columns that do not depend on the parameters, target last: ``[v, a, (load
-    and position terms), tau]``. ``L`` = the causal filter ``sos`` (see :func:`_filter_feats`); pass
-    ``E`` already filtered with the same sections so every column sees the same filter."""
+def _dahl_gram(P, vm, E, dt, sos):
     npop = P.shape[0]
     n = E.shape[0]
     q = E.shape[1]
@@ -133,10 +161,22 @@ def dahl_gram(P, vm, E, dt, sos):
             _filter_feats(feats, 1, sos, zf)
             for j in range(q):
                 feats[1 + j] = E[k, j]
-            _accumulate(gram, feats, m)
-        _symmetrise(gram, m)
+            _accumulate(gram, feats, 1, m)
         grams[p] = gram
-    return grams
+    return _finish(grams, E, 1)
+
+
+_DAHL = _two_versions(_dahl_gram)
+
+
+def dahl_gram(P, vm, E, dt, sos):
+    """Gram of [L phi(vm), E]; the states are driven by the interval-mean velocity vm.
+
+    ``E`` (n x q): the columns that do not depend on the parameters, target last: ``[v, a, (load
+    and position terms), tau]``. ``L`` = the causal filter ``sos`` (see :func:`_filter_feats`); pass
+    ``E`` already filtered with the same sections so every column sees the same filter. Only the
+    rows of ``phi`` are accumulated per candidate; ``E^T E`` is one product (:func:`_finish`)."""
+    return _pick(_DAHL, P.shape[0])(P, vm, E, dt, sos)
 
 
 # ---------------------------------------------------------------------------------- LuGre
@@ -166,9 +206,7 @@ def lugre_features(theta, v, dt):
     return out
 
 
-@njit(cache=True, parallel=True)
-def lugre_gram(P, vm, E, dt, sos):
-    """Gram of [L phi(vm), E] (see :func:`dahl_gram`)."""
+def _lugre_gram(P, vm, E, dt, sos):
     npop = P.shape[0]
     n = E.shape[0]
     q = E.shape[1]
@@ -187,10 +225,17 @@ def lugre_gram(P, vm, E, dt, sos):
             _filter_feats(feats, 2, sos, zf)
             for j in range(q):
                 feats[2 + j] = E[k, j]
-            _accumulate(gram, feats, m)
-        _symmetrise(gram, m)
+            _accumulate(gram, feats, 2, m)
         grams[p] = gram
-    return grams
+    return _finish(grams, E, 2)
+
+
+_LUGRE = _two_versions(_lugre_gram)
+
+
+def lugre_gram(P, vm, E, dt, sos):
+    """Gram of [L phi(vm), E] (see :func:`dahl_gram`)."""
+    return _pick(_LUGRE, P.shape[0])(P, vm, E, dt, sos)
 
 
 # ---------------------------------------------------------------------------------- GMS
@@ -240,15 +285,7 @@ def gms_features(theta, v, dt, damped=False):
     return out
 
 
-@njit(cache=True, parallel=True)
-def gms_gram(P, vm, E, dt, sos, damped=False):
-    """Gram of [L phi(vm), E] (see :func:`dahl_gram`).
-
-    ``damped``: the last column of P is the presliding damping time constant
-    ``s = sigma1 / sum_j k_j`` [s] and each regressor is ``G_i + s dG_i/dt``, with dG_i/dt the
-    backward difference over the sample as in the library GMS (F_damp = (sigma1 / sum_j k_j)
-    sum_i dF_i/dt, dF_i/dt = (F_i(t) - F_i(t - h)) / h): since F_i = beta_i G_i and k_i = beta_i /
-    x_i, the damping force is ``sum_i beta_i s dG_i/dt`` and the element weights stay linear."""
+def _gms_gram(P, vm, E, dt, sos, damped=False):
     npop = P.shape[0]
     n = E.shape[0]
     q = E.shape[1]
@@ -278,10 +315,23 @@ def gms_gram(P, vm, E, dt, sos, damped=False):
             _filter_feats(feats, ne, sos, zf)
             for j in range(q):
                 feats[ne + j] = E[k, j]
-            _accumulate(gram, feats, m)
-        _symmetrise(gram, m)
+            _accumulate(gram, feats, ne, m)
         grams[p] = gram
-    return grams
+    return _finish(grams, E, ne)
+
+
+_GMS = _two_versions(_gms_gram)
+
+
+def gms_gram(P, vm, E, dt, sos, damped=False):
+    """Gram of [L phi(vm), E] (see :func:`dahl_gram`).
+
+    ``damped``: the last column of P is the presliding damping time constant
+    ``s = sigma1 / sum_j k_j`` [s] and each regressor is ``G_i + s dG_i/dt``, with dG_i/dt the
+    backward difference over the sample as in the library GMS (F_damp = (sigma1 / sum_j k_j)
+    sum_i dF_i/dt, dF_i/dt = (F_i(t) - F_i(t - h)) / h): since F_i = beta_i G_i and k_i = beta_i /
+    x_i, the damping force is ``sum_i beta_i s dG_i/dt`` and the element weights stay linear."""
+    return _pick(_GMS, P.shape[0])(P, vm, E, dt, sos, damped)
 
 
 # ---------------------------------------------------------------- seed 001 unity-feedback loop

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
@@ -222,6 +223,14 @@ def fit_one_joint(task: dict) -> JointFit:
         )
     out.seconds = time.perf_counter() - t0
     return out
+
+
+def _worker_threads(threads: int) -> None:
+    """Pool worker set-up: its share of the cores for the compiled fit kernels (the workers already
+    run side by side: two workers with two threads each on two cores would contend for them)."""
+    import numba
+
+    numba.set_num_threads(threads)
 
 
 # ------------------------------------------------------------------------------------ parameter file
@@ -429,7 +438,11 @@ def fit_joints(
 
         # spawn: a fresh interpreter per worker (no fork of a process with threads)
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), mp_context=ctx) as pool:
+        workers = min(jobs, len(tasks))
+        threads = max(1, (os.cpu_count() or 1) // workers)
+        with ProcessPoolExecutor(
+            max_workers=workers, mp_context=ctx, initializer=_worker_threads, initargs=(threads,)
+        ) as pool:
             futures = [pool.submit(fit_one_joint, t) for t in tasks]
             for fut in futures:  # joint order, whatever order they finish in
                 fits.append(fut.result())

@@ -6,7 +6,7 @@ trajectory is that module's band-limited multisine with its amplitude modulated 
 ``envelope_period``), so the speed varies over the log as in a real session (slow and fast stretches),
 and still has exact derivatives (the modulation is a sum of sinusoids too).
 
-    python bench/long_log_files.py /tmp/long_logs --minutes 1 10 60 --arm
+    python bench/_long_log_files.py /tmp/long_logs --minutes 1 10 60 --arm
 """
 
 from __future__ import annotations
