@@ -256,9 +256,8 @@ def test_auto_load_terms_that_do_not_help_the_model_are_dropped():
 
 def test_a_pendulum_log_fits_with_the_default_options(tmp_path):
     """A hand-moved real pendulum (torque = gravity compensation): the default ``--load auto`` picks
-    gravity and the fit succeeds. Two rules used to defeat it: the log's steady stretches were taken
-    for an experiment's plateaus (auto then chose no load terms), and the check that the terms help
-    the recommended model failed outright when nothing could be fitted without them."""
+    gravity and the fit succeeds (the check that the terms help the recommended model used to fail
+    outright when nothing could be fitted without them)."""
     import json
 
     from friction_ros.cli.fit import main

@@ -329,10 +329,8 @@ def terms_for_fit(load, plateaus, train, val, ripple_period, load_eps, eps, join
         load_eps = max(eps, 3.0 * noise, 3.0 * quantization_velocity_noise(r))
     terms = load
     if isinstance(load, str):
-        if load == "auto" and sum(p.source == "events" for p in plateaus) >= 3:
-            # an identification experiment with marked plateaus: its load offset is measured on them;
-            # stretches of steady speed found in any other log (a swinging pendulum) are no such thing
-            terms = "none"
+        if load == "auto" and len(plateaus) >= 3:
+            terms = "none"  # an experiment with plateaus: its load offset is measured on them
         terms = parse_terms(terms, ripple_period=ripple_period, eps=load_eps)
     angle_terms = ("gravity", "ripple")  # functions of an angle: a revolute joint's only
     if terms == "auto":
