@@ -86,6 +86,8 @@ def test_every_preset_completes_with_every_mode_enabled_or_refused(all_presets):
             assert isinstance(r["reason"], str) and r["reason"], (name, m, r)
             if r["enabled"]:
                 assert r["rms_mrad"] <= 1.02 * none["rms_mrad"], (name, m, r, none)
+                # the run-time watch never fires on a file friction-fit wrote (every preset, lockstep)
+                assert r["fallback_s"] is None, (name, m, r)
             assert p["gate"][m]["enabled"] == r["enabled"]
         # every table names every mode with its state
         assert re.search(rf"\[{name}\] Model chosen: \w+", proc.stdout)
