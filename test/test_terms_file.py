@@ -22,4 +22,4 @@ def test_rows_round_trip_exactly_and_a_cut_row_is_skipped(tmp_path):
     assert list(cols) == list(COLUMNS)
     assert cols["stamp_ns"] == [0, 1_000_000, 2_000_000, 3_000_000, 4_000_000]
     assert cols["command"] == written  # repr() round-trips floats bit for bit
-    assert cols["joint"] == ["joint1"] * 5
+    assert cols["joint"] == ["joint1"] * 5 and cols["compensation_fallback"] == [0.0] * 5

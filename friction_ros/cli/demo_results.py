@@ -36,6 +36,8 @@ class TrackingRun:
     enabled: bool = True
     reason: str = ""
     metrics: dict = field(default_factory=dict)
+    #: 1 where the controller's compensation watch had switched compensation off (terms file)
+    fallback: np.ndarray | None = None
 
     @property
     def rms(self) -> float:
@@ -51,7 +53,11 @@ class TrackingRun:
 
     def fallback_time(self) -> float | None:
         """Time after which the friction terms stayed exactly zero while they were active before
-        (the controller's run-time limit-cycle fallback), else None."""
+        (the controller's run-time limit-cycle fallback), else None; from the controller's own record
+        of the fallback when the run has it."""
+        if self.fallback is not None:
+            on = np.nonzero(self.fallback > 0)[0]
+            return float(self.t[on[0]]) if on.size else None
         active = self.friction != 0.0
         if not active.any() or active[-1]:
             return None

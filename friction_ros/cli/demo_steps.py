@@ -239,6 +239,7 @@ def _track_once(
         error=col("error"),
         command=col("command"),
         friction=col("friction_feedforward") + col("friction_feedback"),
+        fallback=col("compensation_fallback"),
         wall_seconds=wall,
     )
 

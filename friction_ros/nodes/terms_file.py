@@ -3,8 +3,9 @@
 A subscriber of ``controller_state`` that falls behind (a busy machine, a slow reader) loses
 messages once the publisher's history is full; the controller's own file cannot: one row per
 computed period (a lockstep re-send of a duplicate state is not a new period), written through a
-buffer and flushed when the node ends. Columns: ``stamp_ns``, ``joint`` and the float fields of
-friction_msgs/ControllerState (SI units). Used by ``friction-demo`` for figures that do not depend
+buffer and flushed when the node ends. Columns: ``stamp_ns``, ``joint``, the float fields of
+friction_msgs/ControllerState (SI units) and ``compensation_fallback`` (1 once the compensation
+watch switched compensation off). Used by ``friction-demo`` for figures that do not depend
 on the machine's load.
 """
 
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 from friction_ros.core.wire import CONTROLLER_STATE_FLOATS
 
-COLUMNS = ("stamp_ns", "joint", *CONTROLLER_STATE_FLOATS)
+COLUMNS = ("stamp_ns", "joint", *CONTROLLER_STATE_FLOATS, "compensation_fallback")
 
 
 class TermsFile:
@@ -24,7 +25,7 @@ class TermsFile:
 
     def add(self, stamp_ns: int, joint: str, terms) -> None:
         values = ",".join(repr(float(getattr(terms, k))) for k in CONTROLLER_STATE_FLOATS)
-        self._fh.write(f"{stamp_ns},{joint},{values}\n")
+        self._fh.write(f"{stamp_ns},{joint},{values},{int(terms.compensation_fallback)}\n")
 
     def close(self) -> None:
         if not self._fh.closed:
