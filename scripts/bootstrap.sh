@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Idempotent set-up of the development environment (no ROS apt repository needed):
 #   1. .venv with pinned ROS 2 Jazzy wheels and Python dependencies (requirements.txt)
-#   2. the CMake path fix for the wheels' exported targets (see README "Layout")
+#   2. the CMake path fix for the wheels' exported targets (see docs/development.md)
 #   3. colcon build of the interface package msg_defs/friction_msgs, installed into the venv prefix
 #   4. friction_ros installed in editable mode so its entry points are on the venv PATH
 # Every step is skipped when its inputs did not change, so a second run takes about a second.

@@ -101,7 +101,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="bag directory (default bags/experiment_<preset>_<date>)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing bag directory")
     p.add_argument("--joint", default="joint1", help="joint name (%(default)s)")
-    arm = p.add_argument_group("an arm (several joints; see 'Experiments on an arm' in the README)")
+    arm = p.add_argument_group("an arm (several joints; see 'Experiments on an arm' in docs/workflows.md)")
     arm.add_argument(
         "--joints",
         metavar="J1,J2,...",

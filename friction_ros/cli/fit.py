@@ -122,7 +122,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="preset whose plant parameters the plant_simulator section starts from (e.g. abb_m19s)",
     )
     p.add_argument(
-        "--train-seconds", type=float, default=10.0, help="training window per record [s] (seed 003: 10)"
+        "--train-seconds",
+        type=float,
+        default=10.0,
+        help="training window per record [s] (10, as in the friction-characterization paper: docs/sources.md)",
     )
     p.add_argument(
         "--max-samples",
@@ -137,7 +140,7 @@ def build_parser() -> argparse.ArgumentParser:
         default="content",
         help="training data: chunks chosen by content so training and validation both hold reversals, high "
         "and low speeds (content, default), the single most exciting --train-seconds window (window), or "
-        "the first --train-seconds (first, seed 003)",
+        "the first --train-seconds (first, as in the friction-characterization paper)",
     )
     p.add_argument(
         "--current-lag",
@@ -162,7 +165,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--optimizer",
         choices=["de", "ga"],
         default="de",
-        help="global optimiser: differential evolution or seed 001's GA",
+        help="global optimiser: differential evolution or the genetic algorithm of the GA friction-modelling "
+        "thesis (docs/sources.md)",
     )
     p.add_argument(
         "--maxiter", type=int, default=None, help="global-search generations (default 40 + 15 x dimension)"
