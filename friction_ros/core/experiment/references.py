@@ -34,6 +34,7 @@ its validation and the config factory, and each is short; a reader compares them
 
 from __future__ import annotations
 
+import inspect
 import math
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -527,8 +528,6 @@ def reference_from_config(config: Mapping[str, Any] | Reference) -> Reference:
     cfg = dict(config)
     kind = check_choice("reference.type", cfg.pop("type", None), REFERENCE_TYPES)
     cls = _TYPES[kind]
-    import inspect
-
     allowed = ["offset", "start_time"] + [
         p for p in inspect.signature(cls.__init__).parameters if p not in ("self", "kw")
     ]

@@ -26,9 +26,11 @@ from __future__ import annotations
 
 import json
 import math
+import multiprocessing
 import os
 import time
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -433,9 +435,6 @@ def fit_joints(
     ]
     fits: list[JointFit] = []
     if jobs > 1 and len(tasks) > 1:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
         # spawn: a fresh interpreter per worker (no fork of a process with threads)
         ctx = multiprocessing.get_context("spawn")
         workers = min(jobs, len(tasks))
