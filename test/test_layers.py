@@ -145,3 +145,27 @@ def test_function_level_third_party_imports_are_heavy_optional_ones():
                 kind = "standard library" if top in sys.stdlib_module_names else "not in LAZY_THIRD_PARTY"
                 bad.append(f"{mod}:{imp.line} imports {imp.module} in a function ({kind})")
     assert not bad, "\n".join(sorted(bad))
+
+
+def test_no_package_module_over_500_lines():
+    """Every module of the package stays under 500 lines (split by concept when it grows)."""
+    long = {m: n for m, p in package_modules().items() if (n := len(p.read_text().splitlines())) > 500}
+    assert not long, f"modules over 500 lines: {long}"
+
+
+def test_one_flatten():
+    """Nested config -> dotted names has one implementation (core.config.flatten)."""
+    import ast
+
+    defs = [
+        f"{m}.{node.name}"
+        for m, p in package_modules().items()
+        for node in ast.walk(ast.parse(p.read_text()))
+        if isinstance(node, ast.FunctionDef) and node.name.lstrip("_") == "flatten"
+    ]
+    assert defs == ["friction_ros.core.config.flatten"]
+    from friction_ros.core.config import flatten
+
+    nested = {"pid": {"p": 2.0, "i": None}, "joints": ["j1"]}
+    assert flatten(nested) == {"pid.p": 2.0, "joints": ["j1"]}
+    assert flatten(nested, keep_none=True) == {"pid.p": 2.0, "pid.i": None, "joints": ["j1"]}
