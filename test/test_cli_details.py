@@ -16,7 +16,7 @@ from friction_ros.cli.demo_report import print_table
 from friction_ros.cli.demo_results import DemoResult, TrackingRun, refusal_warning
 from friction_ros.cli.fit_summary import print_summary
 from friction_ros.cli.reasons import footnotes, format_values, grouped
-from friction_ros.core.control.compensation_gate import Verdict
+from friction_ros.core.compensation_gate import Verdict
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
 
 LONG = (

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
+from friction_ros.core.compensation_gate import gate_modes, perturbations
 from friction_ros.core.control.compensation import FrictionCompensator
-from friction_ros.core.control.compensation_gate import gate_modes, perturbations
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.experiment.joint_scale import JointScale
 from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from import_scan import import_graph, imports
 
 ROOT = Path(__file__).resolve().parents[1]
 MSG_TYPES = ["DriveState", "FrictionEstimate", "ControllerState", "ExperimentEvent"]
@@ -34,44 +35,13 @@ ROS_PACKAGES = (
 )
 
 
-def _module_name(path: Path) -> str:
-    parts = list(path.relative_to(ROOT).with_suffix("").parts)
-    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
-
-
 def _imports(path: Path) -> list[tuple[int, str, str | None]]:
-    """Every import statement of a module, also inside functions and classes:
-    ``(line, module, imported name or None)``, relative imports resolved to absolute names."""
-    tree = ast.parse(path.read_text(), str(path))
-    name = _module_name(path)
-    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
-    out = []
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            out += [(node.lineno, a.name, None) for a in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            base = node.module or ""
-            if node.level:
-                base = ".".join(
-                    package[: len(package) - node.level + 1] + ([node.module] if node.module else [])
-                )
-            out += [(node.lineno, base, a.name) for a in node.names]
-    return out
+    """Every import statement of a module, also inside functions: ``(line, module, name or None)``."""
+    return [(imp.line, imp.module, imp.name) for imp in imports(path)]
 
 
 def _import_graph() -> dict[str, set[str]]:
-    """Static import graph of friction_ros: module -> the friction_ros modules it imports (a
-    ``from package import name`` counts as importing ``package.name`` when that is a module)."""
-    paths = {_module_name(p): p for p in (ROOT / "friction_ros").rglob("*.py")}
-    graph: dict[str, set[str]] = {}
-    for mod, path in paths.items():
-        targets = set()
-        for _, module, name in _imports(path):
-            target = f"{module}.{name}" if name and f"{module}.{name}" in paths else module
-            if target in paths and target != mod:
-                targets.add(target)
-        graph[mod] = targets
-    return graph
+    return import_graph()
 
 
 def test_pure_core_imports_without_rclpy():
@@ -142,7 +112,11 @@ def test_import_graph_has_no_circles():
 def test_import_graph_sees_function_level_imports():
     """The graph the circle test walks includes imports inside functions (a lazy import is an edge)."""
     graph = _import_graph()
-    assert "friction_ros.core.control.compensation" in graph["friction_ros.core.estimation.estimator"]
+    lazy = import_graph(module_level_only=True)
+    # the controller's compensation loads the friction models on first use (their compiled kernels)
+    edge = "friction_ros.core.friction.registry"
+    assert edge in graph["friction_ros.core.control.compensation"]
+    assert edge not in lazy["friction_ros.core.control.compensation"]
 
 
 @pytest.mark.ros

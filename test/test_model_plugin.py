@@ -28,7 +28,8 @@ import yaml
 
 from friction_ros.core.config import Field
 from friction_ros.core.friction import StaticModel, make_model
-from friction_ros.core.identification.fit_model import Coef, FitModel, fit_model, register_fit_model
+from friction_ros.core.identification.fit_model import Coef, FitModel, register_fit_model
+from friction_ros.core.identification.fit_registry import fit_model
 from friction_ros.core.synthetic_logs.tables import GauntletLog, scaled_sines
 
 TRUTH = {"fc": 0.5, "vt": 0.05, "fv": 0.1}  # [N*m], [rad/s], [N*m*s/rad]

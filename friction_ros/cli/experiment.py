@@ -62,7 +62,6 @@ import yaml
 from friction_ros.cli.bringup import Bringup, NodeSpec
 from friction_ros.cli.experiment_arm import arm_setup
 from friction_ros.cli.experiment_config import (
-    flatten,
     nest,
     node_values,
     parse_sets,
@@ -71,6 +70,7 @@ from friction_ros.cli.experiment_config import (
 )
 from friction_ros.cli.experiment_summary import summarize
 from friction_ros.cli.state_watch import FirstStateWatch, no_state_reason
+from friction_ros.core.config import flatten
 from friction_ros.core.experiment.arm import SEQUENCES
 from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCITED, ExcitationProgram
 from friction_ros.core.experiment.excitation_config import PROFILES, PROGRAM_NAMES, resolve_config
@@ -192,7 +192,7 @@ def main(argv: list[str] | None = None) -> int:
 
                 preset_obj = load_preset(preset)
             sized = sized_config(args, preset_obj, sets)
-            sized_flat = typed_like_defaults(flatten(sized), args.profile)
+            sized_flat = typed_like_defaults(flatten(sized, keep_none=True), args.profile)
             sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
             core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets})}
             # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)

@@ -24,7 +24,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from friction_ros.cli.experiment_config import flatten, nest, node_values, sized_config, typed_like_defaults
+from friction_ros.cli.experiment_config import nest, node_values, sized_config, typed_like_defaults
+from friction_ros.core.config import flatten
 from friction_ros.core.joint_config import JointLayout, check_joint_list
 from friction_ros.core.validation import ParameterError
 
@@ -60,7 +61,7 @@ def file_section(paths: list[str], node: str) -> dict[str, Any]:
         for key, value in d.items():
             if key == "ros__parameters":
                 if name.split("/")[-1] in (node, "**") and isinstance(value, dict):
-                    out.update(flatten(value))
+                    out.update(flatten(value, keep_none=True))
             elif isinstance(value, dict):
                 walk(value, str(key))
 
@@ -159,7 +160,7 @@ def arm_setup(args, sets: dict[str, Any]) -> ArmSetup | None:
         try:
             load = start_load(pobj, q0) if pobj is not None else None
             sized = sized_config(args, pobj, sets_j, load=load)
-            sized_flat = typed_like_defaults(flatten(sized), args.profile)
+            sized_flat = typed_like_defaults(flatten(sized, keep_none=True), args.profile)
             sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
             core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets_j})}
             program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets_j)))

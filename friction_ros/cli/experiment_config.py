@@ -3,6 +3,7 @@ probe values), and the node parameter values that carry both."""
 
 from __future__ import annotations
 
+from friction_ros.core.config import flatten
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.yaml_files import YamlLimitError, parse_yaml
 
@@ -103,22 +104,12 @@ def sized_config(args, preset, sets: dict | None = None, load: float | None = No
     return experiment_config(scale, args.profile)
 
 
-def flatten(d: dict, prefix: str = "") -> dict:
-    out: dict = {}
-    for k, v in d.items():
-        if isinstance(v, dict):
-            out.update(flatten(v, f"{prefix}{k}."))
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 def node_values(config: dict, profile: str, sized_flat: dict) -> dict:
     """The experiment node's parameters: the sized values and whatever the limits fit changed."""
     from friction_ros.core.experiment.excitation_config import SECTIONS, profile_defaults
 
-    base = flatten({s: profile_defaults(profile)[s] for s in SECTIONS})
-    fitted = flatten({s: config[s] for s in SECTIONS})
+    base = flatten({s: profile_defaults(profile)[s] for s in SECTIONS}, keep_none=True)
+    fitted = flatten({s: config[s] for s in SECTIONS}, keep_none=True)
     changed = {k: v for k, v in fitted.items() if base.get(k) != v and k not in sized_flat}
     out = dict(sized_flat)
     out.update({k: fitted[k] for k in sized_flat if k in fitted})
@@ -131,7 +122,7 @@ def typed_like_defaults(flat: dict, profile: str) -> dict:
     a double is declared is refused)."""
     from friction_ros.core.experiment.excitation_config import profile_defaults
 
-    base = flatten(profile_defaults(profile))
+    base = flatten(profile_defaults(profile), keep_none=True)
     out = {}
     for k, v in flat.items():
         ref = base.get(k)

@@ -242,15 +242,15 @@ class Schema:
         return out
 
 
-def flatten(config: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+def flatten(config: Mapping[str, Any], prefix: str = "", *, keep_none: bool = False) -> dict[str, Any]:
     """Nested config -> dotted names (``{'pid': {'p': 1}} -> {'pid.p': 1}``); None values are dropped
-    (a ROS parameter cannot be None)."""
+    (a ROS parameter cannot be None) unless ``keep_none``."""
     flat: dict[str, Any] = {}
     for key, value in config.items():
         name = f"{prefix}{key}"
         if isinstance(value, Mapping):
-            flat.update(flatten(value, name + "."))
-        elif value is not None:
+            flat.update(flatten(value, name + ".", keep_none=keep_none))
+        elif value is not None or keep_none:
             flat[name] = value
     return flat
 

@@ -10,6 +10,8 @@ import math
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+import numpy as np
+
 
 class ParameterError(ValueError):
     """A parameter is missing, of the wrong type or outside its allowed range."""
@@ -43,8 +45,6 @@ def check_real(
     allowed = range_text(lo, hi, lo_open, hi_open)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         try:
-            import numpy as np
-
             if isinstance(value, np.generic) and np.isreal(value):
                 value = float(value)
             else:

@@ -21,6 +21,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from ..config import flatten
 from ..wire.cdr import ORIGIN, Writer, encapsulation
 from .errors import CdrError, SchemaError
 from .msgdef import PRIMITIVES, STRINGS, MsgDef
@@ -157,16 +158,6 @@ def _vectorizable(defs: Mapping[str, MsgDef], tname: str) -> bool:
     return bool(defs[tname].fields)
 
 
-def _flatten(d: dict, prefix: str = "", out: dict | None = None) -> dict:
-    out = {} if out is None else out
-    for k, v in d.items():
-        if isinstance(v, dict):
-            _flatten(v, f"{prefix}{k}.", out)
-        else:
-            out[f"{prefix}{k}"] = v
-    return out
-
-
 class _Columns:
     """Collects per-group values and assembles one column per field in message order."""
 
@@ -267,7 +258,7 @@ def _merge_ranges(ranges: list[tuple[int, int]]) -> list[tuple[int, int]]:
 
 
 def _add_generic(cols: _Columns, defs, tname: str, data, i: int) -> None:
-    flat = _flatten(decode(defs, tname, data))
+    flat = flatten(decode(defs, tname, data), keep_none=True)
     idx = np.array([i])
     for path, v in flat.items():
         if isinstance(v, np.ndarray):

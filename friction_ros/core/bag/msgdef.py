@@ -10,6 +10,7 @@ Installed definitions are found under ``<prefix>/share/<pkg>/msg/<Type>.msg`` fo
 from __future__ import annotations
 
 import functools
+import importlib.util
 import json
 import os
 import re
@@ -154,8 +155,6 @@ def _prefixes(package: str) -> list[Path]:
             out.append(Path(p))
     out.append(Path(sys.prefix))
     try:  # the prefix a Python message package is installed in: <prefix>/lib/pythonX.Y/site-packages/pkg
-        import importlib.util
-
         spec = importlib.util.find_spec(package)
         if spec and spec.origin:
             out.append(Path(spec.origin).resolve().parents[4])

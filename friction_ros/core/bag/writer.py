@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import os
 import time
+from importlib.metadata import version
 from pathlib import Path
 
 import yaml
@@ -54,8 +55,6 @@ COMPRESSIONS = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none"
 
 def package_version() -> str:
     try:
-        from importlib.metadata import version
-
         return version("friction_ros")
     except Exception:  # noqa: BLE001 - not installed as a distribution
         return "unknown"

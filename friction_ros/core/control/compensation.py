@@ -82,18 +82,11 @@ COMPENSATION_DEFAULTS: dict[str, Any] = {
 
 
 def build_model(model: Any, name: str = "friction.model"):
-    """Return a fresh library model from a model config dict or a model instance (None -> None)."""
-    if model is None:
-        return None
-    from friction_ros.core.friction import model_from_config
+    """:func:`friction_ros.core.friction.registry.build_model`, imported on first use (the models
+    load their compiled kernels)."""
+    from friction_ros.core.friction.registry import build_model as build
 
-    if hasattr(model, "to_config"):
-        return model_from_config(model.to_config())
-    if not isinstance(model, Mapping):
-        raise ParameterError(f"{name} = {model!r} must be a model config dict with a 'model' key")
-    if not model or model.get("model") in (None, "", "none"):
-        return None
-    return model_from_config(dict(model))
+    return build(model, name)
 
 
 def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:

@@ -179,7 +179,7 @@ class OnlineFrictionEstimator:
         self.rls = None
         self.lugre = None
         if self.model_name not in ADAPTED:  # lugre: the observer (ESTIMATOR_MODELS has no other)
-            from friction_ros.core.control.compensation import build_model
+            from friction_ros.core.friction.registry import build_model  # loads the models' kernels
 
             if not cfg["lugre"]:
                 raise ParameterError(f"{n}.lugre is missing: model = lugre needs a LuGre model config")

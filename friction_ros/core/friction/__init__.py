@@ -24,6 +24,7 @@ _EXPORTS = {
     "DYNAMIC_MODEL_NAMES": "registry",
     "MODEL_CLASSES": "registry",
     "MODEL_NAMES": "registry",
+    "build_model": "registry",
     "STATIC_MODEL_NAMES": "registry",
     "make_model": "registry",
     "model_from_config": "registry",

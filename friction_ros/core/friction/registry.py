@@ -55,3 +55,16 @@ def model_from_config(config: Mapping[str, Any] | FrictionModel | None) -> Frict
     cfg = dict(config)
     name = cfg.pop("model")
     return make_model(name, **cfg)
+
+
+def build_model(model: Any, name: str = "friction.model"):
+    """Return a fresh library model from a model config dict or a model instance (None -> None)."""
+    if model is None:
+        return None
+    if hasattr(model, "to_config"):
+        return model_from_config(model.to_config())
+    if not isinstance(model, Mapping):
+        raise ParameterError(f"{name} = {model!r} must be a model config dict with a 'model' key")
+    if not model or model.get("model") in (None, "", "none"):
+        return None
+    return model_from_config(dict(model))

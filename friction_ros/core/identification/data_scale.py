@@ -19,6 +19,7 @@ is ``b * velocity_scale`` too (position unit = velocity unit x 1 s).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -73,8 +74,6 @@ def torque_scale(data) -> float:
 
 def with_scale(records, scale: DataScale):
     """The records with the scales in their meta (new JointData objects; arrays shared)."""
-    import dataclasses
-
     return [
         dataclasses.replace(r, meta={**r.meta, VELOCITY_KEY: scale.velocity, TORQUE_KEY: scale.torque})
         for r in records

@@ -29,7 +29,7 @@ def library_config(
 ) -> dict | None:
     """The library ``to_config()`` dict for a fitted model (None for learned models): the model's
     :meth:`~friction_ros.core.identification.fit_model.FitModel.library_config`."""
-    from friction_ros.core.identification.fit_model import fit_model
+    from friction_ros.core.identification.fit_registry import fit_model
     from friction_ros.core.identification.models import LEARNED
 
     if name in LEARNED:

@@ -141,7 +141,6 @@ class FitModel:
 
 # ---------------------------------------------------------------------------------------- registry
 _REGISTRY: dict[str, type[FitModel]] = {}
-_PLUGINS_LOADED = False
 ENTRY_POINT_GROUP = "friction_ros.fit_models"
 
 
@@ -156,44 +155,3 @@ def register_fit_model(cls: type[FitModel], *, library_class=None) -> type[FitMo
 
         register_model(library_class)
     return cls
-
-
-def _builtins() -> None:
-    from friction_ros.core.identification import fit_families  # noqa: F401 (registers on import)
-
-
-def _load_plugins() -> None:
-    """Register the classes named in the ``friction_ros.fit_models`` entry-point group (once)."""
-    global _PLUGINS_LOADED
-    if _PLUGINS_LOADED:
-        return
-    _PLUGINS_LOADED = True
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        obj = ep.load()
-        if isinstance(obj, type) and issubclass(obj, FitModel) and obj.family not in _REGISTRY:
-            register_fit_model(obj)
-
-
-def model_help() -> str:
-    """Every registered model name form, for messages."""
-    _builtins()
-    return ", ".join(c.help or c.family for c in _REGISTRY.values())
-
-
-def fit_model(name: str) -> FitModel:
-    """The FitModel instance for model ``name`` (ParameterError naming the allowed ones)."""
-    _builtins()
-    for attempt in range(2):
-        for cls in list(_REGISTRY.values()):
-            m = cls.parse(name)
-            if m is not None:
-                return m
-        if attempt == 0:
-            _load_plugins()
-    from friction_ros.core.identification.models import LEARNED
-
-    raise ParameterError(
-        f"model = {name!r} is not allowed: must be one of {model_help()}, {', '.join(LEARNED)}"
-    )

@@ -3,7 +3,7 @@
 :func:`gate_fit` builds the identified plant's scale (the fitted inertia, the recommended model's
 breakaway and the data's encoder resolution and sample period, plus the current-loop lag and
 delays the user measured), derives the tracking gains and a reference from it
-(:mod:`friction_ros.core.experiment.tracking_design`) and runs :func:`friction_ros.core.control.compensation_gate.gate_modes`.
+(:mod:`friction_ros.core.experiment.tracking_design`) and runs :func:`friction_ros.core.compensation_gate.gate_modes`.
 The verdicts are kept in ``FitResult.gate`` and in the options the parameter document is built
 with, so the written file enables only modes that passed.
 """
@@ -11,10 +11,11 @@ with, so the written file enables only modes that passed.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
-from friction_ros.core.control.compensation_gate import MODES, Verdict, gate_modes
+from friction_ros.core.compensation_gate import MODES, Verdict, gate_modes
 from friction_ros.core.identification.data_scale import velocity_scale
 
 
@@ -77,8 +78,6 @@ def gate_fit(
                     load=-float(res.options.get("load_offset", 0.0) or 0.0),
                 )
             else:
-                from dataclasses import replace
-
                 scale = replace(scale, inertia=J)
             gains = dict(gains or tracking_gains(scale))
             reference = dict(reference or tracking_reference(scale, 4.0))

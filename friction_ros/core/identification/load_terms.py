@@ -265,8 +265,6 @@ def with_transmitted(records, inertia: float, load: JointLoad):
     """The records with ``transmitted`` set from ``inertia`` and ``load`` (:func:`transmitted_torque`);
     a record that carries a measured transmitted torque (``meta["transmitted_source"]``: a CSV
     ``load`` column) keeps it."""
-    import dataclasses
-
     return [
         r
         if r.meta.get("transmitted_source")

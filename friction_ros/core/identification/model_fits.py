@@ -12,7 +12,7 @@ import numpy as np
 from friction_ros.core.identification import export, identifiability
 from friction_ros.core.identification.data_scale import velocity_scale
 from friction_ros.core.identification.dynamic_fit import DynamicFit
-from friction_ros.core.identification.fit_model import fit_model
+from friction_ros.core.identification.fit_registry import fit_model
 from friction_ros.core.identification.fit_results import ModelResult
 from friction_ros.core.identification.records import concat_records
 from friction_ros.core.identification.static_fit import StaticFit, fit_plateaus, stribeck_map

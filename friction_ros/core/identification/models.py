@@ -24,11 +24,10 @@ from scipy import signal
 
 from friction_ros.core.identification.fit_model import (  # noqa: F401 (mid_velocity, sat_sign re-exported)
     FitModel,
-    fit_model,
     mid_velocity,
-    model_help,
     sat_sign,
 )
+from friction_ros.core.identification.fit_registry import LEARNED, fit_model, model_help
 from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.validation import ParameterError
 
@@ -289,9 +288,6 @@ class FitSpec:
                 if nme in vals and vals[nme] is not None:
                     theta[i] = vals[nme]
         return np.clip(theta, self.lower, self.upper)
-
-
-LEARNED = ("anfis", "nusvr")
 
 
 def spec_for(name: str, eps: float = DEFAULT_EPS, velocity_scale: float = 1.0) -> FitSpec:

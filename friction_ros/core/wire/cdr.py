@@ -155,3 +155,49 @@ def compile_template_plan(
     if st.size != len(buf):
         raise ValueError("slots do not tile the template")
     return st, plan
+
+
+class Reader:
+    """Sequential reader of a CDR payload, the inverse of :class:`Writer` for any encapsulation of
+    :data:`ENCAPSULATIONS` (a field of size s is aligned to min(s, maximum alignment) from
+    :data:`ORIGIN`; an empty sequence adds no padding). Malformed input raises ``ValueError``."""
+
+    def __init__(self, data) -> None:
+        if len(data) < 4:
+            raise ValueError(f"payload of {len(data)} byte(s) is shorter than the 4-byte CDR header")
+        enc = encapsulation(data)
+        if enc is None:
+            raise ValueError(
+                f"unsupported CDR encapsulation {bytes(data[:2]).hex()}: supported are 0000/0001 (CDR) and "
+                "0006/0007 (plain XCDR2)"
+            )
+        self.data = bytes(data)
+        self.order, self.max_align = enc
+        self.pos = ORIGIN
+
+    def get(self, fmt: str, align: int) -> tuple:
+        """Unpack ``fmt`` (struct format without byte order) aligned to ``align`` bytes."""
+        self.pos += padding(self.pos - ORIGIN, min(align, self.max_align))
+        st = struct.Struct(self.order + fmt)
+        if self.pos + st.size > len(self.data):
+            raise ValueError(
+                f"payload too short: {st.size} byte(s) needed at offset {self.pos}, has {len(self.data)}"
+            )
+        values = st.unpack_from(self.data, self.pos)
+        self.pos += st.size
+        return values
+
+    def u32(self) -> int:
+        return self.get("I", 4)[0]
+
+    def string(self) -> str:
+        n = self.u32()
+        raw = self.get(f"{n}s", 1)[0] if n else b""
+        return raw[:-1].decode("utf-8", "replace")
+
+    def strings(self) -> tuple[str, ...]:
+        return tuple(self.string() for _ in range(self.u32()))
+
+    def float64s(self) -> tuple[float, ...]:
+        n = self.u32()
+        return self.get(f"{n}d", 8) if n else ()

@@ -20,7 +20,7 @@ import operator
 import struct
 from collections.abc import Iterable
 
-from .cdr import CDR_LE, ORIGIN, U32, Writer, compile_template, compile_template_plan, padding
+from .cdr import CDR_LE, ORIGIN, U32, Reader, Writer, compile_template, compile_template_plan, padding
 
 # friction_msgs/ControllerState float64 fields in message order (the order ControllerStateEncoder.pack
 # expects); msg_defs/friction_msgs/msg/ControllerState.msg, checked against the generated class in tests
@@ -130,8 +130,8 @@ class JointStateDecoder:
     The layout of the last message (string lengths and contents, sequence lengths) is compiled into
     one ``struct.Struct``; a message with the same layout is decoded with one ``unpack_from`` and one
     comparison of its length/name fields (~1 us instead of ~17 us for rclpy's deserialisation into
-    a message object). Anything else (big endian, XCDR2) is decoded by the schema-driven decoder of
-    :mod:`friction_ros.core.bag.cdr`, which raises ``CdrError`` (a ``ValueError``) on malformed input.
+    a message object). Anything else (big endian, XCDR2) is decoded by the sequential
+    :class:`~friction_ros.core.wire.cdr.Reader`, which raises ``ValueError`` on malformed input.
     """
 
     def __init__(self):
@@ -235,36 +235,12 @@ class JointStateDecoder:
 
     @staticmethod
     def _fallback(data: bytes) -> DecodedJointState:
-        from friction_ros.core.bag.cdr import decode
-
-        m = decode(_joint_state_defs(), "sensor_msgs/msg/JointState", data)
-        stamp = m["header"]["stamp"]
+        r = Reader(data)
+        sec, nanosec = r.get("iI", 4)
+        frame_id = r.string()
         return DecodedJointState(
-            stamp["sec"],
-            stamp["nanosec"],
-            m["header"]["frame_id"],
-            tuple(m["name"]),
-            tuple(m["position"].tolist()),
-            tuple(m["velocity"].tolist()),
-            tuple(m["effort"].tolist()),
+            sec, nanosec, frame_id, r.strings(), r.float64s(), r.float64s(), r.float64s()
         )
-
-
-_JOINT_STATE_MSGS = {
-    "sensor_msgs/msg/JointState": "std_msgs/Header header\nstring[] name\nfloat64[] position\n"
-    "float64[] velocity\nfloat64[] effort\n",
-    "std_msgs/msg/Header": "builtin_interfaces/Time stamp\nstring frame_id\n",
-    "builtin_interfaces/msg/Time": "int32 sec\nuint32 nanosec\n",
-}
-_defs_cache: dict = {}
-
-
-def _joint_state_defs() -> dict:
-    if not _defs_cache:
-        from friction_ros.core.bag.msgdef import parse_msg
-
-        _defs_cache.update({k: parse_msg(v, k) for k, v in _JOINT_STATE_MSGS.items()})
-    return _defs_cache
 
 
 # ------------------------------------------------------------------------------ friction_msgs

@@ -38,6 +38,11 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.control.controller import CompensatingController
+from friction_ros.core.control.limit_cycle import LimitCycleDetector
+from friction_ros.core.harness import run_closed_loop
+from friction_ros.core.plant.params import PlantParams
+from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.validation import check_real
 
 MODES = ("feedforward", "feedback", "blended")
@@ -108,8 +113,6 @@ def identified_plant(
 ):
     """A plant with the identified J and friction (torque in N*m = current in A: unit gains);
     ``damping`` [N*m*s/rad]: viscous damping that is not friction (a voltage drive's back-EMF)."""
-    from friction_ros.core.plant.params import PlantParams
-    from friction_ros.core.plant.servo import GearheadServoPlant
 
     cpr = int(round(2.0 * math.pi / resolution)) if resolution > 0 else 0
     return GearheadServoPlant(
@@ -128,8 +131,6 @@ def identified_plant(
 
 
 def _run(plant_args: dict, friction_cfg, controller: dict, reference: dict, duration: float, period: float):
-    from friction_ros.core.control.controller import CompensatingController
-    from friction_ros.core.harness import run_closed_loop
 
     plant = identified_plant(friction_config=friction_cfg, **plant_args)
     ctrl = CompensatingController(controller)
@@ -140,7 +141,6 @@ def _run(plant_args: dict, friction_cfg, controller: dict, reference: dict, dura
 
 def _oscillates(res, period: float):
     """The run-time limit-cycle detector run over a recorded loop; returns it when it fired."""
-    from friction_ros.core.control.limit_cycle import LimitCycleDetector
 
     det = LimitCycleDetector()
     e = res.reference[:, 0] - res.position
