@@ -64,3 +64,17 @@ def pytest_configure(config) -> None:
 
 os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def _rank(item) -> int:
+    return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("ros") else 2
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Slowest files first (xdist hands a free worker the next whole file): files with a ``slow``
+    test, then files with a ``ros`` test, then the rest, each in collection order (stable sort)."""
+    rank: dict[str, int] = {}
+    for item in items:
+        path = item.nodeid.split("::", 1)[0]
+        rank[path] = min(rank.get(path, 2), _rank(item))
+    items.sort(key=lambda item: rank[item.nodeid.split("::", 1)[0]])
