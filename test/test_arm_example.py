@@ -125,6 +125,7 @@ def _rms_errors(states: dict[int, tuple[float, ...]], t_start: float) -> np.ndar
     return np.sqrt(np.mean(e**2, axis=0))
 
 
+@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
 @pytest.mark.ros
 def test_the_addon_halves_every_joints_tracking_error_and_composition_changes_nothing():
     pd_states = _run(addon=False)
