@@ -5,8 +5,10 @@ example) from params/arm7_plant.yaml: friction_ros.core.experiment.arm_example s
     .venv/bin/python scripts/make-arm-example.py [--check]
 
 ``--check``: exit 1 if the committed file differs from what the plant file gives (tests call it):
-the same keys and text, numbers within 1e-4 (relative) or 1e-12 (absolute), since the last digits
-of a fitted coefficient the data do not fix (a viscous term of 1e-52) differ between machines.
+the same keys and text, numbers within 1e-4 (relative) or 1e-12 (absolute). Coefficients the data
+do not fix (``vs`` where ``fs = fc``, a viscous term below the fit's precision) are written in a
+canonical form (``arm_example.canonical_stribeck``); the tolerance covers the last digits of the
+optimiser, which differ between machines.
 """
 
 from __future__ import annotations

@@ -1,17 +1,80 @@
-"""Shared test set-up: each pytest session gets its own ROS domain so parallel runs never cross-talk."""
+"""Shared test set-up: every pytest process (each xdist worker too) owns one ROS domain.
+
+ROS graphs of different domains never see each other. The domain is deterministic: worker ``gwN``
+of a run asks for ``base + N`` (``base`` = ``$FRICTION_TEST_DOMAIN_BASE``, default 10) and holds an
+exclusive lock on ``<tmp>/friction_ros_test_domains/<id>.lock`` for its lifetime, so a second test
+run on the same machine (another engineer's, another worktree's) takes the next free ids instead of
+sharing one. Discovery stays on this machine (``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``). Node
+processes the tests start inherit the domain through the environment. The local CAN bus folder is
+per domain too.
+"""
 
 from __future__ import annotations
 
+import fcntl
 import os
-import random
 import sys
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 VENV_BIN = Path(sys.executable).parent
 
-if "ROS_DOMAIN_ID" not in os.environ:
-    os.environ["ROS_DOMAIN_ID"] = str(random.Random(os.getpid()).randint(1, 100))
-os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+DOMAIN_MAX = 101  # the highest domain id whose DDS ports do not collide on Linux (ROS 2 docs)
+_LOCK_DIR = Path(tempfile.gettempdir()) / "friction_ros_test_domains"
+_held: list = []  # the open lock file: released when the process ends
+
+
+def _worker_index() -> tuple[int, int]:
+    """(this worker's index, number of workers); (0, 1) without xdist."""
+    name = os.environ.get("PYTEST_XDIST_WORKER", "")
+    count = int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1") or 1)
+    return (int(name[2:]), count) if name.startswith("gw") and name[2:].isdigit() else (0, 1)
+
+
+def claim_domain(base: int, index: int, stride: int) -> int:
+    """The first free domain id of ``base + index``, ``base + index + stride``, ... (wrapping to 1),
+    locked for this process; every id is tried once."""
+    _LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    first = base + index
+    candidates = list(range(first, DOMAIN_MAX + 1, stride)) + list(range(1 + index % stride, first, stride))
+    candidates += [d for d in range(1, DOMAIN_MAX + 1) if d not in candidates]
+    for domain in candidates:
+        f = open(_LOCK_DIR / f"{domain}.lock", "a")
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            f.close()
+            continue
+        _held.append(f)
+        return domain
+    raise RuntimeError(f"no free ROS domain id in 1..{DOMAIN_MAX}: {_LOCK_DIR} holds a lock on each")
+
+
+def pytest_configure(config) -> None:
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        return  # the xdist controller runs no test: its workers claim their own domains
+    index, count = _worker_index()
+    base = int(os.environ.get("FRICTION_TEST_DOMAIN_BASE", "10"))
+    domain = claim_domain(base, index, max(count, 1))
+    os.environ["ROS_DOMAIN_ID"] = str(domain)
+    os.environ["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+    os.environ["FRICTION_CAN_DIR"] = str(Path(tempfile.gettempdir()) / "friction_can_tests" / f"d{domain}")
+
+
 os.environ.setdefault("RCUTILS_COLORIZED_OUTPUT", "0")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def _rank(item) -> int:
+    return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("ros") else 2
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Slowest files first (xdist hands a free worker the next whole file): files with a ``slow``
+    test, then files with a ``ros`` test, then the rest, each in collection order (stable sort)."""
+    rank: dict[str, int] = {}
+    for item in items:
+        path = item.nodeid.split("::", 1)[0]
+        rank[path] = min(rank.get(path, 2), _rank(item))
+    items.sort(key=lambda item: rank[item.nodeid.split("::", 1)[0]])

@@ -14,6 +14,7 @@ import yaml
 from ros_graph import ROOT, Graph, Listener
 
 from friction_ros.cli.bringup import NodeSpec, composed_spec
+from friction_ros.core.experiment.arm_example import canonical_stribeck
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.wire import JointStateDecoder
 
@@ -30,6 +31,23 @@ def test_committed_arm_controllers_are_what_the_plant_file_gives():
         text=True,
     )
     assert r.returncode == 0, r.stderr
+
+
+def test_coefficients_the_data_do_not_fix_are_written_in_one_form_on_every_machine():
+    """Two machines' fits of joint4 (fs = fc, so vs is free) and joint2 (viscous term at the bound)."""
+    j4 = dict(fc=0.0370526, fs=0.0370526, fv=0.201853, f_scale=0.19, v_max=0.768)
+    a, b = canonical_stribeck(vs=0.0384, **j4), canonical_stribeck(vs=0.240022, **j4)
+    assert a == b and a["vs"] == pytest.approx(0.05 * 0.768, rel=1e-12) and a["fs"] == a["fc"]
+    j2 = dict(fc=0.965332, fs=1.23125, vs=0.0052033, f_scale=1.25, v_max=0.0849)
+    assert canonical_stribeck(fv=2.47468e-52, **j2) == canonical_stribeck(fv=2.47466e-52, **j2)
+    assert canonical_stribeck(fv=2.47468e-52, **j2)["fv"] == 0.0
+    # what the data do fix is kept, on any scale (joint6: a 1e-3 N*m joint with a 1e-5 viscous term)
+    j6 = canonical_stribeck(fc=6.3816e-4, fs=7.99719e-4, vs=0.50389, fv=1.38345e-5, f_scale=9e-4, v_max=6.2)
+    assert j6 == {"model": "stribeck", "fc": 6.3816e-4, "fs": 7.99719e-4, "vs": 0.50389, "fv": 1.38345e-5}
+    # a Stribeck bump of a millionth of the scale on a 1000 N*m joint is noise, fs > fc otherwise kept
+    big = canonical_stribeck(fc=1000.0, fs=1000.0 + 1e-4, vs=7.0, fv=0.0, f_scale=1000.0, v_max=1.0)
+    assert big["fs"] == 1000.0 and big["vs"] == 0.05
+    assert canonical_stribeck(fc=1000.0, fs=1000.01, vs=7.0, fv=0.0, f_scale=1000.0, v_max=1.0)["vs"] == 7.0
 
 
 def _specs(addon: bool, compose: bool) -> list[NodeSpec]:
@@ -107,6 +125,7 @@ def _rms_errors(states: dict[int, tuple[float, ...]], t_start: float) -> np.ndar
     return np.sqrt(np.mean(e**2, axis=0))
 
 
+@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
 @pytest.mark.ros
 def test_the_addon_halves_every_joints_tracking_error_and_composition_changes_nothing():
     pd_states = _run(addon=False)

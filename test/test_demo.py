@@ -1,7 +1,9 @@
-"""The main job end to end on every preset (quick): experiment -> bag -> fit -> gate -> compensation.
+"""The main job end to end (quick): experiment -> bag -> fit -> gate -> compensation, abb_m19s.
 
-One ``friction-demo --all-presets --quick`` run is shared by the module; a second run of one preset
-under CPU contention must give the same bag, fit and figures.
+Every other preset runs in test_demo_presets_*.py (the groups of ``demo_runs.GROUPS``: together
+every preset, so parallel test workers share the work). Here, one ``friction-demo --presets
+abb_m19s`` run is shared by the module; a second run of it under CPU contention must give the
+same bag, fit and figures; the fitted parameter file starts the controller node.
 """
 
 from __future__ import annotations
@@ -9,14 +11,12 @@ from __future__ import annotations
 import json
 import multiprocessing
 import os
-import re
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 import yaml
+from demo_runs import GROUPS, MODES, check_compensation_helps, check_every_preset_completes, demo, run_group
 from ros_graph import Graph, Listener
 from rosbags.highlevel import AnyReader
 
@@ -24,26 +24,11 @@ from friction_ros.cli.bringup import NodeSpec
 from friction_ros.core.presets import PRESET_NAMES
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
-ROOT = Path(__file__).resolve().parents[1]
-MODES = ("feedforward", "feedback", "blended")
-
-
-def _demo(args: list[str], out: Path, timeout: float = 1500) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "friction_ros.cli.demo", "--quick", "--results", str(out), *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=ROOT,
-    )
 
 
 @pytest.fixture(scope="module")
 def all_presets(tmp_path_factory):
-    out = tmp_path_factory.mktemp("demo_all") / "results"
-    t0 = time.monotonic()
-    proc = _demo(["--all-presets"], out)
-    return proc, out, time.monotonic() - t0
+    return run_group(tmp_path_factory, "abb")
 
 
 def _busy(stop_at: float) -> None:
@@ -62,7 +47,7 @@ def loaded_run(tmp_path_factory):
     for h in hogs:
         h.start()
     try:
-        proc = _demo(["--preset", "abb_m19s"], out)
+        proc = demo(["--preset", "abb_m19s"], out)
     finally:
         for h in hogs:
             h.terminate()
@@ -71,51 +56,23 @@ def loaded_run(tmp_path_factory):
 
 
 def test_every_preset_completes_with_every_mode_enabled_or_refused(all_presets):
-    proc, out, wall = all_presets
-    assert "Traceback" not in proc.stderr, proc.stderr[-3000:]
-    s = json.loads((out / "demo_summary.json").read_text())
-    assert s["presets_failed"] == {}, s["presets_failed"]
-    assert sorted(s["presets_ok"]) == sorted(PRESET_NAMES), (s["presets_ok"], proc.stdout[-4000:])
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    for name, p in s["presets"].items():
-        none = p["runs"]["none"]
-        assert none["enabled"] is True and none["samples"] == 4001
-        for m in MODES:
-            r = p["runs"][m]
-            assert isinstance(r["enabled"], bool) and r["samples"] == 4001, (name, m, r)
-            assert isinstance(r["reason"], str) and r["reason"], (name, m, r)
-            if r["enabled"]:
-                assert r["rms_mrad"] <= 1.02 * none["rms_mrad"], (name, m, r, none)
-                # the run-time watch never fires on a file friction-fit wrote (every preset, lockstep)
-                assert r["fallback_s"] is None, (name, m, r)
-            assert p["gate"][m]["enabled"] == r["enabled"]
-        # every table names every mode with its state
-        assert re.search(rf"\[{name}\] Model chosen: \w+", proc.stdout)
+    proc, out, _ = all_presets
+    check_every_preset_completes(proc, out, GROUPS["abb"])
 
 
 def test_compensation_helps_where_friction_matters_and_is_reported_where_not(all_presets):
-    """Measured on the development VM (quick profile): best enabled mode -89 to -98 % on six presets;
-    on seed000_gearhead (60-count encoder at the joint, backlash, load-dependent gear friction) -10 %,
-    and the demo names why: the encoder caps any measured reduction at -46 %."""
     _, out, _ = all_presets
+    check_compensation_helps(out, GROUPS["abb"])
     s = json.loads((out / "demo_summary.json").read_text())
-    helped = 0
-    for name, p in s["presets"].items():
-        best = p["best"]
-        red = p["reduction_percent"].get(best, 0.0) if best != "none" else 0.0
-        if red >= 50.0:
-            helped += 1
-        else:
-            said = ("barely changes", "no compensation mode", "caps what any compensation can show")
-            assert any(x in w for x in said for w in p["warnings"]), (name, red, p["warnings"])
-        # stick-slip measurably lower with the best enabled mode
-        if red >= 50.0:
-            assert p["runs"][best]["stick_fraction"] <= p["runs"]["none"]["stick_fraction"] + 1e-9, name
-    assert helped >= 6, {n: p["reduction_percent"] for n, p in s["presets"].items()}
-    cap = s["presets"]["seed000_gearhead"]["encoder_cap_percent"]
-    assert 40.0 < cap < 50.0, cap  # q / sqrt(12) of a 60-count encoder against ~55 mrad uncompensated
-    assert all(p["encoder_cap_percent"] > 95.0 for n, p in s["presets"].items() if n != "seed000_gearhead")
     assert s["presets"]["abb_m19s"]["reduction_percent"][s["presets"]["abb_m19s"]["best"]] >= 80.0
+
+
+def test_the_demo_groups_are_every_preset_once():
+    names = [n for g in GROUPS.values() for n in g]
+    assert sorted(names) == sorted(PRESET_NAMES) and len(names) == len(set(names))
+    for group in GROUPS:  # each group has its test module
+        mod = "test_demo.py" if group == "abb" else f"test_demo_presets_{group}.py"
+        assert (Path(__file__).parent / mod).is_file(), mod
 
 
 def test_the_summary_keeps_its_keys_and_the_files_exist(all_presets):
@@ -184,3 +141,17 @@ def test_the_fitted_parameter_file_starts_the_controller_node(all_presets):
     model = doc["compensating_controller"]["ros__parameters"]["friction"]["model"]
     assert isinstance(model, str) and model != "none"
     assert f"friction model {model}," in out_text
+
+
+@pytest.mark.parametrize(
+    ("args", "said"),
+    [
+        (["--presets", "abb_m19s", "nosuch"], "preset = 'nosuch' is not allowed: must be one of abb_m19s"),
+        (["--presets", "abb_m19s", "--bag", "x"], "they cannot be combined with --bag"),
+        (["--all-presets", "--presets", "abb_m19s"], "not allowed with argument --all-presets"),
+    ],
+)
+def test_bad_preset_lists_are_one_line_and_exit_2_before_any_run(tmp_path, args, said):
+    proc = demo(args, tmp_path / "results", timeout=60)
+    assert proc.returncode == 2 and said in proc.stderr.splitlines()[-1], proc.stderr
+    assert "Traceback" not in proc.stderr and not (tmp_path / "results").exists()

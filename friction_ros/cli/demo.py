@@ -17,7 +17,8 @@ any load, as fast as the machine allows):
 4. a table (RMS and max tracking error, stick-slip and hunting per mode, enabled/refused and why),
    warnings for anything suspicious, plots, ``demo_summary.json``.
 
-``--all-presets`` runs every preset in ``params/`` (top-level ``presets_ok`` in the summary);
+``--all-presets`` runs every preset in ``params/`` (top-level ``presets_ok`` in the summary),
+``--presets A B ...`` the presets named, one after another, with the same summary;
 ``--bag`` fits a bag the user already has (steps 2-4; tracking runs on ``--preset`` as the
 stand-in plant); ``--quick`` shortens the fit and the tracking runs (tests, CI).
 """
@@ -231,15 +232,18 @@ def save_partial(res: DemoResult, results_dir: Path, failed: str) -> str:
 
 
 def run(args):
-    """One preset (a DemoResult), with ``--all-presets`` every preset (a summary dict), a multi-joint
-    plant preset (``arm7_plant``) the arm demo (:mod:`friction_ros.cli.demo_arm`)."""
+    """One preset (a DemoResult); with ``--all-presets``/``--presets`` several (a summary dict); a
+    multi-joint plant preset (``arm7_plant``) the arm demo (:mod:`friction_ros.cli.demo_arm`)."""
     from friction_ros.cli.demo_arm import arm_plant_file, main_arm
     from friction_ros.core.presets import PRESET_NAMES, load_preset
 
-    if not args.all_presets and arm_plant_file(args.preset) is not None:
+    if not args.all_presets and not args.presets and arm_plant_file(args.preset) is not None:
         return main_arm(args)
     stamp = time.strftime("%Y%m%d_%H%M%S")
-    if not args.all_presets:
+    names = list(PRESET_NAMES) if args.all_presets else list(dict.fromkeys(args.presets or []))
+    for name in names:
+        load_preset(name)  # a misspelt name stops the run before any preset starts
+    if not names:
         load_preset(args.preset)
         results_dir = Path(args.results or ROOT / "results" / f"demo_{Path(args.preset).stem}_{stamp}")
         res = run_preset(args, args.preset, results_dir)
@@ -256,7 +260,7 @@ def run(args):
     results_dir = Path(args.results or ROOT / "results" / f"demo_all_{stamp}")
     results_dir.mkdir(parents=True, exist_ok=True)
     out: dict = {"presets": {}, "presets_ok": [], "presets_failed": {}}
-    for name in PRESET_NAMES:
+    for name in names:
         say(f"=== preset {name} ===")
         try:
             res = run_preset(args, name, results_dir / name)
@@ -274,10 +278,10 @@ def run(args):
         ]
         if not worse:
             out["presets_ok"].append(name)
-    out["presets_total"] = len(PRESET_NAMES)
+    out["presets_total"] = len(names)
     (results_dir / "demo_summary.json").write_text(json.dumps(out, indent=2, default=json_default))
     print(
-        f"\npresets ok: {len(out['presets_ok'])} of {len(PRESET_NAMES)}; summary {results_dir / 'demo_summary.json'}"
+        f"\npresets ok: {len(out['presets_ok'])} of {len(names)}; summary {results_dir / 'demo_summary.json'}"
     )
     return out
 
@@ -291,7 +295,16 @@ def build_parser() -> argparse.ArgumentParser:
         default="abb_m19s",
         help="plant preset (hidden truth), default abb_m19s; a multi-joint plant (arm7_plant) runs the arm demo",
     )
-    p.add_argument("--all-presets", action="store_true", help="run every preset in params/ one after another")
+    several = p.add_mutually_exclusive_group()
+    several.add_argument(
+        "--all-presets", action="store_true", help="run every preset in params/ one after another"
+    )
+    several.add_argument(
+        "--presets",
+        nargs="+",
+        metavar="PRESET",
+        help="run these presets one after another (summary as --all-presets)",
+    )
     p.add_argument("--bag", help="fit this bag instead of running the experiment (rosbag2 dir or .mcap)")
     p.add_argument("--joint", default="joint1", help="joint name in the bag / graph (default joint1)")
     p.add_argument("--profile", default="quick", choices=("quick", "default"), help="experiment profile")
@@ -315,9 +328,9 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     if args.quick:
         args.duration = min(args.duration, 4.0)
-    if args.all_presets and args.bag:
+    if (args.all_presets or args.presets) and args.bag:
         print(
-            "error: --all-presets runs the experiment on every preset: it cannot be combined with --bag",
+            "error: --all-presets and --presets run the experiment on each preset: they cannot be combined with --bag",
             file=sys.stderr,
         )
         return 2

@@ -75,8 +75,27 @@ def stribeck_map(preset: Preset, v_max: float) -> dict[str, float]:
     lo = [0.0, 0.0, v_max * 1e-4, 0.0]
     hi = [np.inf, np.inf, v_max * 10, np.inf]
     res = least_squares(lambda x: model(x) - f, x0, bounds=(lo, hi))
-    fc, fs, vs, fv = (float(a) for a in res.x)
-    return {"model": "stribeck", "fc": fc, "fs": max(fs, fc), "vs": vs, "fv": fv}
+    return canonical_stribeck(*(float(a) for a in res.x), f_scale=float(np.max(f)), v_max=v_max)
+
+
+FIT_PRECISION = 1e-6  # relative to the joint's friction scale: below it the data fix no coefficient
+
+
+def canonical_stribeck(fc: float, fs: float, vs: float, fv: float, f_scale: float, v_max: float) -> dict:
+    """The Stribeck map with the coefficients the data do not determine written in one form.
+
+    A term whose largest effect on ``|v| <= v_max`` stays below ``FIT_PRECISION * f_scale`` is not
+    measured: ``fv v_max`` that small gives ``fv = 0``; ``fs - fc`` that small gives ``fs = fc``, and
+    then ``F`` does not depend on ``vs``, which is written as ``0.05 v_max`` (the fit's start). The
+    optimiser's last digits there differ between machines; the canonical form does not.
+    """
+    floor = FIT_PRECISION * f_scale
+    fs = max(fs, fc)
+    if fv * v_max < floor:
+        fv = 0.0
+    if fs - fc < floor:
+        fs, vs = fc, 0.05 * v_max
+    return {"model": "stribeck", "fc": fc, "fs": fs, "vs": vs, "fv": fv}
 
 
 def arm_parameter_document(

@@ -1,0 +1,26 @@
+"""The main job end to end (quick) on the presets of group ``xyz`` (``demo_runs.GROUPS``): one
+``friction-demo --presets ...`` run shared by the module; every mode enabled or refused with its
+reason, and compensation helps where friction matters or the demo says why not."""
+
+from __future__ import annotations
+
+import pytest
+from demo_runs import GROUPS, check_compensation_helps, check_every_preset_completes, run_group
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
+GROUP = "xyz"
+
+
+@pytest.fixture(scope="module")
+def group_run(tmp_path_factory):
+    return run_group(tmp_path_factory, GROUP)
+
+
+def test_every_preset_completes_with_every_mode_enabled_or_refused(group_run):
+    proc, out, _ = group_run
+    check_every_preset_completes(proc, out, GROUPS[GROUP])
+
+
+def test_compensation_helps_where_friction_matters_and_is_reported_where_not(group_run):
+    _, out, _ = group_run
+    check_compensation_helps(out, GROUPS[GROUP])
