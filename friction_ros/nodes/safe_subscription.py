@@ -27,7 +27,6 @@ import inspect
 import math
 import os
 import struct
-import sys
 import time
 import traceback
 from collections.abc import Callable
@@ -36,20 +35,19 @@ from typing import Any
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from friction_ros.core.wire import WireDecodeError
+
 MESSAGE = "message"  # decode: rclpy's deserialiser into msg_type
 BYTES = None  # decode: none, the callback takes the CDR bytes
 LOG_PERIOD_S = 1.0  # at most one log line per subscription and kind in this time
 
-_DECODE_ERRORS = (struct.error, UnicodeDecodeError)
+_DECODE_ERRORS = (WireDecodeError, struct.error, UnicodeDecodeError)
 
 
 def _does_not_decode(exc: BaseException) -> bool:
-    """A decoding failure: the project's codec (``CdrError``; its module is loaded once the codec
-    ran, so the nodes need not import the bag package), struct or UTF-8 errors, or rclpy's
-    deserialiser (a RuntimeError whose text says so; rclpy exports no class for it)."""
-    errors = sys.modules.get("friction_ros.core.bag.errors")
-    if errors is not None and isinstance(exc, errors.CdrError):
-        return True
+    """A decoding failure: the project's codecs (``WireDecodeError``, of which the bag codec's
+    ``CdrError`` is one), struct or UTF-8 errors, or rclpy's deserialiser (a RuntimeError whose text
+    says so; rclpy exports no class for it)."""
     return isinstance(exc, _DECODE_ERRORS) or (
         isinstance(exc, RuntimeError) and str(exc).startswith("failed to deserialize")
     )

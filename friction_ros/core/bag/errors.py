@@ -6,6 +6,8 @@ nodes and CLIs can print one clear line instead of a traceback.
 
 from __future__ import annotations
 
+from friction_ros.core.wire.cdr import WireDecodeError
+
 
 class BagError(ValueError):
     """Base class: a bag cannot be read or written as requested."""
@@ -44,7 +46,7 @@ class SchemaError(BagError):
     """A message definition is missing, unparsable, or does not match the expected type."""
 
 
-class CdrError(BagError):
+class CdrError(BagError, WireDecodeError):
     """A CDR payload does not match its message definition."""
 
 

@@ -17,6 +17,7 @@ from .cdr import (
     ORIGIN,
     TIME,
     U32,
+    WireDecodeError,
     Writer,
     compile_template,
     encapsulation,
@@ -37,6 +38,7 @@ from .messages import (
 )
 
 __all__ = [
+    "WireDecodeError",
     "CDR_LE",
     "CONTROLLER_STATE_FLOATS",
     "DRIVE_STATE_FLOATS",

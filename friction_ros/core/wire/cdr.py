@@ -157,17 +157,21 @@ def compile_template_plan(
     return st, plan
 
 
+class WireDecodeError(ValueError):
+    """A CDR payload that does not decode (too short, an unknown encapsulation, a bad length)."""
+
+
 class Reader:
     """Sequential reader of a CDR payload, the inverse of :class:`Writer` for any encapsulation of
     :data:`ENCAPSULATIONS` (a field of size s is aligned to min(s, maximum alignment) from
-    :data:`ORIGIN`; an empty sequence adds no padding). Malformed input raises ``ValueError``."""
+    :data:`ORIGIN`; an empty sequence adds no padding). Malformed input raises :class:`WireDecodeError`."""
 
     def __init__(self, data) -> None:
         if len(data) < 4:
-            raise ValueError(f"payload of {len(data)} byte(s) is shorter than the 4-byte CDR header")
+            raise WireDecodeError(f"payload of {len(data)} byte(s) is shorter than the 4-byte CDR header")
         enc = encapsulation(data)
         if enc is None:
-            raise ValueError(
+            raise WireDecodeError(
                 f"unsupported CDR encapsulation {bytes(data[:2]).hex()}: supported are 0000/0001 (CDR) and "
                 "0006/0007 (plain XCDR2)"
             )
@@ -180,7 +184,7 @@ class Reader:
         self.pos += padding(self.pos - ORIGIN, min(align, self.max_align))
         st = struct.Struct(self.order + fmt)
         if self.pos + st.size > len(self.data):
-            raise ValueError(
+            raise WireDecodeError(
                 f"payload too short: {st.size} byte(s) needed at offset {self.pos}, has {len(self.data)}"
             )
         values = st.unpack_from(self.data, self.pos)
