@@ -25,8 +25,12 @@ phase() { .venv/bin/python -m pytest "$@"; local rc=$?; [ $rc -eq 5 ] && return 
 start=$(date +%s)
 # one process compiles the numba kernels into their on-disk cache; the workers and nodes load it
 .venv/bin/python scripts/warm-numba-cache.py || exit 1
-echo "[test] pytest, ${workers} workers: every test not marked serial"
-phase "${parallel[@]}" -m "not serial" "$@"
+# the workers share the cores: each one (and the node processes it starts) gets its share of the
+# compiled kernels' threads, not a full set each (2 workers x 2 threads on 2 cores fought for them)
+threads=$(( $(nproc) / (workers > 0 ? workers : 1) ))
+[ "$threads" -lt 1 ] && threads=1
+echo "[test] pytest, ${workers} workers: every test not marked serial (${threads} kernel thread(s) each)"
+NUMBA_NUM_THREADS=$threads phase "${parallel[@]}" -m "not serial" "$@"
 rc1=$?
 echo "[test] pytest, alone: the tests marked serial (wall-clock timing a fully loaded CPU breaks)"
 phase -m serial "$@"

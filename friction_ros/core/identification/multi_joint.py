@@ -157,7 +157,8 @@ def _worker_threads(threads: int) -> None:
     run side by side: two workers with two threads each on two cores would contend for them)."""
     import numba
 
-    numba.set_num_threads(threads)
+    # a user's NUMBA_NUM_THREADS (or the test runner's) caps it
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 
 # ------------------------------------------------------------------------------------ parameter file
