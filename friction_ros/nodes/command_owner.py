@@ -28,7 +28,8 @@ def command_source(node: Node) -> str:
 
 class CommandOwnerWatch:
     """See the module docstring. ``role``: ``follows`` (zero torque on a conflicted joint) or
-    ``commands`` (a controller: ``watch_topic`` subscribes to its own output to see other sources)."""
+    ``commands`` (a controller: it reads its own output topic to see other sources, but only while
+    the graph shows another publisher there: no message of its own comes back in the normal case)."""
 
     def __init__(self, node: Node, joints, *, role: str = "follows", topic: str = "joint_commands"):
         self.node = node
@@ -37,11 +38,9 @@ class CommandOwnerWatch:
         self.sources = CommandSources(joints)
         self._index = {j: i for i, j in enumerate(self.sources.joints)}
         self.conflicts = 0  # how many conflicts started
+        self._decoder = JointStateDecoder()
+        self._echo = None  # the controller's subscription to its own output, while others publish there
         node.create_timer(0.2, self._expire)
-        if role == "commands":
-            self._own = command_source(node)
-            self._decoder = JointStateDecoder()
-            safe_subscription(node, JointState, topic, self._on_own_topic, COMMAND_QOS, decode=BYTES)
 
     @property
     def conflict(self) -> bool:
@@ -66,8 +65,20 @@ class CommandOwnerWatch:
         self.admit(msg.frame_id, msg.name)
 
     def _expire(self) -> None:
+        if self.role == "commands":
+            self._watch_others()
         self.sources.expire(time.monotonic())
         self._log()
+
+    def _watch_others(self) -> None:
+        others = self.node.count_publishers(self.topic) > 1
+        if others and self._echo is None:
+            self._echo = safe_subscription(
+                self.node, JointState, self.topic, self._on_own_topic, COMMAND_QOS, decode=BYTES
+            )
+        elif not others and self._echo is not None and not self.conflict:
+            self.node.destroy_subscription(self._echo.subscription)
+            self._echo = None
 
     def _log(self) -> None:
         s, log = self.sources, self.node.get_logger()
