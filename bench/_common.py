@@ -57,3 +57,17 @@ def write_results(name: str, figures: dict, command: str | None = None) -> Path:
     path.write_text(json.dumps(payload, indent=2, default=float) + "\n")
     print(f"\nwrote {path.relative_to(RESULTS.parent.parent)}")
     return path
+
+
+def warm_kernels(record, names=("dahl", "lugre", "gms4", "gms4d")) -> None:
+    """Compile (or load from the numba cache) the dynamic fit kernels of ``names`` on 100 samples of
+    ``record``, so that the timings that follow are fit times, not compile times."""
+    import numpy as np
+
+    from friction_ros.core.identification.models import spec_for
+
+    tr = record.slice(0, 200)
+    for name in names:
+        spec = spec_for(name)
+        x = spec.from_search(np.array([np.mean(b) for b in spec.search_bounds()]))[None, :]
+        spec.grams(x, tr.velocity[:100], tr.acceleration[:100], tr.torque[:100], tr.dt)

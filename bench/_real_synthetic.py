@@ -14,11 +14,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must not shadow python-can
 
-from _common import print_table  # noqa: E402
+from _common import print_table, warm_kernels  # noqa: E402
 
 from friction_ros.core.friction.learned_residual import LearnedResidual  # noqa: E402
 from friction_ros.core.identification.fit_logs import cross_validate_runs  # noqa: E402
-from friction_ros.core.identification.models import spec_for  # noqa: E402
 from friction_ros.core.identification.pipeline import fit_records  # noqa: E402
 from friction_ros.core.identification.realistic_joint import (  # noqa: E402
     JointTruth,
@@ -46,17 +45,7 @@ def _nmse(pred, y) -> float:
 
 
 def _warm_kernels(rec) -> None:
-    """Compile (or load from the numba cache) the dynamic kernels so fit times are fit times."""
-    tr = rec.slice(0, 200)
-    for name in ("lugre",):
-        spec = spec_for(name)
-        spec.grams(
-            spec.from_search(np.array([np.mean(b) for b in spec.search_bounds()]))[None, :],
-            tr.velocity[:100],
-            tr.acceleration[:100],
-            tr.torque[:100],
-            tr.dt,
-        )
+    warm_kernels(rec, ("lugre",))
 
 
 def _map_error_percent(model, truth: JointTruth) -> float:

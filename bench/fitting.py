@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must not shadow python-can
 
-from _common import print_table, write_results  # noqa: E402
+from _common import print_table, warm_kernels, write_results  # noqa: E402
 from compensation import J003, PD003, SENSING, TRUTH003  # noqa: E402
 
 from friction_ros.core.harness import run_closed_loop  # noqa: E402
@@ -104,15 +104,7 @@ def main() -> None:
 
     # warm the compiled kernels (numba cache) so timings are fit times, not compile times
     tr = d.slice(0, 10000)
-    for name in ("dahl", "lugre", "gms4", "gms4d"):
-        spec = spec_for(name)
-        spec.grams(
-            spec.from_search(np.array([np.mean(b) for b in spec.search_bounds()]))[None, :],
-            tr.velocity[:100],
-            tr.acceleration[:100],
-            tr.torque[:100],
-            tr.dt,
-        )
+    warm_kernels(tr)
 
     # Table 1 analogue (10 s train, rest validation) with per-model fit times
     t0 = time.perf_counter()

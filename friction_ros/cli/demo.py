@@ -32,7 +32,13 @@ import sys
 import time
 from pathlib import Path
 
-from friction_ros.cli.demo_report import json_default, plot_friction_map, plot_tracking, print_table
+from friction_ros.cli.demo_report import (
+    json_default,
+    plot_friction_map,
+    plot_tracking,
+    print_files_and_timings,
+    print_table,
+)
 from friction_ros.cli.demo_results import (
     ENCODER_CAP_WARN,
     GRAPH_PERIOD,
@@ -248,14 +254,7 @@ def run(args):
         results_dir = Path(args.results or ROOT / "results" / f"demo_{Path(args.preset).stem}_{stamp}")
         res = run_preset(args, args.preset, results_dir)
         print_table(res)
-        print("\nfiles written:")
-        for f in res.files:
-            print(f"  {f}")
-        print(
-            f"\ntotal time {res.timings['total']:.0f} s ("
-            + ", ".join(f"{k} {v:.0f} s" for k, v in res.timings.items() if k != "total")
-            + ")"
-        )
+        print_files_and_timings(res.files, res.timings)
         return res
     results_dir = Path(args.results or ROOT / "results" / f"demo_all_{stamp}")
     results_dir.mkdir(parents=True, exist_ok=True)

@@ -32,7 +32,7 @@ from friction_ros.cli.demo_arm_steps import (
     joint_verdicts,
     track_arm,
 )
-from friction_ros.cli.demo_report import json_default
+from friction_ros.cli.demo_report import json_default, print_files_and_timings
 from friction_ros.cli.demo_results import GRAPH_PERIOD
 from friction_ros.cli.demo_steps import say
 from friction_ros.core.validation import ParameterError
@@ -248,12 +248,5 @@ def main_arm(args) -> ArmDemoResult:
         )
     res = run(args)
     print_arm_table(res)
-    print("\nfiles written:")
-    for f in res.files:
-        print(f"  {f}")
-    print(
-        f"\ntotal time {res.timings['total']:.0f} s ("
-        + ", ".join(f"{k} {v:.0f} s" for k, v in res.timings.items() if k != "total")
-        + ")"
-    )
+    print_files_and_timings(res.files, res.timings)
     return res

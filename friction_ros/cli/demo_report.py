@@ -154,6 +154,15 @@ def print_table(result: DemoResult) -> None:
             print(f"WARNING: {w}")
 
 
+def print_files_and_timings(files, timings: dict) -> None:
+    """The end of a demo's output: the files written and the time of each step."""
+    print("\nfiles written:")
+    for f in files:
+        print(f"  {f}")
+    steps = ", ".join(f"{k} {v:.0f} s" for k, v in timings.items() if k != "total")
+    print(f"\ntotal time {timings['total']:.0f} s ({steps})")
+
+
 def json_default(x):
     if isinstance(x, (np.floating, np.integer)):
         return x.item()
