@@ -413,14 +413,15 @@ def test_several_drives_parameters_per_joint_and_at_run_time(channel):
 
 def test_bursts_wait_for_a_full_queue_and_a_stalled_member_does_not_stall_the_bus(channel):
     """A receive queue holds only net.unix.max_dgram_qlen (10) frames: a burst of 100 frames to a
-    member that keeps reading arrives whole and in order (the sender waits for room); a member that
-    never reads loses frames after the send timeout instead of blocking the sender."""
+    member that keeps reading arrives whole and in order (the sender waits for room up to its send
+    timeout: 1 s here, so a reader descheduled on a loaded machine loses nothing); a member that never
+    reads loses frames after the send timeout instead of blocking the sender."""
     tx, rx = LocalBus(channel), LocalBus(channel)
     got: list[int] = []
 
     def reader():
         while len(got) < 100:
-            m = rx.recv(0.5)
+            m = rx.recv(5.0)
             if m is None:
                 return
             got.append(m.data[0])
@@ -429,7 +430,7 @@ def test_bursts_wait_for_a_full_queue_and_a_stalled_member_does_not_stall_the_bu
     th.start()
     try:
         for i in range(100):
-            tx.send(can.Message(arbitration_id=0x10, data=bytes([i]), is_extended_id=False))
+            tx.send(can.Message(arbitration_id=0x10, data=bytes([i]), is_extended_id=False), timeout=1.0)
         th.join(10)
         assert got == list(range(100)) and tx.frames_dropped == 0
         stalled = LocalBus(channel)  # joins, never reads

@@ -67,7 +67,11 @@ def test_two_controllers_on_one_joint_are_refused_and_reported(tmp_path):
                     10,
                     g2,
                 ), "no diagnostics ERROR from a controller"
-                assert "commanded by 2 sources" in g2.output("ctrl_b")
+                # the second controller sees the first one on its topic once its own reader of that
+                # topic has matched the first one's publisher (discovery: up to seconds on a loaded machine)
+                assert lis.wait_for(lambda: "commanded by 2 sources" in g2.output("ctrl_b"), 15, g2), (
+                    g2.output("ctrl_b")
+                )
             # the second controller stopped: cleared, the first one controls again
             assert lis.wait_for(lambda: "cleared" in g.output("plant_simulator"), 30, g)
             assert lis.wait_for(lambda: abs(states[-1].position[0] - 0.5) < 0.05, 30, g), states[-1].position
