@@ -1,0 +1,331 @@
+"""Master (driver) side of one CiA 402 axis in cyclic synchronous torque mode: pure frame logic.
+
+Start-up (CiA 301 boot-up, like ros2_canopen's ``canopen_402_driver``): NMT enter pre-operational,
+SDO reads of the units the parameters leave open, SDO writes 0x6060 = 10 (cyclic synchronous
+torque), 0x1017 heartbeat producer time, 0x6072 max torque, the PDO mappings of :mod:`.frames`
+(RPDO1, TPDO1, TPDO2, all synchronous: transmission type 1), then NMT start.
+
+Each control period ``frames(t)`` gives RPDO1 (controlword + target torque); the SYNC that makes
+the drive apply it and answer with TPDO1/TPDO2 comes from one :class:`~.network.SyncProducer` per
+bus. ``handle(cob_id, data, t)`` takes TPDOs, EMCY, heartbeat and SDO answers.
+
+Faults latch (``fault`` holds one line of text) and make the axis quick stop, then disable
+voltage: an EMCY (its error code text), the statusword fault bit, a missing heartbeat (consumer
+time :attr:`Cia402Config.consumer_timeout`), the drive leaving OPERATIONAL, no TPDO1 for
+``telemetry_timeout``, a state transition not done within ``state_timeout``, an SDO abort/timeout.
+``enable()`` clears the latch and walks the drive to OPERATION ENABLED (fault reset first).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+from friction_ros.core.can.cia402 import frames as fr
+from friction_ros.core.can.cia402 import objects as ob
+from friction_ros.core.can.cia402.config import Cia402Config, eds_defaults
+from friction_ros.core.can.cia402.sdo_script import SdoScript, SdoStep
+from friction_ros.core.can.cia402.state_machine import (
+    CW_DISABLE_VOLTAGE,
+    STATE_NAMES,
+    State,
+    master_controlword,
+    state_from_statusword,
+)
+from friction_ros.core.can.cia402.units import Cia402Scaling
+from friction_ros.core.can.frame import Frame
+from friction_ros.core.can.joint import JointConversion
+
+_RPDO1 = fr.RPDO1.pack
+_TPDO1 = fr.TPDO1.unpack_from
+_TPDO2 = fr.TPDO2.unpack_from
+_UNIT_OBJECTS = {  # parameter -> objects read from the drive when neither parameter nor EDS gives it
+    "counts_per_rev": ((ob.OD_ENCODER_RESOLUTION, 1), (ob.OD_ENCODER_RESOLUTION, 2)),
+    "gear_ratio": ((ob.OD_GEAR_RATIO, 1), (ob.OD_GEAR_RATIO, 2)),
+    "rated_torque": ((ob.OD_RATED_TORQUE, 0),),
+    "rated_current": ((ob.OD_RATED_CURRENT, 0),),
+}
+
+
+class Cia402Telemetry(NamedTuple):
+    t: float  # receive time of the TPDO1
+    position: float  # joint [rad or m]
+    velocity: float  # joint [rad/s or m/s]
+    torque: float  # joint [N*m or N] from 0x6077
+    current: float  # motor [A] from 0x6078
+    statusword: int
+    state: State
+
+
+def _pdo_steps(comm: int, mapping: int, cob: int, entries: tuple[int, ...]) -> list[SdoStep]:
+    """CiA 301 7.5.2.36 mapping procedure: disable the PDO, clear, map, set count, enable."""
+    return [
+        SdoStep(comm, 1, cob | ob.PDO_COB_INVALID),
+        SdoStep(comm, 2, ob.SYNC_TRANSMISSION, 1),
+        SdoStep(mapping, 0, 0, 1),
+        *(SdoStep(mapping, i + 1, e) for i, e in enumerate(entries)),
+        SdoStep(mapping, 0, len(entries), 1),
+        SdoStep(comm, 1, cob),
+    ]
+
+
+class Cia402Master:
+    """One drive axis; not thread-safe (call from the bus thread only)."""
+
+    def __init__(self, config: Cia402Config | None = None):
+        self.cfg = cfg = config or Cia402Config()
+        n = cfg.node_id
+        self.node_id = n
+        self.cob_tpdo1, self.cob_tpdo2 = ob.COB_TPDO1 + n, ob.COB_TPDO2 + n
+        self.cob_rpdo1 = ob.COB_RPDO1 + n
+        self.cob_emcy, self.cob_sdo_tx, self.cob_heartbeat = (
+            ob.COB_EMCY + n,
+            ob.COB_SDO_TX + n,
+            ob.COB_HEARTBEAT + n,
+        )
+        self.cob_ids = (self.cob_tpdo1, self.cob_tpdo2, self.cob_emcy, self.cob_sdo_tx, self.cob_heartbeat)
+        self.phase = "idle"  # idle -> units -> configure -> operational | failed
+        self.units: dict[str, float] = {k: getattr(cfg, k) for k in _UNIT_OBJECTS if getattr(cfg, k)}
+        if cfg.eds_path:
+            for k, v in eds_defaults(cfg.eds_path).items():
+                self.units.setdefault(k, v)
+        self.scaling: Cia402Scaling | None = None
+        self.sdo: SdoScript | None = None
+        self.statusword = 0
+        self.state = State.UNKNOWN
+        self.target = State.SWITCH_ON_DISABLED
+        self.controlword = CW_DISABLE_VOLTAGE
+        self.torque_permille = 0
+        self.max_permille = 32767
+        self.fault = ""  # latched fault text ("" = none)
+        self.emcy_log: list[tuple[float, fr.EmcyMessage]] = []
+        self.nmt_state: int | None = None  # from the heartbeat
+        self.telemetry: Cia402Telemetry | None = None
+        self._tau = 0.0
+        self._vel = 0.0
+        self._cur = 0.0
+        self._t_state = 0.0  # when the state last changed (or the target was set)
+        self._t_heartbeat = 0.0
+        self._t_tpdo1 = 0.0
+        self._t_operational = 0.0
+        self.tpdo1_count = 0
+
+    # ---- commands -------------------------------------------------------------------------------------
+    def start(self, t: float) -> list[Frame]:
+        """Begin the start-up; returns the NMT frame to send now."""
+        steps = [SdoStep(*obj) for k, objs in _UNIT_OBJECTS.items() if k not in self.units for obj in objs]
+        self.sdo = SdoScript(self.node_id, steps, self.cfg.sdo_timeout, self.cfg.sdo_retries)
+        self.phase = "units"
+        self._t_state = t
+        return [fr.nmt(ob.NMT_PRE_OPERATIONAL, self.node_id)]
+
+    def enable(self, t: float) -> None:
+        """Clear a latched fault and walk the drive to OPERATION ENABLED (fault reset first)."""
+        self.fault = ""
+        self._set_target(State.OPERATION_ENABLED, t)
+        if self.phase == "operational":
+            self._t_heartbeat = self._t_tpdo1 = max(self._t_tpdo1, t - self.cfg.telemetry_timeout / 2)
+
+    def disable(self, t: float) -> None:
+        self._set_target(State.SWITCH_ON_DISABLED, t)
+
+    def quick_stop(self, t: float) -> None:
+        self._set_target(State.QUICK_STOP_ACTIVE, t)
+
+    def set_torque(self, joint_torque: float) -> None:
+        """Joint torque [N*m or N] for the next RPDO, clamped to the configured max torque."""
+        if self.scaling is None:
+            return
+        p = self.scaling.torque_permille(joint_torque)
+        m = self.max_permille
+        self.torque_permille = m if p > m else -m if p < -m else p
+
+    @property
+    def enabled(self) -> bool:
+        return self.state == State.OPERATION_ENABLED and not self.fault
+
+    # ---- per period -------------------------------------------------------------------------------------
+    def frames(self, t: float) -> list[Frame]:
+        """Frames to send this period, before the SYNC."""
+        if self.phase == "operational":
+            self._supervise(t)
+            cw = master_controlword(self.state, self.target, self.controlword)
+            self.controlword = cw
+            tq = (
+                self.torque_permille
+                if self.state == State.OPERATION_ENABLED and self.target == State.OPERATION_ENABLED
+                else 0
+            )
+            return [Frame(self.cob_rpdo1, _RPDO1(cw, tq))]
+        if self.phase in ("units", "configure"):
+            return self._configure(t)
+        return []
+
+    def exit_frames(self) -> list[list[Frame]]:
+        """Frames of the last periods, one list per SYNC: quick stop, disable voltage, NMT pre-operational."""
+        if self.phase != "operational":
+            return []
+        self.target = State.SWITCH_ON_DISABLED
+        return [
+            [Frame(self.cob_rpdo1, _RPDO1(0x02, 0))],
+            [Frame(self.cob_rpdo1, _RPDO1(CW_DISABLE_VOLTAGE, 0))],
+            [fr.nmt(ob.NMT_PRE_OPERATIONAL, self.node_id)],
+        ]
+
+    def handle(self, cob: int, data: bytes, t: float) -> None:
+        if cob == self.cob_tpdo1:
+            sw, tq, pos = _TPDO1(data)
+            self._t_tpdo1 = t
+            self.tpdo1_count += 1
+            sc = self.scaling
+            if sw != self.statusword:
+                self._on_statusword(sw, t)
+            self._tau = sc.joint_torque(tq)
+            self.telemetry = Cia402Telemetry(
+                t, sc.joint_position(pos), self._vel, self._tau, self._cur, sw, self.state
+            )
+        elif cob == self.cob_tpdo2:
+            vel, cur = _TPDO2(data)
+            sc = self.scaling
+            self._vel, self._cur = sc.joint_velocity(vel), sc.current(cur)
+        elif cob == self.cob_heartbeat:
+            self._t_heartbeat = t
+            state = data[0] & 0x7F if data else -1
+            if (
+                self.phase == "operational"
+                and state != ob.NMT_OPERATIONAL
+                and self.nmt_state == ob.NMT_OPERATIONAL
+            ):
+                name = ob.NMT_STATE_NAMES.get(state, f"0x{state:02X}")
+                self._latch(f"drive node {self.node_id} left NMT OPERATIONAL (heartbeat reports {name})", t)
+            self.nmt_state = state
+        elif cob == self.cob_emcy:
+            msg = fr.decode_emcy(data)
+            self.emcy_log.append((t, msg))
+            if msg.code & 0xFF00:
+                self._latch(f"drive node {self.node_id} {msg.text}", t, emcy=True)
+        elif cob == self.cob_sdo_tx and self.sdo is not None:
+            self.sdo.on_response(data)
+
+    # ---- internals ---------------------------------------------------------------------------------------
+    def _set_target(self, target: State, t: float) -> None:
+        if target != self.target:
+            self.target = target
+            self._t_state = t
+
+    def _latch(self, text: str, t: float, emcy: bool = False) -> None:
+        if not self.fault or (emcy and self._fault_from_statusword and t - self._t_fault < 0.2):
+            self.fault = text
+            self._t_fault = t
+            self._fault_from_statusword = False
+        if self.target == State.OPERATION_ENABLED:
+            self._set_target(
+                State.QUICK_STOP_ACTIVE
+                if self.state == State.OPERATION_ENABLED
+                else State.SWITCH_ON_DISABLED,
+                t,
+            )
+        self.torque_permille = 0
+
+    _t_fault = 0.0
+    _fault_from_statusword = False
+
+    def _on_statusword(self, sw: int, t: float) -> None:
+        self.statusword = sw
+        state = state_from_statusword(sw)
+        if state != self.state:
+            self.state = state
+            self._t_state = t
+            if (
+                state in (State.FAULT, State.FAULT_REACTION_ACTIVE)
+                and self.target != State.SWITCH_ON_DISABLED
+            ):
+                if not self.fault:
+                    self._latch(f"drive node {self.node_id} reports FAULT in the statusword (0x{sw:04X})", t)
+                    self._fault_from_statusword = True
+                elif self.target == State.OPERATION_ENABLED:
+                    self._set_target(State.SWITCH_ON_DISABLED, t)
+
+    def _supervise(self, t: float) -> None:
+        cfg = self.cfg
+        if t - self._t_heartbeat > cfg.consumer_timeout:
+            self._t_heartbeat = t  # one report per missing episode
+            self._latch(
+                f"heartbeat of drive node {self.node_id} missing for more than {cfg.consumer_timeout * 1e3:.0f} ms",
+                t,
+            )
+        if t - self._t_tpdo1 > cfg.telemetry_timeout:
+            self._t_tpdo1 = t
+            self._latch(
+                f"telemetry of drive node {self.node_id} stale: no TPDO1 for more than "
+                f"{cfg.telemetry_timeout * 1e3:.0f} ms",
+                t,
+            )
+        if self.target == State.QUICK_STOP_ACTIVE and self.state == State.QUICK_STOP_ACTIVE:
+            self._set_target(State.SWITCH_ON_DISABLED, t)
+        elif self.state != self.target and t - self._t_state > cfg.state_timeout:
+            if self.target == State.QUICK_STOP_ACTIVE:
+                self._set_target(State.SWITCH_ON_DISABLED, t)
+            elif self.target == State.OPERATION_ENABLED:
+                self._latch(
+                    f"drive node {self.node_id} did not reach OPERATION ENABLED: stayed in "
+                    f"{STATE_NAMES[self.state]} for {cfg.state_timeout:g} s",
+                    t,
+                )
+            else:
+                self._t_state = t  # disable: keep commanding it
+
+    def _configure(self, t: float) -> list[Frame]:
+        sdo = self.sdo
+        if sdo.error:
+            self.phase = "failed"
+            self.fault = sdo.error
+            return []
+        if sdo.done and self.phase == "units":
+            self._resolve_units(sdo.values)
+            self.phase = "configure"
+            sdo.extend(self._configuration_steps())
+        if sdo.done and self.phase == "configure":
+            self.phase = "operational"
+            self._t_heartbeat = self._t_tpdo1 = self._t_operational = self._t_state = t
+            return [fr.nmt(ob.NMT_START, self.node_id)]
+        f = sdo.poll(t)
+        return [f] if f is not None else []
+
+    def _resolve_units(self, values: dict[tuple[int, int], int]) -> None:
+        u = self.units
+        v = values.get
+        if "counts_per_rev" not in u:
+            u["counts_per_rev"] = v((ob.OD_ENCODER_RESOLUTION, 1), 0) // max(
+                v((ob.OD_ENCODER_RESOLUTION, 2), 1), 1
+            )
+        if "gear_ratio" not in u:
+            u["gear_ratio"] = v((ob.OD_GEAR_RATIO, 1), 1) / max(v((ob.OD_GEAR_RATIO, 2), 1), 1)
+        if "rated_torque" not in u:
+            u["rated_torque"] = v((ob.OD_RATED_TORQUE, 0), 0) / 1000.0
+        if "rated_current" not in u:
+            u["rated_current"] = v((ob.OD_RATED_CURRENT, 0), 0) / 1000.0
+        cfg = self.cfg
+        conv = JointConversion(
+            gear_ratio=1.0 if cfg.lead > 0 else u["gear_ratio"],
+            direction=cfg.direction,
+            zero_offset=cfg.zero_offset,
+            lead=cfg.lead,
+        )
+        self.scaling = Cia402Scaling(
+            int(u["counts_per_rev"]), u["rated_torque"], u["rated_current"] or 1.0, conv
+        )
+        if cfg.max_torque:
+            self.max_permille = min(abs(self.scaling.torque_permille(cfg.max_torque)), 65535)
+
+    def _configuration_steps(self) -> list[SdoStep]:
+        n, cfg = self.node_id, self.cfg
+        steps = [
+            SdoStep(ob.OD_MODES_OF_OPERATION, 0, ob.MODE_CYCLIC_SYNC_TORQUE, 1, True),
+            SdoStep(ob.OD_HEARTBEAT_PRODUCER, 0, cfg.heartbeat_ms, 2),
+        ]
+        if cfg.max_torque:
+            steps.append(SdoStep(ob.OD_MAX_TORQUE, 0, self.max_permille, 2))
+        steps += _pdo_steps(ob.OD_RPDO1_COMM, ob.OD_RPDO1_MAP, ob.COB_RPDO1 + n, fr.RPDO1_MAP)
+        steps += _pdo_steps(ob.OD_TPDO1_COMM, ob.OD_TPDO1_MAP, ob.COB_TPDO1 + n, fr.TPDO1_MAP)
+        steps += _pdo_steps(ob.OD_TPDO2_COMM, ob.OD_TPDO2_MAP, ob.COB_TPDO2 + n, fr.TPDO2_MAP)
+        return steps
