@@ -100,6 +100,7 @@ class Cia402DriveEmulator:
         self.syncs = 0
         self.tpdos_sent = 0
         self.emcy_sent: list[int] = []
+        self.state_log: list[State] = [self.sm.state]  # every state the drive went through
         self._rpdos: dict[int, _Pdo] = {}
         self._tpdos: list[_Pdo] = []
         self._dirty = True
@@ -239,9 +240,14 @@ class Cia402DriveEmulator:
     def _apply_controlword(self) -> None:
         before = self.sm.state
         self.sm.apply(self.controlword)
+        self._log_state()
         if before == State.FAULT and self.sm.state != State.FAULT:
             self.error_code = 0
             self._emcy(0)  # error reset
+
+    def _log_state(self) -> None:
+        if self.sm.state != self.state_log[-1]:
+            self.state_log.append(self.sm.state)
 
     def _emcy(self, code: int) -> None:
         if not self.silent:
@@ -278,9 +284,11 @@ class Cia402DriveEmulator:
         if over and self.sm.state == State.OPERATION_ENABLED:
             self.error_code = 0x8311
             self.sm.fault()
+            self._log_state()
             self._emcy(0x8311)
         if self.sm.state == State.FAULT_REACTION_ACTIVE:
             self.sm.apply(self.controlword)  # reaction done: FAULT
+            self._log_state()
 
     def _motor_torque(self) -> float:
         if (
