@@ -109,6 +109,8 @@ class Cia402DriveEmulator:
         self._put(ob.OD_RATED_TORQUE, 0, round(cfg.rated_torque * 1000))
         self._put(ob.OD_RATED_CURRENT, 0, max(1, round(cfg.rated_torque / conversion.torque_constant * 1000)))
         self._put(ob.OD_MAX_TORQUE, 0, cfg.max_torque_permille)
+        self.mode = self.get(ob.OD_MODES_OF_OPERATION)  # cached copies of 0x6060 / 0x6072 (hot path)
+        self.max_torque = cfg.max_torque_permille
         gr = conversion.gear_ratio
         self._put(ob.OD_GEAR_RATIO, 1, round(gr * 1000))
         self._put(ob.OD_GEAR_RATIO, 2, 1000)
@@ -147,7 +149,7 @@ class Cia402DriveEmulator:
         if index == ob.OD_CURRENT_ACTUAL:
             return round(1000.0 * self.meas.motor_current / self.scaling.rated_current)
         if index == ob.OD_MODES_DISPLAY:
-            return self.get(ob.OD_MODES_OF_OPERATION)
+            return self.mode
         if index == ob.OD_ERROR_CODE:
             return self.error_code
         if index == ob.OD_ERROR_REGISTER:
@@ -166,6 +168,10 @@ class Cia402DriveEmulator:
                 self._apply_controlword()
         elif index == ob.OD_TARGET_TORQUE:
             self.target_torque = od.decode_raw(data)
+        elif index == ob.OD_MODES_OF_OPERATION:
+            self.mode = od.decode_raw(data)
+        elif index == ob.OD_MAX_TORQUE:
+            self.max_torque = od.decode_raw(data)
 
     # ---- PDO configuration ------------------------------------------------------------------------------
     def _read_pdos(self) -> None:
@@ -234,7 +240,7 @@ class Cia402DriveEmulator:
             elif index == ob.OD_TARGET_TORQUE:
                 self.target_torque = v
             else:
-                self._put(index, 0, v)
+                self.node.set_data(index, 0, self._od[index].encode_raw(v))
         self._apply_controlword()
 
     def _apply_controlword(self) -> None:
@@ -278,7 +284,7 @@ class Cia402DriveEmulator:
         return self.get(index) if v is None else v
 
     def _check_torque(self) -> None:
-        over = abs(self.target_torque) > self.get(ob.OD_MAX_TORQUE)
+        over = abs(self.target_torque) > self.max_torque
         if self.sm.fault_active and not over:
             self.sm.clear_fault()
         if over and self.sm.state == State.OPERATION_ENABLED:
@@ -291,10 +297,7 @@ class Cia402DriveEmulator:
             self._log_state()
 
     def _motor_torque(self) -> float:
-        if (
-            self.sm.state != State.OPERATION_ENABLED
-            or self.get(ob.OD_MODES_OF_OPERATION) != ob.MODE_CYCLIC_SYNC_TORQUE
-        ):
+        if self.sm.state != State.OPERATION_ENABLED or self.mode != ob.MODE_CYCLIC_SYNC_TORQUE:
             return 0.0
         return self.target_torque * self.scaling.rated_torque / 1000.0
 
@@ -319,7 +322,7 @@ class Cia402DriveEmulator:
 
     def set_max_torque(self, permille: int) -> None:
         """Change 0x6072 on the drive side (e.g. a drive panel), without the master knowing."""
-        self._put(ob.OD_MAX_TORQUE, 0, permille)
+        self.node.set_data(ob.OD_MAX_TORQUE, 0, self._od[ob.OD_MAX_TORQUE].encode_raw(permille))
 
     def stop(self) -> None:
         self.node.nmt.stop_heartbeat()
@@ -327,16 +330,18 @@ class Cia402DriveEmulator:
         self.network.unsubscribe(ob.COB_NMT, self._on_nmt)
 
 
-def emulated_drives(bus, node_ids, preset: str = "abb_m19s", **config):
+def emulated_drives(bus, node_ids, preset: str = "abb_m19s", plant_factory=None, **config):
     """A canopen Network on ``bus`` (python-can ``virtual``, ``friction_local``, ...) with one booted
-    emulated drive per node id, each with its own plant of ``preset``. Returns (network, drives)."""
+    emulated drive per node id, each with its own plant: ``plant_factory()`` -> (plant, conversion),
+    by default the plant of ``preset``. Returns (network, drives)."""
     from friction_ros.core.can.emulator import plant_from_preset
 
     network = canopen.Network(bus)
+    network.NOTIFIER_CYCLE = 0.05  # a prompt disconnect()
     network.connect()
     drives = []
     for n in node_ids:
-        plant, conv = plant_from_preset(preset)
+        plant, conv = plant_factory() if plant_factory else plant_from_preset(preset)
         drives.append(Cia402DriveEmulator(network, plant, conv, Cia402EmulatorConfig(node_id=n, **config)))
     for d in drives:
         d.boot()
