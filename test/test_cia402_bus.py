@@ -218,7 +218,7 @@ def test_over_torque_emcy_latches_fault_with_text_and_enable_resets(bench):
 
 
 def test_missing_heartbeat_is_a_fault_and_the_drive_is_stopped(bench):
-    net, (m,), (d,), _, _ = bench((5,), heartbeat_ms=20)
+    net, (m,), (d,), _, _ = bench((5,), heartbeat_ms=20, heartbeat_timeout=0.05)
     _enable(net, [m])
     m.set_torque(0.2)
     net.run_until(lambda: False, 0.1)
@@ -233,7 +233,7 @@ def test_missing_heartbeat_is_a_fault_and_the_drive_is_stopped(bench):
 
 
 def test_silent_drive_is_stale_telemetry_fault(bench):
-    net, (m,), (d,), _, _ = bench((6,))
+    net, (m,), (d,), _, _ = bench((6,), telemetry_timeout=0.05)
     _enable(net, [m])
     d.set_silent()
     assert net.run_until(lambda: bool(m.fault), 1.0)

@@ -3,12 +3,16 @@
 Units resolution, per quantity: the parameter when it is set (non-zero), else the EDS default
 (``eds_path``), else the drive's own object read by SDO at start-up (0x608F counts per revolution,
 0x6091 gear ratio, 0x6076 rated torque, 0x6075 rated current).
+
+The automatic timeouts add ``JITTER_MARGIN`` (0.5 s) like the other drive protocols: scheduler pauses
+of a loaded machine reach hundreds of ms; on a robot with a quiet CPU set a few periods instead.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+from friction_ros.core.can.axis_config import JITTER_MARGIN  # pauses of a shared machine, measured there
 from friction_ros.core.can.cia402 import objects as ob
 from friction_ros.core.validation import ParameterError, check_int, check_real
 
@@ -25,8 +29,8 @@ class Cia402Config:
     rated_current: float = 0.0  # A (0: EDS / drive 0x6075)
     max_torque: float = 0.0  # joint N*m (N if prismatic) written to 0x6072; 0 = keep the drive's
     heartbeat_ms: int = 100  # producer heartbeat time written to 0x1017
-    heartbeat_timeout: float = 0.0  # [s] heartbeat consumer; 0 = 2.5 heartbeat periods
-    telemetry_timeout: float = 0.05  # [s] no TPDO1 this long while operational = fault
+    heartbeat_timeout: float = 0.0  # [s] heartbeat consumer; 0 = 3 heartbeat periods + JITTER_MARGIN
+    telemetry_timeout: float = 0.0  # [s] no TPDO1 this long = fault; 0 = 3 control periods + JITTER_MARGIN
     sdo_timeout: float = 0.1  # [s] per SDO request
     sdo_retries: int = 3
     state_timeout: float = 0.5  # [s] per CiA 402 state transition
@@ -41,10 +45,8 @@ class Cia402Config:
         check_real("rated_current", self.rated_current, 0.0, unit="A (0 = from EDS or drive)")
         check_real("max_torque", self.max_torque, 0.0, unit="N*m or N at the joint (0 = keep the drive's)")
         check_int("heartbeat_ms", self.heartbeat_ms, 1, 65535)
-        check_real(
-            "heartbeat_timeout", self.heartbeat_timeout, 0.0, 60.0, unit="s (0 = 2.5 heartbeat periods)"
-        )
-        check_real("telemetry_timeout", self.telemetry_timeout, 0.0, 10.0, lo_open=True, unit="s")
+        check_real("heartbeat_timeout", self.heartbeat_timeout, 0.0, 60.0, unit="s (0 = automatic)")
+        check_real("telemetry_timeout", self.telemetry_timeout, 0.0, 60.0, unit="s (0 = automatic)")
         check_real("sdo_timeout", self.sdo_timeout, 0.0, 10.0, lo_open=True, unit="s")
         check_int("sdo_retries", self.sdo_retries, 0, 100)
         check_real("state_timeout", self.state_timeout, 0.0, 60.0, lo_open=True, unit="s")
@@ -58,7 +60,12 @@ class Cia402Config:
 
     @property
     def consumer_timeout(self) -> float:
-        return self.heartbeat_timeout or 2.5e-3 * self.heartbeat_ms
+        """Heartbeat consumer time [s]: the parameter, or 3 producer periods + JITTER_MARGIN."""
+        return self.heartbeat_timeout or 3e-3 * self.heartbeat_ms + JITTER_MARGIN
+
+    def stale_after(self, control_period: float) -> float:
+        """Stale-telemetry timeout [s]: the parameter, or 3 control periods + JITTER_MARGIN."""
+        return self.telemetry_timeout or 3 * control_period + JITTER_MARGIN
 
 
 def eds_defaults(path: str) -> dict[str, float]:

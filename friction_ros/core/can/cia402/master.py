@@ -108,6 +108,7 @@ class Cia402Master:
         self._t_tpdo1 = 0.0
         self._t_operational = 0.0
         self.tpdo1_count = 0
+        self.control_period = 1e-3  # set by the network; sizes the automatic stale timeout
 
     # ---- commands -------------------------------------------------------------------------------------
     def start(self, t: float) -> list[Frame]:
@@ -123,7 +124,7 @@ class Cia402Master:
         self.fault = ""
         self._set_target(State.OPERATION_ENABLED, t)
         if self.phase == "operational":
-            self._t_heartbeat = self._t_tpdo1 = max(self._t_tpdo1, t - self.cfg.telemetry_timeout / 2)
+            self._t_heartbeat = self._t_tpdo1 = max(self._t_tpdo1, t - self.stale_after / 2)
 
     def disable(self, t: float) -> None:
         self._set_target(State.SWITCH_ON_DISABLED, t)
@@ -138,6 +139,10 @@ class Cia402Master:
         p = self.scaling.torque_permille(joint_torque)
         m = self.max_permille
         self.torque_permille = m if p > m else -m if p < -m else p
+
+    @property
+    def stale_after(self) -> float:
+        return self.cfg.stale_after(self.control_period)
 
     @property
     def enabled(self) -> bool:
@@ -253,11 +258,11 @@ class Cia402Master:
                 f"heartbeat of drive node {self.node_id} missing for more than {cfg.consumer_timeout * 1e3:.0f} ms",
                 t,
             )
-        if t - self._t_tpdo1 > cfg.telemetry_timeout:
+        if t - self._t_tpdo1 > self.stale_after:
             self._t_tpdo1 = t
             self._latch(
                 f"telemetry of drive node {self.node_id} stale: no TPDO1 for more than "
-                f"{cfg.telemetry_timeout * 1e3:.0f} ms",
+                f"{self.stale_after * 1e3:.0f} ms",
                 t,
             )
         if self.target == State.QUICK_STOP_ACTIVE and self.state == State.QUICK_STOP_ACTIVE:

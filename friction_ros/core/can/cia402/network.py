@@ -48,6 +48,8 @@ class Cia402Network:
         self.period = period
         self.send_errors = 0
         self.frames_rx = 0
+        for m in self.masters:
+            m.control_period = period
         self._dispatch = {cob: m.handle for m in self.masters for cob in m.cob_ids}
         self._sync_msg = _msg(self.sync.frame)
 
