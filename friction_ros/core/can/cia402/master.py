@@ -97,6 +97,8 @@ class Cia402Master:
         self.torque_permille = 0
         self.max_permille = 32767
         self.fault = ""  # latched fault text ("" = none)
+        self._t_fault = 0.0
+        self._fault_from_statusword = False  # an EMCY arriving just after replaces the text
         self.emcy_log: list[tuple[float, fr.EmcyMessage]] = []
         self.nmt_state: int | None = None  # from the heartbeat
         self.telemetry: Cia402Telemetry | None = None
@@ -230,9 +232,6 @@ class Cia402Master:
                 t,
             )
         self.torque_permille = 0
-
-    _t_fault = 0.0
-    _fault_from_statusword = False
 
     def _on_statusword(self, sw: int, t: float) -> None:
         self.statusword = sw
