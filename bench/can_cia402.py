@@ -183,6 +183,7 @@ def run_drives(n_drives: int, duration: float) -> dict:
         "faults": faults,
         "cpu_percent": 100 * cpu / wall,
         "cpu_per_axis_percent": 100 * cpu / wall / n_drives,
+        "cpu_us_per_period": cpu / max(ran, 1) * 1e6,
         "expected_periods": round(wall / PERIOD),
         "syncs": syncs,
         "missed_sync": round(wall / PERIOD) - syncs,
@@ -208,6 +209,7 @@ def main() -> None:
     ran, cpu, wall = loop(lambda: None, a.duration)
     floor = {
         "cpu_percent": 100 * cpu / wall,
+        "cpu_us_per_period": cpu / ran * 1e6,
         "missed": round(wall / PERIOD) - ran,
         "expected": round(wall / PERIOD),
     }
@@ -217,6 +219,7 @@ def main() -> None:
             "timer floor (empty 1 kHz loop)",
             0,
             floor["cpu_percent"],
+            floor["cpu_us_per_period"],
             "-",
             f"{floor['missed']} / {floor['expected']}",
             "-",
@@ -227,6 +230,7 @@ def main() -> None:
             f"CiA 402, {r['drives']} drive(s)" + ("" if r["enabled"] else " (FAULT)"),
             r["drives"],
             r["cpu_percent"],
+            r["cpu_us_per_period"],
             r["cpu_per_axis_percent"],
             f"{r['missed_sync']} / {r['expected_periods']}",
             r["tpdo1_per_sync"],
@@ -236,7 +240,15 @@ def main() -> None:
     print_table(
         f"Driver at 1 kHz on friction_local, drives in another process ({a.duration:g} s per row; "
         f"master work per axis and period without the bus: {per_axis_us:.1f} us)",
-        ["row", "drives", "driver CPU %", "CPU per axis %", "missed SYNC / periods", "TPDO1 / SYNC"],
+        [
+            "row",
+            "drives",
+            "driver CPU %",
+            "CPU us / period",
+            "CPU per axis %",
+            "missed SYNC / periods",
+            "TPDO1 / SYNC",
+        ],
         rows,
     )
     write_results(
@@ -246,6 +258,7 @@ def main() -> None:
             "master_period_us_per_axis": per_axis_us,
             "timer_floor": floor,
             "runs": runs,
+            "load_average_1min_after": os.getloadavg()[0],
         },
         command=f".venv/bin/python bench/can_cia402.py --duration {a.duration:g}",
     )

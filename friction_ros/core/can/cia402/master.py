@@ -152,20 +152,29 @@ class Cia402Master:
 
     # ---- per period -------------------------------------------------------------------------------------
     def frames(self, t: float) -> list[Frame]:
-        """Frames to send this period, before the SYNC."""
+        """Frames to send this period, before the SYNC: :meth:`step` and, once operational, the RPDO."""
+        out = self.step(t)
+        if self.phase == "operational":
+            out.append(self.rpdo_frame())
+        return out
+
+    def step(self, t: float) -> list[Frame]:
+        """Supervision and the state machine walk of one period; start-up frames (SDO, NMT) while
+        configuring. The period's RPDO is :meth:`rpdo_frame` (separate for drivers that send the
+        command themselves)."""
         if self.phase == "operational":
             self._supervise(t)
-            cw = master_controlword(self.state, self.target, self.controlword)
-            self.controlword = cw
-            tq = (
-                self.torque_permille
-                if self.state == State.OPERATION_ENABLED and self.target == State.OPERATION_ENABLED
-                else 0
-            )
-            return [Frame(self.cob_rpdo1, _RPDO1(cw, tq))]
+            self.controlword = master_controlword(self.state, self.target, self.controlword)
+            return []
         if self.phase in ("units", "configure"):
             return self._configure(t)
         return []
+
+    def rpdo_frame(self) -> Frame:
+        """RPDO1: the controlword of this period and the target torque (zero unless OPERATION ENABLED
+        is both the state and the target)."""
+        on = self.state == State.OPERATION_ENABLED and self.target == State.OPERATION_ENABLED
+        return Frame(self.cob_rpdo1, _RPDO1(self.controlword, self.torque_permille if on else 0))
 
     def exit_frames(self) -> list[list[Frame]]:
         """Frames of the last periods, one list per SYNC: quick stop, disable voltage, NMT pre-operational."""
