@@ -190,3 +190,23 @@ def test_core_imports_no_rclpy():
     code = "import sys, friction_ros.core.can.cia402.emulator, friction_ros.core.can.cia402; print('rclpy' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def test_master_unwraps_int32_position_and_converts_telemetry():
+    from friction_ros.core.can.cia402 import Cia402Master
+
+    m = Cia402Master(
+        Cia402Config(node_id=2, counts_per_rev=1000, gear_ratio=2.0, rated_torque=0.5, rated_current=4.0)
+    )
+    m.start(0.0)
+    m.step(0.0)  # no unit to read: straight to the configuration writes
+    assert m.phase == "configure" and m.scaling is not None
+    top = 2**31 - 10
+    m.handle(0x182, fr.TPDO1.pack(0x0237, 100, top), 0.01)
+    m.handle(0x282, fr.TPDO2.pack(500, -250), 0.01)
+    m.handle(0x182, fr.TPDO1.pack(0x0237, 100, -(2**31) + 10), 0.02)  # wrapped: +20 counts
+    tel = m.telemetry
+    assert tel.position == pytest.approx((top + 20) / 1000 * 2 * math.pi / 2.0)
+    assert tel.velocity == pytest.approx(0.5 * 2 * math.pi / 2.0)  # 500 counts/s, gear 2
+    assert tel.torque == pytest.approx(0.1 * 0.5 * 2.0) and tel.current == pytest.approx(-1.0)
+    assert tel.state == State.OPERATION_ENABLED

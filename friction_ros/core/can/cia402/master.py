@@ -38,6 +38,7 @@ from friction_ros.core.can.joint import JointConversion
 _RPDO1 = fr.RPDO1.pack
 _TPDO1 = fr.TPDO1.unpack_from
 _TPDO2 = fr.TPDO2.unpack_from
+_HALF, _MASK = 1 << 31, (1 << 32) - 1
 _UNIT_OBJECTS = {  # parameter -> objects read from the drive when neither parameter nor EDS gives it
     "counts_per_rev": ((ob.OD_ENCODER_RESOLUTION, 1), (ob.OD_ENCODER_RESOLUTION, 2)),
     "gear_ratio": ((ob.OD_GEAR_RATIO, 1), (ob.OD_GEAR_RATIO, 2)),
@@ -110,6 +111,8 @@ class Cia402Master:
         self._t_tpdo1 = 0.0
         self._t_operational = 0.0
         self.tpdo1_count = 0
+        self._counts = 0  # position actual unwrapped across int32 overflow (multi-turn joints)
+        self._last_counts: int | None = None
         self.control_period = 1e-3  # set by the network; sizes the automatic stale timeout
 
     # ---- commands -------------------------------------------------------------------------------------
@@ -196,8 +199,11 @@ class Cia402Master:
             if sw != self.statusword:
                 self._on_statusword(sw, t)
             self._tau = sc.joint_torque(tq)
+            last = self._last_counts
+            self._counts = pos if last is None else self._counts + ((pos - last + _HALF) & _MASK) - _HALF
+            self._last_counts = pos
             self.telemetry = Cia402Telemetry(
-                t, sc.joint_position(pos), self._vel, self._tau, self._cur, sw, self.state
+                t, sc.joint_position(self._counts), self._vel, self._tau, self._cur, sw, self.state
             )
         elif cob == self.cob_tpdo2:
             vel, cur = _TPDO2(data)
