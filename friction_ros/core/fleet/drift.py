@@ -7,7 +7,7 @@ run-to-run scatter of the normalised coefficient c_n:
 
     mu_0 = median(c_n),   sigma_0 = max(1.4826 MAD(c_n), median(se_n))
 
-(``se_n`` the run's propagated standard error, :mod:`.temperature`). Every run i is standardised,
+(``se_n`` the run's propagated standard error, :mod:`.temperature_law`). Every run i is standardised,
 with its own uncertainty added when it exceeds the baseline's typical one,
 
     z_i = (c_n,i - mu_0) / s_i,   s_i = sqrt(sigma_0^2 + max(0, se_n,i^2 - median(se_n)^2)),
@@ -38,7 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from friction_ros.core.fleet.temperature import robust_sigma
+from friction_ros.core.fleet.temperature_law import robust_sigma
 
 Z_CLIP = 4.0  # |z| limit per run [baseline sigmas]
 DEFAULT_K = 1.0  # reference value [baseline sigmas]: half the 2-sigma shift detected fastest

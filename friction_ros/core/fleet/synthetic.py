@@ -2,7 +2,7 @@
 gearbox temperature following a daily cycle, some joints wearing from a known day.
 
 Per joint (a linear track in N and six revolute joints in N*m, scales from 0.8 N*m to 40 N), the
-true coefficients of run r on day d at temperature T (laws of :mod:`.temperature`, T_ref = 25 degC):
+true coefficients of run r on day d at temperature T (laws of :mod:`.temperature_law`, T_ref = 25 degC):
 
     fc(d, T) = fc_0 (1 + a_c (T - T_ref)) (1 + w (d - d_0)_+ / 100),   a_c ~ -0.004 /K
     fv(T)    = fv_0 exp(-k_v (T - T_ref)),                               k_v ~ 0.02 /K

@@ -4,7 +4,7 @@ For every (robot, joint) of the table (:data:`~.table.FLEET_SCHEMA`), the runs f
 of the model friction-fit recommended most often for that joint give one series per tracked
 coefficient (default :data:`WEAR_COEFFICIENTS`). The joint's baseline is the runs of its first
 ``baseline_days`` days (from its first run); on it the temperature/load law of each coefficient is
-fitted (:mod:`.temperature`), every run is normalised to ``t_ref`` with its uncertainty, and the
+fitted (:mod:`.temperature_law`), every run is normalised to ``t_ref`` with its uncertainty, and the
 upper CUSUM of :mod:`.drift` raises the wear alarm. Drift for ranking the fleet: the mean change of
 the normalised coefficient over the last ``recent_days`` days vs the baseline, in baseline sigmas.
 """
@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from friction_ros.core.fleet.drift import DEFAULT_ARL0, Detection, detect
-from friction_ros.core.fleet.temperature import TemperatureLaw, fit_law
+from friction_ros.core.fleet.temperature_law import TemperatureLaw, fit_law
 from friction_ros.core.validation import ParameterError
 
 #: the coefficients that wear changes (friction levels and viscous friction)
