@@ -23,6 +23,7 @@ ENTRY_POINTS = [
     "friction-fit = friction_ros.cli.fit:main",
     "identification_experiment = friction_ros.nodes.identification_experiment:main",
     "friction-experiment = friction_ros.cli.experiment:main",
+    "friction-fleet = friction_ros.cli.fleet:main",
 ]
 
 setup(

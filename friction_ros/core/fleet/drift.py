@@ -116,8 +116,14 @@ def detect(day, values, stderr, baseline, arl0: float = DEFAULT_ARL0, k: float =
     n_base = int(base.sum())
     des = design(n_base, arl0, k)
     if n_base < 4:
-        return Detection(math.nan, math.nan, np.zeros(v.size), np.zeros(v.size), design=des,
-                         notes=[f"baseline has {n_base} usable runs (at least 4 needed): no alarm possible"])
+        return Detection(
+            math.nan,
+            math.nan,
+            np.zeros(v.size),
+            np.zeros(v.size),
+            design=des,
+            notes=[f"baseline has {n_base} usable runs (at least 4 needed): no alarm possible"],
+        )
     mu0, sigma0, se_med = baseline_level(v[base], se[base])
     if not sigma0 > 0:
         sigma0 = max(abs(mu0) * 1e-6, 1e-300)

@@ -172,7 +172,9 @@ def fleet_plan(
     last = max(first_wear_day, days - 8)
     picks = rng.choice(robots * len(joints), size=min(worn, robots * len(joints)), replace=False)
     wear = [
-        Wear(names[p // len(joints)], joints[p % len(joints)].name, int(rng.integers(first_wear_day, last + 1)))
+        Wear(
+            names[p // len(joints)], joints[p % len(joints)].name, int(rng.integers(first_wear_day, last + 1))
+        )
         for p in sorted(picks)
     ]
     hours = [2.0 + 24.0 * i / runs_per_day for i in range(runs_per_day)]
@@ -224,7 +226,10 @@ def table_rows(plan: FleetPlan, seed: int | None = None, noise: dict | None = No
             "source_sha256": hashlib.sha256(run.key.encode()).hexdigest(),
             "fitted_at": fitted_at,
         }
-        for model, names, rec in (("coulomb_viscous", ("fc", "fv", "J"), True), ("coulomb", ("fc", "J"), False)):
+        for model, names, rec in (
+            ("coulomb_viscous", ("fc", "fv", "J"), True),
+            ("coulomb", ("fc", "J"), False),
+        ):
             values = [truth[n] * (1.0 + noise[n] * rng.standard_normal()) for n in names]
             stderr = [noise[n] * truth[n] * rng.uniform(0.8, 1.2) for n in names]
             rows.append(

@@ -79,11 +79,14 @@ class CoefficientTrend:
         return 100.0 * (self.normalised / self.detection.mu0 - 1.0)
 
     def recent(self, days: int) -> tuple[float, float]:
-        """(mean change [%], mean z [baseline sigmas]) over the last ``days`` days."""
+        """(mean change [%], mean change [baseline sigmas, not clipped]) over the last ``days`` days."""
         sel = (self.day > self.day.max() - days) & np.isfinite(self.normalised)
         if not sel.any() or not math.isfinite(self.detection.mu0):
             return math.nan, math.nan
-        return float(np.mean(self.change_percent[sel])), float(np.mean(self.detection.z[sel]))
+        d = self.detection
+        return float(np.mean(self.change_percent[sel])), float(
+            (np.mean(self.normalised[sel]) - d.mu0) / d.sigma0
+        )
 
 
 @dataclass
@@ -128,13 +131,17 @@ def analyse(table, options: TrendOptions | None = None) -> list[JointTrend]:
         if not err:
             groups.setdefault((robot, joint), []).append(i)
     if not groups:
-        raise ParameterError("the table has no fitted run (every row is empty or has an error): nothing to trend")
+        raise ParameterError(
+            "the table has no fitted run (every row is empty or has an error): nothing to trend"
+        )
     return [_joint_trend(key, rows, cols, options) for key, rows in sorted(groups.items())]
 
 
 def _joint_trend(key, rows: list[int], cols: dict, options: TrendOptions) -> JointTrend:
     votes = Counter(cols["model"][i] for i in rows if cols["recommended"][i])
-    model = votes.most_common(1)[0][0] if votes else Counter(cols["model"][i] for i in rows).most_common(1)[0][0]
+    model = (
+        votes.most_common(1)[0][0] if votes else Counter(cols["model"][i] for i in rows).most_common(1)[0][0]
+    )
     rows = sorted((i for i in rows if cols["model"][i] == model), key=lambda i: cols["run_time"][i])
     jt = JointTrend(key[0], key[1], model, cols["joint_type"][rows[0]] or "revolute", len(rows))
     times = [cols["run_time"][i] for i in rows]
@@ -155,7 +162,9 @@ def _joint_trend(key, rows: list[int], cols: dict, options: TrendOptions) -> Joi
             CoefficientTrend(name, day, times, values, stderr, temp, cn, se_n, baseline, law, det)
         )
     if not jt.coefficients:
-        jt.notes.append(f"model {model} has none of the tracked coefficients ({', '.join(options.coefficients)})")
+        jt.notes.append(
+            f"model {model} has none of the tracked coefficients ({', '.join(options.coefficients)})"
+        )
     if day.max() < options.baseline_days:
         jt.notes.append(f"runs span {day.max() + 1} day(s), within the {options.baseline_days}-day baseline")
     return jt
