@@ -29,7 +29,7 @@ import numpy as np
 T_REF = 25.0  # [degC]
 #: relative run-to-run noise of fitted coefficients (table-level generator)
 NOISE = {"fc": 0.008, "fv": 0.015, "J": 0.01}
-START = dt.datetime(2026, 1, 5, tzinfo=dt.timezone.utc)
+START = dt.datetime(2026, 1, 5, tzinfo=dt.UTC)
 
 
 @dataclass(frozen=True)
