@@ -88,7 +88,9 @@ class PathPattern:
                 fmt = fmt or ("%Y-%m-%d" if name == "date" else "%H:%M:%S")
                 parts.append(f"(?P<{name}>{self._strptime_regex(fmt)})")
             elif fmt:
-                raise ParameterError(f"--pattern {text!r}: {{{name}}} takes no format (only date and time do)")
+                raise ParameterError(
+                    f"--pattern {text!r}: {{{name}}} takes no format (only date and time do)"
+                )
             else:
                 parts.append(f"(?P<{name}>[^/]+?)")
             self.formats[name] = fmt
@@ -133,7 +135,7 @@ class PathPattern:
             day = dt.datetime.strptime(g["date"], self.formats["date"]) if g.get("date") else None
             tod = dt.datetime.strptime(g["time"], self.formats["time"]).time() if g.get("time") else dt.time()
             base = day.date() if day else dt.date(1970, 1, 1)
-            out["run_time"] = dt.datetime.combine(base, tod, tzinfo=dt.timezone.utc)
+            out["run_time"] = dt.datetime.combine(base, tod, tzinfo=dt.UTC)
         return out
 
 
@@ -185,8 +187,10 @@ def _as_utc(value, where: str) -> dt.datetime:
         try:
             t = dt.datetime.fromisoformat(str(value).strip().replace("Z", "+00:00"))
         except ValueError:
-            raise ParameterError(f"{where}: time {value!r} is not ISO 8601 (e.g. 2026-03-01T08:00:00Z)") from None
-    return t.replace(tzinfo=dt.timezone.utc) if t.tzinfo is None else t.astimezone(dt.timezone.utc)
+            raise ParameterError(
+                f"{where}: time {value!r} is not ISO 8601 (e.g. 2026-03-01T08:00:00Z)"
+            ) from None
+    return t.replace(tzinfo=dt.UTC) if t.tzinfo is None else t.astimezone(dt.UTC)
 
 
 def read_sidecar(run: Path) -> dict:
@@ -204,7 +208,9 @@ def read_sidecar(run: Path) -> dict:
         raise ParameterError(f"sidecar {side}: must be a mapping of {', '.join(SIDECAR_KEYS)}")
     unknown = sorted(set(doc) - set(SIDECAR_KEYS))
     if unknown:
-        raise ParameterError(f"sidecar {side}: unknown key(s) {', '.join(unknown)}: allowed {', '.join(SIDECAR_KEYS)}")
+        raise ParameterError(
+            f"sidecar {side}: unknown key(s) {', '.join(unknown)}: allowed {', '.join(SIDECAR_KEYS)}"
+        )
     out = {k: doc[k] for k in SIDECAR_KEYS if k in doc and k != "time"}
     for k in ("robot", "joint"):
         if k in out:
@@ -230,7 +236,7 @@ def bag_identity(run: Path) -> dict:
     if "run_time" in found:
         found["run_time"] = _as_utc(found["run_time"], f"bag {run}")
     elif info.span is not None:
-        found["run_time"] = dt.datetime.fromtimestamp(info.span[0] * 1e-9, dt.timezone.utc)
+        found["run_time"] = dt.datetime.fromtimestamp(info.span[0] * 1e-9, dt.UTC)
     return {k: str(v) if k != "run_time" else v for k, v in found.items()}
 
 

@@ -72,7 +72,7 @@ def _base_row(task: RunTask, joint_type: str) -> dict:
         "software_version": software_version(),
         "source_path": task.path,
         "source_sha256": task.source_sha256,
-        "fitted_at": dt.datetime.now(dt.timezone.utc),
+        "fitted_at": dt.datetime.now(dt.UTC),
     }
 
 
@@ -158,8 +158,7 @@ def _fit(task: RunTask, opts: dict) -> list[dict]:
         return [{**row, "error": str(exc).splitlines()[0] if str(exc) else type(exc).__name__}]
     label, nmse = verdict_label(res)
     text = (res.options.get("verdict") or {}).get("text") or (
-        f"the recommended model {res.recommended} explains the measured torque "
-        f"(validation NMSE {nmse:.3g} %)"
+        f"the recommended model {res.recommended} explains the measured torque (validation NMSE {nmse:.3g} %)"
         if res.recommended and nmse is not None
         else "no model is recommended"
     )
