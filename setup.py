@@ -24,7 +24,6 @@ ENTRY_POINTS = [
     "friction-fleet = friction_ros.cli.fleet:main",
     "identification_experiment = friction_ros.nodes.identification_experiment:main",
     "friction-experiment = friction_ros.cli.experiment:main",
-    "friction-fleet = friction_ros.cli.fleet:main",
 ]
 
 setup(
