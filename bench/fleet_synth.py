@@ -58,7 +58,9 @@ def run_columns(plan: FleetPlan, run: Run, seconds: float, seed: int) -> dict[st
 
 
 def run_path(root: Path, run: Run) -> Path:
-    return root / run.robot / run.time.strftime("%Y-%m-%d") / f"{run.joint.name}-{run.time.strftime('%H%M')}.csv"
+    return (
+        root / run.robot / run.time.strftime("%Y-%m-%d") / f"{run.joint.name}-{run.time.strftime('%H%M')}.csv"
+    )
 
 
 def write_run(root: Path, plan: FleetPlan, run: Run, seconds: float, seed: int) -> Path:
