@@ -23,6 +23,7 @@ import importlib
 import math
 import threading
 from collections.abc import Sequence
+from importlib import metadata
 from typing import TYPE_CHECKING, Any, NamedTuple
 
 from friction_ros.core.can.frame import DecodeStats, Frame, SafeDecoder
@@ -231,9 +232,7 @@ def _load_entry_points() -> None:
     if _entry_points_loaded:
         return
     _entry_points_loaded = True
-    from importlib.metadata import entry_points
-
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
         _registered.setdefault(ep.name, ep.value)
 
 
