@@ -82,6 +82,9 @@ class ToyProtocol(DriveProtocol):
     def closed_loop(self, state):
         return state == 1
 
+    def error_text(self, code):
+        return {7: "toy overheated"}.get(code, "")
+
     def _cmd(self, torque, mode):
         return Frame(CMD + self.cfg.node_id, _CMD.pack(torque, mode))
 
@@ -259,7 +262,7 @@ def test_toy_protocol_drives_the_emulated_axis_and_faults_to_the_safe_state(toy)
         rig.emu.inject_axis_error(7)  # a drive fault: reported in the telemetry frame
         rig.run(0.05, torque=0.3)
         assert rig.axis.latched & FAULT_DRIVE_ERROR and rig.axis.telemetry.axis_error == 7
-        assert "drive reports error 0x7" in rig.axis.fault_reason and not rig.axis.enabled
+        assert rig.axis.fault_reason == "drive reports error 0x7 (toy overheated)" and not rig.axis.enabled
         assert rig.results[-1].joint_torque_command == 0.0 and rig.sent()[-1] == (0.0, 0)
         assert sum(1 for r in rig.results[n:] for f in r.frames if f.data == _CMD.pack(0.0, 0)) == 1
     finally:

@@ -102,6 +102,9 @@ class DriveAxis:
         self._fast: dict[int, int] = self.protocol.float_pairs()
         self._channel = self.protocol.gated_ids()
         self._reports_state = self.protocol.reports_state
+        self._decode = self.protocol.decode  # bound once: the per-frame and per-period calls
+        self._torque_frame = self.protocol.torque_frame
+        self._poll_frames = self.protocol.poll_frames
         proto_cls = type(self.protocol)
         self._cycle_frames = (
             self.protocol.cycle_frames if proto_cls.cycle_frames is not DriveProtocol.cycle_frames else None
@@ -178,7 +181,7 @@ class DriveAxis:
                             c.effort_frames += 1
                 return
         rejected = self.decoder.stats.rejected
-        r = self.protocol.decode(arb_id, data, is_remote, is_extended, is_error)
+        r = self._decode(arb_id, data, is_remote, is_extended, is_error)
         if r is None:
             channel = self._channel.get(arb_id)
             if channel is not None and self.decoder.stats.rejected > rejected:
@@ -327,7 +330,10 @@ class DriveAxis:
                     self._latch(FAULT_TELEMETRY_STALE, f"telemetry stale: {reasons[FAULT_TELEMETRY_STALE]}")
             if tel.axis_error:
                 flags |= FAULT_DRIVE_ERROR
-                reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}"
+                text = self.protocol.error_text(tel.axis_error)
+                reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}" + (
+                    f" ({text})" if text else ""
+                )
                 if self.enabled or self.enable_requested:
                     self._latch(FAULT_DRIVE_ERROR, reasons[FAULT_DRIVE_ERROR])
             implausible = self.gate.implausible
@@ -398,8 +404,8 @@ class DriveAxis:
                     flags |= FAULT_LIMIT
                     self.counters.limit_hits += 1
                 motor_torque = conv.motor_torque(cmd)
-                frames.append(self.protocol.torque_frame(motor_torque))
-            frames += self.protocol.poll_frames(self.enabled)
+                frames.append(self._torque_frame(motor_torque))
+            frames += self._poll_frames(self.enabled)
             if self._cycle_frames is not None:
                 frames += self._cycle_frames(t)
             self.counters.frames_tx += len(frames)

@@ -20,6 +20,7 @@ from friction_ros.core.can.telemetry_gate import MOTION
 from friction_ros.core.validation import ParameterError, check_int
 
 POSITION_STEPS = (1 << 16) - 1  # 16-bit position field
+_NONE: tuple = ()
 
 
 class MitProtocol(DriveProtocol):
@@ -53,13 +54,9 @@ class MitProtocol(DriveProtocol):
         m = self.decoder.decode(arb_id, data, is_remote, is_extended, is_error)
         if m is None:
             return None
-        return DriveTelemetry(
-            position=m.position,
-            velocity=m.velocity,
-            torque=m.torque,
-            current=m.torque / self.cfg.conversion.torque_constant,
-            error=m.error,
-        )
+        # positional (hot path, every period): position, velocity, torque, torque_target, current, ...
+        _, p, v, tau, _, err = m
+        return DriveTelemetry(p, v, tau, None, tau / self.cfg.conversion.torque_constant, None, None, err)
 
     def receive_filters(self) -> list[dict]:
         return [{"can_id": self.codec.master_id, "can_mask": 0x7FF, "extended": False}]
@@ -84,7 +81,7 @@ class MitProtocol(DriveProtocol):
         return self.codec.encode_command(torque=motor_torque)
 
     def poll_frames(self, enabled: bool) -> list[Frame]:
-        return [] if enabled else [self._zero]  # the drive only reports when it receives a frame
+        return _NONE if enabled else [self._zero]  # the drive only reports when it receives a frame
 
 
 class MitEmulatedDrive(EmulatedDriveProtocol):

@@ -103,11 +103,11 @@ class OdriveProtocol(DriveProtocol):
     def torque_frame(self, motor_torque: float) -> Frame:
         return od.encode_set_input_torque(self.node_id, motor_torque)
 
-    def poll_frames(self, enabled: bool) -> list[Frame]:
+    def poll_frames(self, enabled: bool) -> tuple[Frame, ...]:
         if not self.cfg.request_telemetry:
-            return []
+            return ()
         n = self.node_id
-        return [od.encode_rtr(n, od.Cmd.GET_ENCODER_ESTIMATES), od.encode_rtr(n, self._effort_cmd)]
+        return (od.encode_rtr(n, od.Cmd.GET_ENCODER_ESTIMATES), od.encode_rtr(n, self._effort_cmd))
 
 
 class OdriveEmulatedDrive(EmulatedDriveProtocol):

@@ -137,6 +137,10 @@ class DriveProtocol:
     def state_name(self, state: int) -> str:
         return str(state)
 
+    def error_text(self, code: int) -> str:
+        """Words for a drive fault code, added to the fault line; default none."""
+        return ""
+
     # ---- send -------------------------------------------------------------------------------------
     def startup_frames(self) -> list[Frame]:
         """Frames sent once when the bus opens (e.g. network management); default none."""
@@ -158,9 +162,9 @@ class DriveProtocol:
         """The command of one period: motor torque [N*m] (finite, already limited)."""
         raise NotImplementedError
 
-    def poll_frames(self, enabled: bool) -> list[Frame]:
+    def poll_frames(self, enabled: bool) -> Sequence[Frame]:
         """Telemetry requests sent every period after the torque command (or alone, disabled)."""
-        return []
+        return ()
 
     def cycle_frames(self, t: float) -> list[Frame]:
         """Other frames sent every period at time ``t`` (e.g. a CANopen SYNC); default none."""
