@@ -21,6 +21,7 @@ ENTRY_POINTS = [
     "bag_player = friction_ros.nodes.bag_player:main",
     "friction-bag = friction_ros.cli.bag:main",
     "friction-fit = friction_ros.cli.fit:main",
+    "friction-fleet = friction_ros.cli.fleet:main",
     "identification_experiment = friction_ros.nodes.identification_experiment:main",
     "friction-experiment = friction_ros.cli.experiment:main",
 ]

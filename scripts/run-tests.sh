@@ -3,7 +3,9 @@
 #
 # pytest runs in TEST_WORKERS parallel worker processes (pytest-xdist, default 2 = this project's
 # machine size; TEST_WORKERS=0 runs in one process). Each worker owns its own ROS domain
-# (test/conftest.py), so the ROS graphs of two workers never see each other. A test file runs whole
+# (test/conftest.py), so the ROS graphs of two workers never see each other, and its own CPU(s) (every
+# process it starts inherits them: a worker's lockstep graph never waits for the other worker's fit,
+# FRICTION_TEST_PIN=0 turns that off). A test file runs whole
 # on one worker (its module fixtures are built once); the slowest files start first. Tests marked
 # `serial` (wall-clock timing that a fully loaded CPU breaks) run afterwards, alone. Extra arguments
 # go to pytest (`make test ARGS="-k demo"`); each phase prints its slowest tests.

@@ -12,10 +12,6 @@ import numpy as np
 from friction_ros.cli.demo_results import TrackingRun
 from friction_ros.nodes.terms_file import read_terms_file
 
-# s of wall time between seeing the controller's writer and starting the plant (its writer matches
-# this reader a moment later; the experiment node waits alike)
-MATCH_GRACE = 0.5
-
 
 def say(msg: str) -> None:
     print(f"[demo] {msg}", flush=True)
@@ -135,14 +131,15 @@ def _track_once(
     import threading
 
     import rclpy
-    from friction_msgs.msg import ControllerState
     from rclpy.executors import SingleThreadedExecutor
+    from rosgraph_msgs.msg import Clock
 
     from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
-    from friction_ros.nodes.qos import RECORDED_QOS
+    from friction_ros.nodes.qos import STATE_QOS
 
     # the figures come from the controller's own terms file: one row per computed period, whatever
-    # this process's subscription (progress only) manages to read on a busy machine
+    # this process manages to read on a busy machine; this process follows the run on the plant's
+    # /clock only (every 10 ms simulated, not every period: no wake-up of a third process per step)
     terms_path = Path(params_file).with_name(f"terms_{label}.csv")
     specs = [
         NodeSpec("plant_simulator", "", [], {"preset": preset, "mode": "lockstep", "joint_name": joint}),
@@ -157,8 +154,12 @@ def _track_once(
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
-    states: list = []
-    sub = node.create_subscription(ControllerState, "controller_state", states.append, RECORDED_QOS)
+    clock = [0.0]  # the latest simulated time the plant published [s]
+
+    def on_clock(msg) -> None:
+        clock[0] = max(clock[0], msg.clock.sec + msg.clock.nanosec * 1e-9)
+
+    sub = node.create_subscription(Clock, "/clock", on_clock, STATE_QOS)
     ex = SingleThreadedExecutor()
     ex.add_node(node)
     stop = threading.Event()
@@ -169,37 +170,27 @@ def _track_once(
 
     th = threading.Thread(target=spin, daemon=True)
     th.start()
-    # the controller first; the plant (which steps the run) only once this subscription is matched to
-    # the controller's publisher, so that no state of the run is published before we listen (a late
-    # match under load used to shift the evaluated window: figures then depended on machine speed)
+    # both at once: in lockstep the plant re-sends its first state until the controller answers it,
+    # so neither start order nor a late match changes a byte of the run
     bring_ctrl = Bringup(specs[1:], quiet=True)
     bring_plant = Bringup(specs[:1], quiet=True)
     t0 = time.monotonic()
     bring_ctrl.start()
+    bring_plant.start()
     n_periods = int(round(duration / period))
     try:
-        while sub.get_publisher_count() < 1:
-            if bring_ctrl.failed():
-                out = "\n".join(sum(bring_ctrl.output.values(), [])[-20:])
-                raise RuntimeError(f"tracking run {label}: the controller failed\n{out}")
-            if time.monotonic() - t0 > 60:
-                raise RuntimeError(f"tracking run {label}: controller_state not matched within 60 s")
-            time.sleep(0.01)
-        time.sleep(MATCH_GRACE)  # the controller's writer matches this reader a moment later
-        bring_plant.start()
         last_print = 0.0
-        while True:
+        # the plant publishes /clock = t only after the command for t - period: once it passed the
+        # run's end by two periods, the controller has computed (and written) every period of the run
+        while clock[0] < duration + 2 * period - 1e-9:
             if bring_ctrl.failed() or bring_plant.failed():
                 out = "\n".join(sum([*bring_ctrl.output.values(), *bring_plant.output.values()], [])[-20:])
                 raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
-            t_sim = _stamp(states[-1]) - _stamp(states[0]) if states else 0.0
-            if t_sim >= duration + 2 * period:
-                break
             if time.monotonic() - t0 > 60 + 20 * duration:
-                raise RuntimeError(f"tracking run {label}: timed out at t = {t_sim:.2f} s")
+                raise RuntimeError(f"tracking run {label}: timed out at t = {clock[0]:.2f} s")
             if sys.stdout.isatty() and time.monotonic() - last_print > 1.0:
                 last_print = time.monotonic()
-                print(f"\r[demo]   {label:<12} t = {t_sim:5.1f} / {duration:g} s", end="", flush=True)
+                print(f"\r[demo]   {label:<12} t = {clock[0]:5.1f} / {duration:g} s", end="", flush=True)
             time.sleep(0.02)
     finally:
         wall = time.monotonic() - t0
@@ -207,6 +198,7 @@ def _track_once(
         bring_plant.stop()
         stop.set()
         th.join(timeout=2)
+        node.destroy_subscription(sub)
         node.destroy_node()
     print(
         f"{chr(13) if sys.stdout.isatty() else ''}[demo]   {label:<12} {duration:g} s simulated in {wall:.1f} s",
@@ -242,7 +234,3 @@ def _track_once(
         fallback=col("compensation_fallback"),
         wall_seconds=wall,
     )
-
-
-def _stamp(m) -> float:
-    return m.header.stamp.sec + m.header.stamp.nanosec * 1e-9

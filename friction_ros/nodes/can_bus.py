@@ -7,6 +7,7 @@ receive time (``Message.timestamp``, the kernel's on SocketCAN) mapped onto the 
 clamped to [previous drain, now]: exact with sane timestamps, never off by more than one period
 whatever the interface reports, so stale-telemetry detection keeps its accuracy.
 
+The drives' start-up frames (their protocol's, often none) are sent when the bus opens or reopens.
 Bus errors are counted; a dead bus (bus-off error frame, reader failure, ``error_limit``
 consecutive send failures) latches a bus fault on every drive and is reopened every
 ``recovery_period`` until it works again (each axis then logs that its drive stays disabled until
@@ -21,9 +22,7 @@ from collections.abc import Callable
 
 import can
 
-from friction_ros.core.can import odrive
 from friction_ros.core.can.axis import DriveAxis
-from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.validation import ParameterError
 
@@ -31,18 +30,11 @@ CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
 RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 per ms)
 
 
-def can_filters(cfg: AxisConfig) -> list[dict]:
-    """Kernel receive filters for the frames of one drive."""
-    if cfg.protocol == "odrive_cansimple":
-        return [odrive.kernel_filter(cfg.node_id)]
-    return [{"can_id": cfg.mit_master_id, "can_mask": 0x7FF, "extended": False}]
-
-
-def bus_filters(configs: list[AxisConfig]) -> list[dict]:
-    """Kernel receive filters for every drive on the bus (each filter once)."""
+def bus_filters(axes: list[DriveAxis]) -> list[dict]:
+    """Kernel receive filters for every drive on the bus (each filter once), from their protocols."""
     out: list[dict] = []
-    for cfg in configs:
-        out += [f for f in can_filters(cfg) if f not in out]
+    for a in axes:
+        out += [f for f in a.protocol.receive_filters() if f not in out]
     return out
 
 
@@ -77,7 +69,7 @@ class CanBusLink:
         self.axes, self.route, self.logger = axes, route, logger
         self.error_limit = error_limit  # consecutive failed sends before the bus counts as dead
         self.recovery_period = recovery_period  # wait before reopening a dead bus [s]
-        self.filters = bus_filters([a.cfg for a in axes])
+        self.filters = bus_filters(axes)
         self.error_frames = 0
         self.send_errors = 0
         self.reopens = 0
@@ -87,6 +79,11 @@ class CanBusLink:
         self.bus = open_bus(interface, channel, bitrate, self.filters)
         self._rx_ok = True  # False after a read failure until the bus is reopened
         self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
+        self.send(self.startup_frames())
+
+    def startup_frames(self) -> list[Frame]:
+        """What the drives' protocols send when the bus opens or reopens (often nothing)."""
+        return [f for a in self.axes for f in a.startup_frames()]
 
     def send(self, frames: list[Frame]) -> bool:
         """Send ``frames``; False if any failed (counted; too many in a row: the bus is dead)."""
@@ -142,6 +139,7 @@ class CanBusLink:
             self.dead_since = None
             for a in self.axes:  # each axis logs "bus cleared ...; drive stays disabled until ~/enable"
                 a.clear_bus_fault()
+            self.send(self.startup_frames())
         except Exception as exc:
             self.dead_since = now
             self.logger.error(f"reopening the CAN bus failed: {exc}", throttle_duration_sec=5.0)

@@ -23,6 +23,7 @@ import threading
 import time
 
 from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig, plant_from_preset
+from friction_ros.core.can.protocol import PROTOCOLS
 from friction_ros.core.validation import ParameterError
 
 
@@ -42,7 +43,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument("--interface", default="socketcan", help="python-can interface (default socketcan)")
     ap.add_argument("--channel", default="vcan0", help="CAN channel (default vcan0)")
     ap.add_argument("--bitrate", type=int, default=1_000_000)
-    ap.add_argument("--protocol", default="odrive_cansimple", choices=("odrive_cansimple", "mit"))
+    ap.add_argument(
+        "--protocol", default="odrive_cansimple", choices=PROTOCOLS, help="drive protocol: %(choices)s"
+    )
     ap.add_argument(
         "--node-id",
         type=int,

@@ -23,6 +23,7 @@ import uuid
 import can
 
 from friction_ros.core.can.emulator import DriveEmulator
+from friction_ros.core.can.protocol import PROTOCOLS
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.drive_emulator import emulated_drive
 from friction_ros.nodes.node_help import help_requested, parameter_lines
@@ -52,7 +53,9 @@ def main(argv: list[str] | None = None) -> int:
         epilog=_drive_interface_parameters() if help_requested(["simulated_drive", *own]) else None,
     )
     ap.add_argument("--preset", default="abb_m19s", help="plant preset behind the emulated drive")
-    ap.add_argument("--protocol", default="odrive_cansimple", choices=("odrive_cansimple", "mit"))
+    ap.add_argument(
+        "--protocol", default="odrive_cansimple", choices=PROTOCOLS, help="drive protocol: %(choices)s"
+    )
     ap.add_argument("--node-id", type=int, default=0, help="drive node id (default 0)")
     ap.add_argument("--rate", type=float, default=1000.0, help="telemetry and physics rate [Hz]")
     ap.add_argument("--latency", type=float, default=0.0, help="frame latency of the drive [s]")

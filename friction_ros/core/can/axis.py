@@ -1,7 +1,8 @@
 """Safety and state logic of one drive axis, independent of ROS and of the bus (pure, testable).
 
 :class:`DriveAxis` turns received frames into joint-side samples and a joint torque command into
-the frames to send, with every safety rule of the drive interface in one place:
+the frames to send, with every safety rule of the drive interface in one place; the wire format is
+its :class:`~friction_ros.core.can.protocol.DriveProtocol` (``AxisConfig.protocol``):
 
 * command watchdog: no command for ``command_timeout`` -> zero torque (flag, trip counted);
 * NaN/inf commands rejected (the command becomes zero torque, counted);
@@ -24,8 +25,8 @@ the timeout.
 
 Latched faults clear only with an explicit :meth:`request_enable`: a drive that faulted does not
 restart by itself (no automatic restart after a communication loss, as in EN 60204-1 7.5 and the
-CiA 402 fault reset), even when its telemetry comes back. Disabling means zero torque and IDLE
-(ODrive Set_Axis_State 1) or zero command + exit motor mode (MIT). Every fault is logged once when
+CiA 402 fault reset), even when its telemetry comes back. Disabling means the protocol's
+``disable_frames`` (zero torque, then IDLE on ODrive, exit motor mode on MIT). Every fault is logged once when
 it starts and once when it clears (or is reset) through :class:`~friction_ros.core.can.faults.FaultLog`:
 :meth:`DriveAxis.cycle` returns the lines as ``events``.
 """
@@ -36,8 +37,6 @@ import math
 import struct
 import threading
 
-from friction_ros.core.can import mit as mitc
-from friction_ros.core.can import odrive as od
 from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.axis_records import AxisCounters, CycleResult, JointSample, Telemetry
 from friction_ros.core.can.faults import (
@@ -55,7 +54,8 @@ from friction_ros.core.can.faults import (
     FaultLog,
 )
 from friction_ros.core.can.frame import DecodeStats, Frame
-from friction_ros.core.can.telemetry_gate import EFFORT, MOTION, TelemetryGate
+from friction_ros.core.can.protocol import MOTION_PAIR, DriveProtocol, DriveTelemetry, drive_protocol
+from friction_ros.core.can.telemetry_gate import TelemetryGate
 
 _F2 = struct.Struct("<ff")
 
@@ -64,9 +64,10 @@ class DriveAxis:
     """One axis: decode telemetry, supervise, produce command frames. Thread-safe."""
 
     ERROR_GRACE_S = 0.05  # error reports sent before the drive processed Clear_Errors are ignored
-    # ODrive: a heartbeat this long after the enable sequence must report CLOSED_LOOP_CONTROL; if not,
-    # the sequence is sent once more, then the axis faults (frames lost, drive refused). Once in
-    # closed loop, a heartbeat reporting any other state (the drive dropped out) is a fault too.
+    # A protocol that reports the drive state (ODrive heartbeat): a state report this long after the
+    # enable sequence must be closed loop (DriveProtocol.closed_loop); if not, the sequence is sent once
+    # more, then the axis faults (frames lost, drive refused). Once in closed loop, a report of any
+    # other state (the drive dropped out) is a fault too.
     CLOSED_LOOP_GRACE_S = 0.2
     ENABLE_ATTEMPTS = 2
 
@@ -88,31 +89,26 @@ class DriveAxis:
         self._ignore_errors_until = -math.inf  # drive errors in flight while clearing are ignored
         self._enable_time = -math.inf  # when the enable sequence was last sent
         self._enable_attempts = 0
-        self._closed_loop_seen = False  # a heartbeat after enabling reported CLOSED_LOOP_CONTROL
+        self._closed_loop_seen = False  # a state report after enabling said closed loop
         self._start: float | None = None  # first period: the age of "nothing received yet"
         self._bus_reason = ""  # set while the adapter reports the bus dead
         self.age_window_max = 0.0  # largest telemetry age since take_age_max() [s]
         self.faults = FaultLog(
             {b: n for b, n in FAULT_NAMES.items() if b != FAULT_COMMAND_REJECTED}, FAULT_HOLD
         )  # rejected commands are logged one by one (rate-limited) by the adapter
-        # Fast path of the two telemetry frames of every period (ODrive encoder estimates + Iq): one
-        # dict lookup by arbitration id and one unpack instead of a message object and an isinstance
-        # chain. Same checks and counters as the decoder; anything else takes the general path.
-        self._fast: dict[int, int] = {}
-        if config.protocol == "odrive_cansimple":
-            self.decoder = od.OdriveDecoder([config.node_id], role="host")
-            self.mit = None
-            self._effort_cmd = od.Cmd.GET_IQ if config.effort_source == "current" else od.Cmd.GET_TORQUES
-            self._fast = {
-                (config.node_id << 5) | od.Cmd.GET_ENCODER_ESTIMATES: 0,
-                (config.node_id << 5) | od.Cmd.GET_IQ: 1,
-            }
-            gated = {od.Cmd.GET_ENCODER_ESTIMATES: MOTION, od.Cmd.GET_IQ: EFFORT, od.Cmd.GET_TORQUES: EFFORT}
-            self._channel = {(config.node_id << 5) | c: ch for c, ch in gated.items()}
-        else:
-            self.mit = mitc.MitCodec(config.node_id, config.mit_ranges, config.mit_master_id)
-            self.decoder = mitc.MitDecoder(self.mit, role="host")
-            self._channel = {config.mit_master_id: MOTION}
+        # Fast path of the two telemetry frames of every period (e.g. ODrive encoder estimates + Iq):
+        # one dict lookup by arbitration id and one unpack instead of a report object. Same checks and
+        # counters as the general path; anything else takes it (the protocol's decode).
+        self._fast: dict[int, int] = self.protocol.float_pairs()
+        self._channel = self.protocol.gated_ids()
+        self._reports_state = self.protocol.reports_state
+        self._decode = self.protocol.decode  # bound once: the per-frame and per-period calls
+        self._torque_frame = self.protocol.torque_frame
+        self._poll_frames = self.protocol.poll_frames
+        proto_cls = type(self.protocol)
+        self._cycle_frames = (
+            self.protocol.cycle_frames if proto_cls.cycle_frames is not DriveProtocol.cycle_frames else None
+        )
 
     @property
     def cfg(self) -> AxisConfig:
@@ -121,28 +117,35 @@ class DriveAxis:
     @cfg.setter
     def cfg(self, config: AxisConfig) -> None:
         """A new configuration (run-time parameter change) also moves the telemetry gate's bounds."""
+        if not hasattr(self, "protocol"):
+            self.protocol = drive_protocol(config.protocol)(config)
+            self.decoder = self.protocol.decoder
+        self.protocol.reconfigure(config)
         self._cfg, self.conv = config, config.conversion
         self.gate.limits, c = config.plausibility(), self.conv
-        self._turn = c.direction * od.TWO_PI / c.ratio  # joint units per motor turn (fast path)
+        self._scale = self.protocol.motion_scale  # motor rad per wire unit (fast path)
+        self._turn = c.direction * self._scale / c.ratio  # joint units per wire unit
         self._amp = c.direction * c.torque_constant * c.ratio  # joint effort per A
+        self._effort_current = self.protocol.effort_source == "current"
 
-    def _admit(self, msg, t: float) -> bool:
-        """Pass a decoded encoder/effort report through the telemetry gate (lock held)."""
+    def _admit(self, r: DriveTelemetry, t: float) -> bool:
+        """Pass a decoded report through the telemetry gate (lock held): position with torque as one
+        reading, position alone as motion, current or torque as effort."""
         c, gate = self.conv, self.gate
-        if isinstance(msg, od.EncoderEstimates):
-            ok = gate.motion(c.joint_position(msg.position), c.joint_velocity(msg.velocity), t)
-        elif isinstance(msg, mitc.MitReply):
-            q, v = c.joint_position(msg.position), c.joint_velocity(msg.velocity)
-            ok = gate.reading(q, v, c.joint_torque(msg.torque), t)
-        elif isinstance(msg, od.Iq):
-            ok = gate.effort(
-                t, c.joint_torque_from_current(msg.setpoint), c.joint_torque_from_current(msg.measured)
-            )
-        elif isinstance(msg, od.Torques):
-            ok = gate.effort(t, c.joint_torque(msg.target), c.joint_torque(msg.estimate))
-        else:
-            return True
-        return ok
+        if r.position is not None:
+            q, v = c.joint_position(r.position), c.joint_velocity(r.velocity)
+            if r.torque is not None:
+                return gate.reading(q, v, c.joint_torque(r.torque), t)
+            return gate.motion(q, v, t)
+        if r.current is not None:
+            a = c.joint_torque_from_current(r.current)
+            if r.current_setpoint is None:
+                return gate.effort(t, a)
+            return gate.effort(t, c.joint_torque_from_current(r.current_setpoint), a)
+        if r.torque is not None:
+            a = c.joint_torque(r.torque)
+            return gate.effort(t, a if r.torque_target is None else c.joint_torque(r.torque_target), a)
+        return True
 
     # ---- inputs ------------------------------------------------------------------------------------
     @property
@@ -161,64 +164,59 @@ class DriveAxis:
                 with self._lock:
                     self.decoder.stats.decoded += 1
                     c.frames_rx += 1
-                    if kind == 0:
+                    if kind == MOTION_PAIR:
                         k = self._turn
                         q = a * k - self.conv.zero_offset
                         if not self.gate.motion(q, b * k, t):
                             return
-                        tel.motor_position, tel.motor_velocity = a * od.TWO_PI, b * od.TWO_PI
+                        s = self._scale
+                        tel.motor_position, tel.motor_velocity = a * s, b * s
                         tel.encoder_time = t
                         c.encoder_frames += 1
                     else:
                         if not self.gate.effort(t, a * self._amp, b * self._amp):
                             return
                         tel.current_setpoint, tel.current_measured, tel.iq_time = a, b, t
-                        if self.cfg.effort_source == "current":
+                        if self._effort_current:
                             c.effort_frames += 1
                 return
         rejected = self.decoder.stats.rejected
-        msg = self.decoder.decode(arb_id, data, is_remote, is_extended, is_error)
-        if msg is None:
+        r = self._decode(arb_id, data, is_remote, is_extended, is_error)
+        if r is None:
             channel = self._channel.get(arb_id)
             if channel is not None and self.decoder.stats.rejected > rejected:
                 with self._lock:
                     self.gate.undecodable(channel, self.decoder.stats.last_reject_reason, t)
             return
-        tel = self.telemetry
+        tel, c = self.telemetry, self.counters
         with self._lock:
-            self.counters.frames_rx += 1
-            if not self._admit(msg, t):
+            c.frames_rx += 1
+            if not self._admit(r, t):
                 return
-            if isinstance(msg, od.EncoderEstimates):
-                tel.motor_position, tel.motor_velocity, tel.encoder_time = msg.position, msg.velocity, t
-                self.counters.encoder_frames += 1
-            elif isinstance(msg, od.Iq):
-                tel.current_setpoint, tel.current_measured, tel.iq_time = msg.setpoint, msg.measured, t
-                if self.cfg.effort_source == "current":
-                    self.counters.effort_frames += 1
-            elif isinstance(msg, od.Torques):
-                tel.torque_target, tel.torque_estimate, tel.torque_time = msg.target, msg.estimate, t
-                if self.cfg.effort_source == "torque_estimate":
-                    self.counters.effort_frames += 1
-            elif isinstance(msg, od.Heartbeat):
-                tel.axis_state, tel.heartbeat_time = msg.axis_state, t
-                if t >= self._ignore_errors_until:
-                    tel.axis_error = msg.axis_error
-                self.counters.heartbeat_frames += 1
-            elif isinstance(msg, od.BusVoltageCurrent):
-                tel.bus_voltage = msg.voltage
-            elif isinstance(msg, od.DriveError):
-                if t >= self._ignore_errors_until:
-                    tel.axis_error = msg.active_errors
-            elif isinstance(msg, mitc.MitReply):
-                tel.motor_position, tel.motor_velocity, tel.encoder_time = msg.position, msg.velocity, t
-                tel.torque_estimate, tel.torque_time = msg.torque, t
-                tel.current_measured = msg.torque / self.conv.torque_constant
-                if t >= self._ignore_errors_until:
-                    tel.axis_error = msg.error
+            if r.position is not None:
+                tel.motor_position, tel.motor_velocity, tel.encoder_time = r.position, r.velocity, t
+                c.encoder_frames += 1
+            if r.current is not None:
+                if r.current_setpoint is not None:
+                    tel.current_setpoint = r.current_setpoint
+                tel.current_measured, tel.iq_time = r.current, t
+                if self._effort_current:
+                    c.effort_frames += 1
+            if r.torque is not None:
+                if r.torque_target is not None:
+                    tel.torque_target = r.torque_target
+                tel.torque_estimate, tel.torque_time = r.torque, t
+                if not self._effort_current:
+                    c.effort_frames += 1
+            if r.state is not None:
+                tel.axis_state, tel.heartbeat_time = r.state, t
+                c.heartbeat_frames += 1
+            elif not self._reports_state:
                 tel.axis_state = 1 if self.enabled else 0
-                self.counters.encoder_frames += 1
-                self.counters.effort_frames += 1
+            if r.error is not None and t >= self._ignore_errors_until:
+                tel.axis_error = r.error
+            if r.bus_voltage is not None:
+                tel.bus_voltage = r.bus_voltage
 
     def set_command(self, joint_torque: float, t: float) -> bool:
         """Store a joint torque command [N*m]. NaN/inf -> rejected (zero torque), returns False."""
@@ -275,24 +273,15 @@ class DriveAxis:
 
     # ---- frames ------------------------------------------------------------------------------------
     def enable_frames(self) -> list[Frame]:
-        n = self.cfg.node_id
-        if self.mit is not None:
-            return [self.mit.encode_command(), self.mit.encode_enter()]
-        motor_vel_limit = abs(self.conv.motor_velocity(self.cfg.velocity_limit))
-        return [
-            od.encode_clear_errors(n),
-            od.encode_set_limits(n, motor_vel_limit, self.cfg.current_limit),
-            od.encode_set_controller_mode(n, od.ControlMode.TORQUE_CONTROL, od.InputMode.PASSTHROUGH),
-            od.encode_set_input_torque(n, 0.0),
-            od.encode_set_axis_state(n, od.AxisState.CLOSED_LOOP_CONTROL),
-        ]
+        return self.protocol.enable_frames()
 
     def disable_frames(self) -> list[Frame]:
-        """Zero torque, then idle / exit motor mode (what shutdown and every fault send)."""
-        if self.mit is not None:
-            return [self.mit.encode_command(), self.mit.encode_exit()]
-        n = self.cfg.node_id
-        return [od.encode_set_input_torque(n, 0.0), od.encode_set_axis_state(n, od.AxisState.IDLE)]
+        """Zero torque, then leave torque control (what shutdown and every fault send)."""
+        return self.protocol.disable_frames()
+
+    def startup_frames(self) -> list[Frame]:
+        """Frames the protocol sends once when the bus opens (often none)."""
+        return self.protocol.startup_frames()
 
     # ---- the control-period step ---------------------------------------------------------------------
     def _latch(self, bit: int, reason: str) -> None:
@@ -304,11 +293,7 @@ class DriveAxis:
         """(age of the newest telemetry [s], anything ever received). Without any telemetry the
         age counts from the axis' first period, so an absent drive is reported after the same timeout."""
         tel = self.telemetry
-        eff_t = (
-            tel.encoder_time
-            if self.mit is not None
-            else (tel.iq_time if self.cfg.effort_source == "current" else tel.torque_time)
-        )
+        eff_t = tel.iq_time if self._effort_current else tel.torque_time
         if tel.encoder_time is None or eff_t is None:
             return t - self._start, False
         age = t - min(tel.encoder_time, eff_t)
@@ -345,7 +330,10 @@ class DriveAxis:
                     self._latch(FAULT_TELEMETRY_STALE, f"telemetry stale: {reasons[FAULT_TELEMETRY_STALE]}")
             if tel.axis_error:
                 flags |= FAULT_DRIVE_ERROR
-                reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}"
+                text = self.protocol.error_text(tel.axis_error)
+                reasons[FAULT_DRIVE_ERROR] = f"drive reports error 0x{tel.axis_error:X}" + (
+                    f" ({text})" if text else ""
+                )
                 if self.enabled or self.enable_requested:
                     self._latch(FAULT_DRIVE_ERROR, reasons[FAULT_DRIVE_ERROR])
             implausible = self.gate.implausible
@@ -367,7 +355,7 @@ class DriveAxis:
                 self._cmd, self._cmd_time, self._watchdog_tripped = 0.0, None, True
                 self._ignore_errors_until = t + self.ERROR_GRACE_S
                 self._enable_time, self._enable_attempts, self._closed_loop_seen = t, 1, False
-            elif self.enabled and self.mit is None:
+            elif self.enabled and self._reports_state:
                 frames += self._check_closed_loop(t)
                 if self.latched:  # the drive is not in closed loop: disable (zero torque + IDLE)
                     flags |= self.latched
@@ -380,12 +368,12 @@ class DriveAxis:
             if not late:
                 pos = conv.joint_position(tel.motor_position)
                 vel = conv.joint_velocity(tel.motor_velocity)
-                if self.mit is not None or cfg.effort_source == "torque_estimate":
-                    eff = conv.joint_torque(tel.torque_estimate)
-                    stamp = tel.encoder_time
-                else:
+                if self._effort_current:
                     eff = conv.joint_torque_from_current(tel.current_measured)
                     stamp = max(tel.encoder_time, tel.iq_time)
+                else:
+                    eff = conv.joint_torque(tel.torque_estimate)
+                    stamp = tel.encoder_time
                 sample = JointSample(pos, vel, eff, stamp)
 
             cmd = 0.0
@@ -416,15 +404,10 @@ class DriveAxis:
                     flags |= FAULT_LIMIT
                     self.counters.limit_hits += 1
                 motor_torque = conv.motor_torque(cmd)
-                if self.mit is not None:
-                    frames.append(self.mit.encode_command(torque=motor_torque))
-                else:
-                    frames.append(od.encode_set_input_torque(cfg.node_id, motor_torque))
-            elif self.mit is not None:
-                frames.append(self.mit.encode_command())  # MIT drives only report when polled
-            if self.mit is None and cfg.request_telemetry:
-                frames.append(od.encode_rtr(cfg.node_id, od.Cmd.GET_ENCODER_ESTIMATES))
-                frames.append(od.encode_rtr(cfg.node_id, self._effort_cmd))
+                frames.append(self._torque_frame(motor_torque))
+            frames += self._poll_frames(self.enabled)
+            if self._cycle_frames is not None:
+                frames += self._cycle_frames(t)
             self.counters.frames_tx += len(frames)
             self._last_flags = flags
             active = flags & (FAULT_COMMAND_WATCHDOG | FAULT_LIMIT | FAULT_DRIVE_ERROR)
@@ -455,25 +438,17 @@ class DriveAxis:
             return CycleResult(frames, sample, flags, cmd, events)
 
     def _check_closed_loop(self, t: float) -> list[Frame]:
-        """ODrive heartbeat check of an enabled axis (lock held): see :attr:`CLOSED_LOOP_GRACE_S`."""
+        """State check of an enabled axis (lock held): see :attr:`CLOSED_LOOP_GRACE_S`."""
         tel = self.telemetry
         hb = tel.heartbeat_time
         if hb is None or hb < self._enable_time + self.CLOSED_LOOP_GRACE_S:
-            if (
-                hb is not None
-                and hb >= self._enable_time
-                and tel.axis_state == od.AxisState.CLOSED_LOOP_CONTROL
-            ):
+            if hb is not None and hb >= self._enable_time and self.protocol.closed_loop(tel.axis_state):
                 self._closed_loop_seen = True
             return []
-        if tel.axis_state == od.AxisState.CLOSED_LOOP_CONTROL:
+        if self.protocol.closed_loop(tel.axis_state):
             self._closed_loop_seen = True
             return []
-        state = (
-            od.AxisState(tel.axis_state).name
-            if tel.axis_state in od.AxisState._value2member_map_
-            else tel.axis_state
-        )
+        state = self.protocol.state_name(tel.axis_state)
         if self._closed_loop_seen:
             self._latch(FAULT_DRIVE_ERROR, f"drive left closed loop: heartbeat reports axis state {state}")
             return []

@@ -9,20 +9,18 @@ N*m; m and N on a ``joint_type: prismatic`` axis, which needs ``lead``, its trav
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from friction_ros.core.can import mit as mitc
-from friction_ros.core.can import odrive as od
 from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.can.protocol import PROTOCOLS, drive_protocol
 from friction_ros.core.can.telemetry_gate import TelemetryLimits
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
 
-PROTOCOLS = ("odrive_cansimple", "mit")
 EFFORT_SOURCES = ("current", "torque_estimate")
 
 # Stale timeout derived from the telemetry period T: STALE_PERIODS * T + JITTER_MARGIN. The margin
@@ -34,14 +32,12 @@ EFFORT_SOURCES = ("current", "torque_estimate")
 # stamps) pauses ~never, so a robot may set telemetry_timeout to a few periods for faster detection.
 STALE_PERIODS = 3
 JITTER_MARGIN = 0.5  # [s]
-ODRIVE_POSITION_TURNS = 2.0**24  # float32 turns: beyond this a position no longer resolves one turn
-MIT_POSITION_STEPS = (1 << 16) - 1  # 16-bit position field
 
 
 @dataclass(frozen=True)
 class AxisConfig:
     protocol: str = "odrive_cansimple"
-    node_id: int = 0  # ODrive node id (0..63) or MIT motor CAN id
+    node_id: int = 0  # the drive's id on the bus (ODrive node id 0..63, MIT motor CAN id)
     mit_master_id: int = 0
     mit_ranges: mitc.MitRanges = field(default_factory=mitc.MitRanges)
     conversion: JointConversion = field(default_factory=JointConversion)
@@ -59,15 +55,7 @@ class AxisConfig:
     def __post_init__(self):
         check_choice("protocol", self.protocol, PROTOCOLS)
         check_choice("effort_source", self.effort_source, EFFORT_SOURCES)
-        if self.protocol == "odrive_cansimple":
-            check_int("node_id", self.node_id, 0, od.NODE_ID_MAX)
-        else:
-            check_int("node_id", self.node_id, 0, 0x7FF)
-            check_int("mit_master_id", self.mit_master_id, 0, 0x7FF)
-            if self.node_id == self.mit_master_id:
-                raise ParameterError(
-                    f"node_id = {self.node_id} equals mit_master_id: must differ (replies go to the master id)"
-                )
+        drive_protocol(self.protocol).check_config(self)
         check_real("torque_limit", self.torque_limit, 0.0, lo_open=True, unit="N*m")
         check_real("current_limit", self.current_limit, 0.0, lo_open=True, unit="A")
         check_real("velocity_limit", self.velocity_limit, 0.0, lo_open=True, unit="rad/s")
@@ -100,14 +88,11 @@ class AxisConfig:
     def plausibility(self) -> TelemetryLimits:
         """Joint-side bounds of plausible telemetry (:mod:`~friction_ros.core.can.telemetry_gate`):
         ``limit_factor`` x the velocity limit and x the effort the current limit gives
-        (``current_limit * k_t * ratio``); position within the protocol's range (ODrive: 2^24 float32
-        turns, MIT: its p range, whose 16-bit step is the resolution)."""
+        (``current_limit * k_t * ratio``); position within the protocol's range
+        (:meth:`DriveProtocol.position_range <friction_ros.core.can.protocol.DriveProtocol.position_range>`:
+        ODrive 2^24 float32 turns; MIT its p range, whose 16-bit step is the resolution)."""
         conv, f = self.conversion, self.limit_factor
-        if self.protocol == "mit":
-            r = self.mit_ranges
-            motor_max, step = max(abs(r.p_min), abs(r.p_max)), (r.p_max - r.p_min) / MIT_POSITION_STEPS
-        else:
-            motor_max, step = ODRIVE_POSITION_TURNS * 2.0 * math.pi, 0.0
+        motor_max, step = drive_protocol(self.protocol).position_range(self)
         return TelemetryLimits(
             max_position=motor_max / conv.ratio + abs(conv.zero_offset),
             max_velocity=f * self.velocity_limit,

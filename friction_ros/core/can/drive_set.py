@@ -76,15 +76,14 @@ def changed_values(
 def frame_router(axes: list[DriveAxis]) -> Callable[[int, bytes], DriveAxis]:
     """Received frame (arbitration id, data) -> the axis it belongs to, for several drives on one bus.
 
-    ODrive CANSimple: node id = arbitration id >> 5. MIT: a reply's first data byte is the motor id.
+    The protocol's :meth:`~friction_ros.core.can.protocol.DriveProtocol.route_key` names the drive
+    (ODrive CANSimple: node id = arbitration id >> 5; MIT: a reply's first data byte is the motor id).
     With one axis, or for a frame of no configured drive, the first axis: its decoder counts the
     frame as ignored or rejected, as a single-drive node does.
     """
     first = axes[0]
     if len(axes) == 1:
         return lambda arb_id, data: first
-    if first.cfg.protocol == "odrive_cansimple":
-        by_id = {a.cfg.node_id: a for a in axes}
-        return lambda arb_id, data: by_id.get(arb_id >> 5, first)
-    by_motor = {a.cfg.node_id & 0xFF: a for a in axes}
-    return lambda arb_id, data: by_motor.get(data[0], first) if data else first
+    by_key = {a.protocol.own_route_key: a for a in axes}
+    key = first.protocol.route_key
+    return lambda arb_id, data: by_key.get(key(arb_id, data), first)

@@ -1,4 +1,4 @@
-"""Frame-level servo-drive emulator (ODrive CANSimple or MIT) on a python-can bus.
+"""Frame-level servo-drive emulator (any registered drive protocol) on a python-can bus.
 
 A plant object (``step(command_torque, dt) -> measurement`` with joint ``position``, ``velocity``,
 ``effort`` attributes, e.g. ``friction_ros.core.plant.servo.GearheadServoPlant`` in torque mode) sits behind
@@ -11,8 +11,10 @@ a drive that answers the same frames a real one does:
 * MIT: enter / exit motor mode, set zero, command ``tau = kp (p_des - p) + kd (v_des - v) + t_ff``
   (clamped to the torque range) and one reply per received frame.
 
-Faults for tests: latency of every transmitted frame, random frame loss, going silent, an injected
-axis error (the axis drops to IDLE / leaves motor mode, as a real drive does).
+The drive's state machine and frames are the protocol's
+:class:`~friction_ros.core.can.protocol.EmulatedDriveProtocol` (``DriveProtocol.emulated``); this
+module owns the plant, time, the cyclic schedule and the faults. Faults for tests: latency of every
+transmitted frame, random frame loss, going silent, an injected axis error (the axis drops to IDLE / leaves motor mode, as a real drive does).
 
 The bus is only touched in :meth:`poll` / the background thread; :meth:`handle` and :meth:`advance`
 are plain logic, so a test can run the emulator in lock step without threads.
@@ -21,7 +23,6 @@ are plain logic, so a test can run the emulator in lock step without threads.
 from __future__ import annotations
 
 import collections
-import math
 import random
 import threading
 import time
@@ -31,9 +32,8 @@ from friction_ros.core.can import mit as mitc
 from friction_ros.core.can import odrive as od
 from friction_ros.core.can.frame import Frame
 from friction_ros.core.can.joint import JointConversion
-from friction_ros.core.validation import ParameterError, check_choice, check_int, check_real
-
-PROTOCOLS = ("odrive_cansimple", "mit")
+from friction_ros.core.can.protocol import PROTOCOLS, EmulatedDriveProtocol, drive_protocol
+from friction_ros.core.validation import ParameterError, check_choice, check_real
 
 
 @dataclass(frozen=True)
@@ -57,10 +57,10 @@ class EmulatorConfig:
 
     def __post_init__(self):
         check_choice("emulator.protocol", self.protocol, PROTOCOLS)
-        if self.protocol == "odrive_cansimple":
-            check_int("emulator.node_id", self.node_id, 0, od.NODE_ID_MAX)
-        else:
-            check_int("emulator.node_id", self.node_id, 0, 0x7FF)
+        drive = drive_protocol(self.protocol).emulated
+        if drive is None:
+            raise ParameterError(f"emulator.protocol = {self.protocol!r} has no emulated drive side")
+        drive.check_config(self)
         check_real("emulator.physics_rate_hz", self.physics_rate_hz, 0.0, 100_000.0, lo_open=True, unit="Hz")
         for name in (
             "encoder_rate_hz",
@@ -107,33 +107,12 @@ class DriveEmulator:
         self._t_phys: float | None = None
         self.meas = plant.step(0.0, self.dt)
         self.time = 0.0
-        # drive state (motor side)
+        # drive state (motor side); the protocol's state machine in self.drive
         self.axis_error = 0
-        self.axis_state = od.AxisState.IDLE
-        self.control_mode = od.ControlMode.TORQUE_CONTROL
-        self.input_mode = od.InputMode.PASSTHROUGH
-        self.input_torque = 0.0
         self.applied_torque = 0.0  # motor side [N*m]
-        self.current_limit = cfg.current_limit
-        self.velocity_limit = math.inf  # motor [rad/s]
-        if cfg.protocol == "odrive_cansimple":
-            self.decoder = od.OdriveDecoder([cfg.node_id], role="drive")
-            self.mit = None
-            self._cyclic = [
-                [cfg.heartbeat_rate_hz, 0.0, od.Cmd.HEARTBEAT],
-                [cfg.encoder_rate_hz, 0.0, od.Cmd.GET_ENCODER_ESTIMATES],
-                [cfg.iq_rate_hz, 0.0, od.Cmd.GET_IQ],
-                [cfg.torques_rate_hz, 0.0, od.Cmd.GET_TORQUES],
-                [cfg.bus_voltage_rate_hz, 0.0, od.Cmd.GET_BUS_VOLTAGE_CURRENT],
-            ]
-            self._cyclic = [c for c in self._cyclic if c[0] > 0]
-        else:
-            self.mit = mitc.MitCodec(cfg.node_id, cfg.mit_ranges, cfg.mit_master_id)
-            self.decoder = mitc.MitDecoder(self.mit, role="drive")
-            self._cyclic = []
-            self.motor_mode = False
-            self.mit_cmd = mitc.MitCommand(cfg.node_id, 0.0, 0.0, 0.0, 0.0, 0.0)
-            self.zero_offset = 0.0  # motor rad
+        self.drive: EmulatedDriveProtocol = drive_protocol(cfg.protocol).emulated(self)
+        self.decoder = self.drive.decoder
+        self._cyclic = [[rate, 0.0, key] for rate, key in self.drive.cyclic() if rate > 0]
 
     # ---- faults -------------------------------------------------------------------------------------
     def set_silent(self, silent: bool = True) -> None:
@@ -144,15 +123,12 @@ class DriveEmulator:
         """Raise a drive error: the axis disarms (IDLE / leaves motor mode) and reports it."""
         with self._lock:
             self.axis_error |= int(error)
-            self.axis_state = od.AxisState.IDLE
-            if self.mit is not None:
-                self.motor_mode = False
+            self.drive.fault()
 
     # ---- motor-side measurements ----------------------------------------------------------------------
     @property
     def motor_position(self) -> float:
-        p = self.conv.motor_position(self.meas.position)
-        return p - self.zero_offset if self.mit is not None else p
+        return self.conv.motor_position(self.meas.position) - self.drive.position_offset
 
     @property
     def motor_velocity(self) -> float:
@@ -164,30 +140,12 @@ class DriveEmulator:
 
     @property
     def armed(self) -> bool:
-        if self.mit is not None:
-            return self.motor_mode and not self.axis_error
-        return self.axis_state == od.AxisState.CLOSED_LOOP_CONTROL
+        return self.drive.armed
 
     # ---- logic ----------------------------------------------------------------------------------------
-    def telemetry_frame(self, cmd: int) -> Frame:
-        n = self.cfg.node_id
-        kt = self.conv.torque_constant
-        if cmd == od.Cmd.GET_ENCODER_ESTIMATES:
-            return od.encode_encoder_estimates(n, self.motor_position, self.motor_velocity)
-        if cmd == od.Cmd.GET_IQ:
-            return od.encode_iq(n, self.applied_torque / kt, self.motor_torque_measured / kt)
-        if cmd == od.Cmd.GET_TORQUES:
-            return od.encode_torques(n, self.applied_torque, self.motor_torque_measured)
-        if cmd == od.Cmd.HEARTBEAT:
-            return od.encode_heartbeat(n, self.axis_error, self.axis_state)
-        if cmd == od.Cmd.GET_BUS_VOLTAGE_CURRENT:
-            return od.encode_bus_voltage_current(n, self.cfg.bus_voltage, 0.0)
-        return od.encode_error(n, self.axis_error, 0)
-
-    def mit_reply(self) -> Frame:
-        return self.mit.encode_reply(
-            self.motor_position, self.motor_velocity, self.motor_torque_measured, 25.0, self.axis_error & 0xFF
-        )
+    def telemetry_frame(self, key) -> Frame:
+        """The telemetry frame ``key`` of the protocol (e.g. an ODrive command id) with the state now."""
+        return self.drive.telemetry_frame(key)
 
     def handle(self, frame: Frame, t: float) -> None:
         """React to one received frame at time ``t``."""
@@ -198,65 +156,8 @@ class DriveEmulator:
                 self.rx_log.append((t, frame))
             if msg is None:
                 return
-            if self.mit is not None:
-                self._handle_mit(msg, t)
-            else:
-                self._handle_odrive(msg, t)
-
-    def _handle_odrive(self, msg, t: float) -> None:
-        if isinstance(msg, od.SetInputTorque):
-            self.input_torque = msg.torque
-            self.stats.commands += 1
-        elif isinstance(msg, od.RtrRequest):
-            self._queue(self.telemetry_frame(msg.cmd), t)
-        elif isinstance(msg, od.SetAxisState):
-            if msg.state == od.AxisState.CLOSED_LOOP_CONTROL:
-                if not self.axis_error:
-                    self.axis_state = od.AxisState.CLOSED_LOOP_CONTROL
-            elif msg.state == od.AxisState.IDLE:
-                self.axis_state = od.AxisState.IDLE
-                self.input_torque = 0.0
-        elif isinstance(msg, od.SetControllerMode):
-            self.control_mode, self.input_mode = msg.control_mode, msg.input_mode
-        elif isinstance(msg, od.SetLimits):
-            self.velocity_limit, self.current_limit = msg.velocity_limit, msg.current_limit
-        elif isinstance(msg, od.ClearErrors):
-            self.axis_error = 0
-        elif isinstance(msg, od.Estop):
-            self.axis_error |= od.ERROR_ESTOP_REQUESTED
-            self.axis_state = od.AxisState.IDLE
-
-    def _handle_mit(self, msg, t: float) -> None:
-        if isinstance(msg, mitc.MitSpecial):
-            if msg.kind == "enter":
-                self.motor_mode = not self.axis_error
-            elif msg.kind == "exit":
-                self.motor_mode = False
-            else:
-                self.zero_offset += self.motor_position
-        else:
-            self.mit_cmd = msg
-            self.stats.commands += 1
-        self._queue(self.mit_reply(), t)
-
-    def _motor_torque(self) -> float:
-        if self.mit is not None:
-            if not self.armed:
-                return 0.0
-            c, r = self.mit_cmd, self.cfg.mit_ranges
-            tau = (
-                c.kp * (c.position - self.motor_position)
-                + c.kd * (c.velocity - self.motor_velocity)
-                + c.torque
-            )
-            return min(max(tau, r.t_min), r.t_max)
-        if not self.armed or self.control_mode != od.ControlMode.TORQUE_CONTROL:
-            return 0.0
-        tau_max = self.current_limit * self.conv.torque_constant
-        tau = min(max(self.input_torque, -tau_max), tau_max)
-        if abs(self.motor_velocity) > self.velocity_limit and tau * self.motor_velocity > 0:
-            tau = 0.0  # ODrive torque-mode velocity limit
-        return tau
+            for reply in self.drive.handle(msg, t):
+                self._queue(reply, t)
 
     def advance(self, t: float, max_backlog: float | None = None) -> None:
         """Step the plant in fixed ``dt`` steps up to time ``t`` and queue due cyclic telemetry.
@@ -272,7 +173,7 @@ class DriveEmulator:
                 self._t_phys = t - self.dt
             while self._t_phys + self.dt <= t + 1e-9:
                 self._t_phys += self.dt
-                self.applied_torque = self._motor_torque()
+                self.applied_torque = self.drive.motor_torque()
                 self.meas = self.plant.step(self.conv.joint_torque(self.applied_torque), self.dt)
                 self.time += self.dt
                 self.stats.physics_steps += 1

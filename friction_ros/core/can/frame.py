@@ -82,5 +82,9 @@ class SafeDecoder:
             self._reject(f"id 0x{arb_id & 0x1FFFFFFF:X}: {type(exc).__name__}: {exc}")
             return None
 
+    def decode_frame(self, frame: Frame):
+        """:meth:`decode` of a :class:`Frame`."""
+        return self.decode(frame.arbitration_id, frame.data, frame.is_remote, frame.is_extended)
+
     def _decode(self, arb_id, data, is_remote, is_extended, is_error):  # pragma: no cover
         raise NotImplementedError

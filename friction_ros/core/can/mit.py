@@ -229,9 +229,6 @@ class MitDecoder(SafeDecoder):
         self.role = role
         super().__init__()
 
-    def decode_frame(self, frame: Frame):
-        return self.decode(frame.arbitration_id, frame.data, frame.is_remote, frame.is_extended)
-
     def _decode(self, arb_id, data, is_remote, is_extended, is_error):
         st = self.stats
         c = self.codec

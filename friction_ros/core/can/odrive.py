@@ -313,9 +313,6 @@ class OdriveDecoder(SafeDecoder):
         self._wanted = frozenset(int(c) for c in want)
         self._rtr = role in ("drive", "any")
 
-    def decode_frame(self, frame: Frame):
-        return self.decode(frame.arbitration_id, frame.data, frame.is_remote, frame.is_extended)
-
     def _decode(self, arb_id, data, is_remote, is_extended, is_error):
         st = self.stats
         if is_error or is_extended or arb_id > 0x7FF or arb_id < 0:

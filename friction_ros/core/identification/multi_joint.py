@@ -89,8 +89,8 @@ class JointFit:
 def fit_one_joint(task: dict) -> JointFit:
     """Fit one joint (``task``: fit_bag's arguments with ``joint`` and ``out_dir``); module level so
     a process pool can run it. A fit the data refuse (ParameterError, ValueError) is a failed joint."""
-    from friction_ros.core.identification import metrics
     from friction_ros.core.identification.fit_logs import fit_bag
+    from friction_ros.core.identification.recommendation import verdict_label
     from friction_ros.core.identification.report import _clean
 
     t0 = time.perf_counter()
@@ -114,14 +114,7 @@ def fit_one_joint(task: dict) -> JointFit:
             effort_limit=_effort_limit_without_fit(task),
         )
     rec = res.models[res.recommended]
-    nmse = rec.metrics.get("nmse_percent")
-    nmse = float(nmse) if nmse is not None and math.isfinite(float(nmse)) else None
-    verdict = res.options.get("verdict") or {}
-    if verdict.get("explains_little"):
-        nothing = nmse is None or nmse >= metrics.NO_SIGNAL_NMSE
-        label = "explains nothing" if nothing else "explains little"
-    else:
-        label = "ok"
+    label, nmse = verdict_label(res)
     out = JointFit(
         joint,
         label,

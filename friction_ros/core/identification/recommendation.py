@@ -84,3 +84,17 @@ def verdict(results, rec, val, vall, terms, eps, tried: bool = False) -> dict:
         )
     )
     return {"explains_little": True, "text": text, "suggestions": tips, "nmse_percent": nm}
+
+
+def verdict_label(res) -> tuple[str, float | None]:
+    """(verdict, validation NMSE % of the recommended model or None) of a FitResult: ``ok``
+    (compensate with it), ``explains little`` (NMSE > :data:`EXPLAINS_LITTLE_NMSE`) or ``explains
+    nothing`` (NMSE >= :data:`~.metrics.NO_SIGNAL_NMSE`, no better than a constant); the label of
+    friction-fit's per-joint index and of the fleet table."""
+    rec = res.models.get(res.recommended) if res.recommended else None
+    nmse = rec.metrics.get("nmse_percent") if rec is not None else None
+    nmse = float(nmse) if nmse is not None and math.isfinite(float(nmse)) else None
+    if not (res.options.get("verdict") or {}).get("explains_little"):
+        return "ok", nmse
+    nothing = nmse is None or nmse >= metrics.NO_SIGNAL_NMSE
+    return ("explains nothing" if nothing else "explains little"), nmse
