@@ -198,8 +198,10 @@ def test_registry_lists_the_toy_and_refuses_unknown_names(toy):
     assert drive_protocol("toy") is ToyProtocol
     with pytest.raises(ParameterError) as e:
         AxisConfig(protocol="toi")
-    assert str(e.value) == "protocol = 'toi' is not allowed: must be one of odrive_cansimple, mit, toy"
-    with pytest.raises(ParameterError, match=r"must be one of odrive_cansimple, mit, toy$"):
+    assert (
+        str(e.value) == "protocol = 'toi' is not allowed: must be one of odrive_cansimple, mit, cia402, toy"
+    )
+    with pytest.raises(ParameterError, match=r"must be one of odrive_cansimple, mit, cia402, toy$"):
         drive_protocol("toi")
     with pytest.raises(ParameterError, match=r"node_id = 200 is out of range"):
         AxisConfig(protocol="toy", node_id=200)  # the protocol's own id check
@@ -209,8 +211,8 @@ def test_registry_lists_the_toy_and_refuses_unknown_names(toy):
     from friction_ros.nodes import drive_emulator, drive_interface
 
     field = dict(drive_interface.parameter_schema().fields())["protocol"]
-    assert "toy" in field.choices and field.range_text() == "one of odrive_cansimple, mit, toy"
-    assert "{odrive_cansimple,mit,toy}" in drive_emulator.build_parser().format_help()
+    assert "toy" in field.choices and field.range_text() == "one of odrive_cansimple, mit, cia402, toy"
+    assert "{odrive_cansimple,mit,cia402,toy}" in drive_emulator.build_parser().format_help()
     assert drive_emulator.build_parser().parse_args(["--protocol", "toy"]).protocol == "toy"
 
 
@@ -222,7 +224,7 @@ def test_entry_point_protocols_load_on_first_use(monkeypatch):
         metadata.EntryPoint("broken", f"{__name__}:NoSuchClass", protocol.ENTRY_POINT_GROUP),
     ]
     monkeypatch.setattr(metadata, "entry_points", lambda group: [e for e in eps if e.group == group])
-    assert protocol_names() == ("odrive_cansimple", "mit", "toy_ep", "broken")
+    assert protocol_names() == ("odrive_cansimple", "mit", "cia402", "toy_ep", "broken")
     assert drive_protocol("toy_ep") is ToyProtocol
     with pytest.raises(ParameterError, match=r"protocol = 'broken' cannot be loaded from .*NoSuchClass"):
         drive_protocol("broken")

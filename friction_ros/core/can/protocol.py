@@ -9,7 +9,7 @@ protocol is one module defining both and registering them::
 
 or, from another distribution, the entry point group ``friction_ros.drive_protocols``
 (``my_protocol = my_package.module:MyProtocol``). :func:`protocol_names` lists the built-ins
-(``odrive_cansimple``, ``mit``), then entry points, then run-time registrations; both are loaded on
+(``odrive_cansimple``, ``mit``, ``cia402``), then entry points, then run-time registrations; both are loaded on
 first use.
 
 Units: a protocol reports and takes motor-side SI values (rad, rad/s, N*m, A, V; m and N for a
@@ -37,6 +37,7 @@ ENTRY_POINT_GROUP = "friction_ros.drive_protocols"
 BUILTIN = {
     "odrive_cansimple": "friction_ros.core.can.odrive_protocol:OdriveProtocol",
     "mit": "friction_ros.core.can.mit_protocol:MitProtocol",
+    "cia402": "friction_ros.core.can.cia402.protocol:Cia402Protocol",
 }
 MOTION_PAIR = 0  # float_pairs(): (position, velocity) x motion_scale -> motor rad, rad/s
 CURRENT_PAIR = 1  # float_pairs(): (current setpoint, measured) [A]

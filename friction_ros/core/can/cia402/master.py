@@ -98,6 +98,7 @@ class Cia402Master:
         self.torque_permille = 0
         self.max_permille = 32767
         self.fault = ""  # latched fault text ("" = none)
+        self.fault_code = 0  # its CiA error code: the EMCY's, 0x8130 heartbeat, 0x8100 stale, else 0x1000
         self._t_fault = 0.0
         self._fault_from_statusword = False  # an EMCY arriving just after replaces the text
         self.emcy_log: list[tuple[float, fr.EmcyMessage]] = []
@@ -126,7 +127,7 @@ class Cia402Master:
 
     def enable(self, t: float) -> None:
         """Clear a latched fault and walk the drive to OPERATION ENABLED (fault reset first)."""
-        self.fault = ""
+        self.fault, self.fault_code = "", 0
         self._set_target(State.OPERATION_ENABLED, t)
         if self.phase == "operational":
             self._t_heartbeat = self._t_tpdo1 = max(self._t_tpdo1, t - self.stale_after / 2)
@@ -224,7 +225,7 @@ class Cia402Master:
             msg = fr.decode_emcy(data)
             self.emcy_log.append((t, msg))
             if msg.code & 0xFF00:
-                self._latch(f"drive node {self.node_id} {msg.text}", t, emcy=True)
+                self._latch(f"drive node {self.node_id} {msg.text}", t, msg.code, emcy=True)
         elif cob == self.cob_sdo_tx and self.sdo is not None:
             self.sdo.on_response(data)
 
@@ -234,9 +235,10 @@ class Cia402Master:
             self.target = target
             self._t_state = t
 
-    def _latch(self, text: str, t: float, emcy: bool = False) -> None:
+    def _latch(self, text: str, t: float, code: int = ob.ERROR_GENERIC, emcy: bool = False) -> None:
         if not self.fault or (emcy and self._fault_from_statusword and t - self._t_fault < 0.2):
             self.fault = text
+            self.fault_code = code
             self._t_fault = t
             self._fault_from_statusword = False
         if self.target == State.OPERATION_ENABLED:
@@ -271,6 +273,7 @@ class Cia402Master:
             self._latch(
                 f"heartbeat of drive node {self.node_id} missing for more than {cfg.consumer_timeout * 1e3:.0f} ms",
                 t,
+                ob.ERROR_HEARTBEAT,
             )
         if t - self._t_tpdo1 > self.stale_after:
             self._t_tpdo1 = t
@@ -278,6 +281,7 @@ class Cia402Master:
                 f"telemetry of drive node {self.node_id} stale: no TPDO1 for more than "
                 f"{self.stale_after * 1e3:.0f} ms",
                 t,
+                ob.ERROR_COMMUNICATION,
             )
         if self.target == State.QUICK_STOP_ACTIVE and self.state == State.QUICK_STOP_ACTIVE:
             self._set_target(State.SWITCH_ON_DISABLED, t)

@@ -81,6 +81,7 @@ EMCY_TEXTS = {
     0x6010: "software reset (watchdog)",
     0x7121: "motor blocked",
     0x7305: "incremental sensor 1 fault",
+    0x8100: "communication",
     0x8110: "CAN overrun (objects lost)",
     0x8120: "CAN in error passive mode",
     0x8130: "life guard error or heartbeat error",
@@ -91,6 +92,7 @@ EMCY_TEXTS = {
     0x8611: "following error",
     0xFF00: "device specific",
 }
+ERROR_GENERIC, ERROR_COMMUNICATION, ERROR_HEARTBEAT = 0x1000, 0x8100, 0x8130
 _EMCY_CLASSES = {
     0x1: "generic",
     0x2: "current",

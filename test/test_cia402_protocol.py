@@ -1,0 +1,153 @@
+"""The registered ``cia402`` drive protocol: the real DriveAxis + CanBusLink (host) against the
+emulated CiA 402 drives (canopen LocalNode + plant) on a python-can ``virtual`` bus, in real time."""
+
+from __future__ import annotations
+
+import time
+import uuid
+
+import can
+import pytest
+from can_support import StandInPlant
+
+from friction_ros.core.can.axis import DriveAxis
+from friction_ros.core.can.axis_config import AxisConfig
+from friction_ros.core.can.cia402 import State
+from friction_ros.core.can.cia402.emulator import emulated_drives
+from friction_ros.core.can.cia402.protocol import Cia402Protocol, set_axis_parameters
+from friction_ros.core.can.drive_set import frame_router
+from friction_ros.core.can.faults import FAULT_DRIVE_ERROR
+from friction_ros.core.can.joint import JointConversion
+from friction_ros.core.can.protocol import drive_protocol
+from friction_ros.core.validation import ParameterError
+from friction_ros.nodes.can_bus import CanBusLink
+
+DT = 0.002
+CONV = JointConversion(gear_ratio=10.0, torque_constant=0.5)
+
+
+class Logger:
+    def error(self, *a, **k):
+        raise AssertionError(a)
+
+    warning = error
+
+
+class Rig:
+    def __init__(self, node_ids):
+        channel = f"cia402p-{uuid.uuid4().hex[:8]}"
+        plant = lambda: (StandInPlant(inertia=0.5, viscous=0.5, coulomb=0.2), CONV)  # noqa: E731
+        self.enet, self.drives = emulated_drives(
+            can.Bus(interface="virtual", channel=channel), node_ids, plant_factory=plant
+        )
+        self.axes = [
+            DriveAxis(
+                AxisConfig(
+                    protocol="cia402",
+                    node_id=n,
+                    conversion=CONV,
+                    telemetry_period=DT,
+                    torque_limit=5.0,
+                    effort_source="torque_estimate",
+                )
+            )
+            for n in node_ids
+        ]
+        self.link = CanBusLink(
+            "virtual", channel, 1_000_000, self.axes, frame_router(self.axes), 5, 1.0, Logger()
+        )
+        self.results = []
+
+    def run(self, seconds, torques=None, until=None):
+        nxt = time.monotonic()
+        end = nxt + seconds
+        while time.monotonic() < end:
+            now = time.monotonic()
+            self.link.receive(now)
+            for k, a in enumerate(self.axes):
+                if torques is not None:
+                    a.set_command(torques[k], now)
+                r = a.cycle(now)
+                self.results.append(r)
+                assert self.link.send(r.frames)
+            if until is not None and until():
+                return True
+            nxt += DT
+            time.sleep(max(0.0, nxt - time.monotonic()))
+        return False
+
+    def close(self):
+        self.link.send([f for a in self.axes for f in a.shutdown_frames()])
+        time.sleep(0.05)
+        self.link.close()
+        for d in self.drives:
+            d.stop()
+        self.enet.disconnect()
+
+
+@pytest.fixture
+def rig():
+    made = []
+
+    def make(node_ids):
+        made.append(Rig(node_ids))
+        return made[-1]
+
+    yield make
+    for r in made:
+        r.close()
+
+
+def test_registered_and_checks_node_id():
+    assert drive_protocol("cia402") is Cia402Protocol
+    with pytest.raises(
+        ParameterError,
+        match=r"^node_id = 0 is out of range: must be an integer in \[1, 127\], i.e. >= 1 and <= 127$",
+    ):
+        AxisConfig(protocol="cia402", node_id=0)
+
+
+def test_drive_axis_enables_and_commands_two_cia402_drives_with_one_sync(rig):
+    r = rig([1, 2])
+    assert r.run(2.0, until=lambda: all(a.protocol.master.phase == "operational" for a in r.axes))
+    for a in r.axes:
+        a.request_enable()
+    ok = r.run(2.0, [0.0, 0.0], until=lambda: all(d.sm.state == State.OPERATION_ENABLED for d in r.drives))
+    assert ok, [a.fault_reason for a in r.axes]
+    r.run(0.4, [2.0, -3.0])
+    # joint torque 2 / -3 N*m through gear ratio 10: 0.2 / -0.3 N*m at the motor
+    assert [d.applied_torque for d in r.drives] == pytest.approx([0.2, -0.3])
+    s = [x.sample for x in r.results[-2:]]
+    assert s[0].effort == pytest.approx(2.0, abs=0.01) and s[1].effort == pytest.approx(-3.0, abs=0.01)
+    assert s[0].velocity > 0 > s[1].velocity
+    assert s[0].position == pytest.approx(r.drives[0].meas.position, abs=0.02)
+    assert all(a.enabled and not a.latched for a in r.axes)
+    syncs = [d.syncs for d in r.drives]
+    assert syncs[0] == pytest.approx(syncs[1], abs=2)  # both saw the same SYNCs
+    n_periods = len(r.results) // 2
+    assert syncs[0] <= n_periods + 2  # one SYNC per period for both drives, not two
+
+
+def test_emcy_reaches_drive_axis_as_drive_error_with_text(rig):
+    r = rig([3])
+    a, d = r.axes[0], r.drives[0]
+    r.run(2.0, until=lambda: a.protocol.master.phase == "operational")
+    a.request_enable()
+    assert r.run(2.0, [0.0], until=lambda: d.sm.state == State.OPERATION_ENABLED)
+    d.set_max_torque(100)  # the drive's limit: 0.1 N*m motor = 1 N*m joint
+    assert r.run(1.0, [2.0], until=lambda: bool(a.latched))
+    assert a.latched & FAULT_DRIVE_ERROR and not a.enabled
+    assert a.fault_reason == "drive reports error 0x8311 (excess torque)"
+    assert r.run(1.0, [0.0], until=lambda: d.sm.state in (State.SWITCH_ON_DISABLED, State.FAULT))
+    assert d.applied_torque == 0.0 and d.emcy_sent == [0x8311]
+
+
+def test_set_axis_parameters_reach_the_master():
+    set_axis_parameters(7, counts_per_rev=4096, rated_torque=2.5, rated_current=6.0)
+    p = Cia402Protocol(AxisConfig(protocol="cia402", node_id=7, conversion=JointConversion(gear_ratio=50.0)))
+    assert p.master.units == {
+        "counts_per_rev": 4096,
+        "gear_ratio": 1.0,
+        "rated_torque": 2.5,
+        "rated_current": 6.0,
+    }
