@@ -51,6 +51,9 @@ class AxisConfig:
     request_telemetry: bool = False  # ODrive: send RTR requests for encoder + effort every cycle
     limit_factor: float = 10.0  # telemetry above this many times a configured limit is implausible
     reject_run: int = 5  # consecutive implausible reports that latch a fault
+    cia402: tuple[
+        tuple[str, Any], ...
+    ] = ()  # CiA 402 settings (Cia402Config keyword, value), see cia402.config
 
     def __post_init__(self):
         check_choice("protocol", self.protocol, PROTOCOLS)
@@ -111,11 +114,19 @@ class AxisConfig:
         )
 
 
+CIA402_KEYS = ("eds_path", "counts_per_rev", "rated_torque", "rated_current", "heartbeat_ms")
 AXIS_SCHEMA = Schema(
     "axis",
     [
         Field("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
-        Field("node_id", 0, "ODrive node id (0..63) or MIT motor CAN id", lo=0, hi=0x7FF, read_only=True),
+        Field(
+            "node_id",
+            0,
+            "ODrive node id (0..63) or MIT motor CAN id",
+            lo=0,
+            hi=0x7FF,
+            read_only=True,
+        ),
         Schema(
             "mit",
             [
@@ -126,6 +137,52 @@ AXIS_SCHEMA = Schema(
                 ],
             ],
             doc="MIT protocol",
+        ),
+        Schema(
+            "cia402",
+            [
+                Field(
+                    "eds_path",
+                    "",
+                    "CiA 402: the drive's EDS file; its defaults fill the units left at 0",
+                    read_only=True,
+                ),
+                Field(
+                    "counts_per_rev",
+                    0,
+                    "CiA 402: encoder counts per motor revolution (0: EDS, else the drive's 0x608F)",
+                    lo=0,
+                    hi=2**31 - 1,
+                    read_only=True,
+                    unit="counts/rev",
+                ),
+                Field(
+                    "rated_torque",
+                    0.0,
+                    "CiA 402: motor rated torque, the unit of target torque (0: EDS, else 0x6076)",
+                    lo=0.0,
+                    read_only=True,
+                    unit="N*m",
+                ),
+                Field(
+                    "rated_current",
+                    0.0,
+                    "CiA 402: motor rated current, the unit of current actual (0: EDS, else 0x6075)",
+                    lo=0.0,
+                    read_only=True,
+                    unit="A",
+                ),
+                Field(
+                    "heartbeat_ms",
+                    100,
+                    "CiA 402: heartbeat period the drive is told to send",
+                    lo=1,
+                    hi=65535,
+                    read_only=True,
+                    unit="ms",
+                ),
+            ],
+            doc="CiA 402 over CANopen (units left at 0 are read from the EDS or the drive)",
         ),
         JOINT_TYPE_FIELD,
         Field("gear_ratio", 1.0, "motor revolutions per joint revolution", lo=1e-6, read_only=True),
@@ -273,4 +330,5 @@ def _axis_config(v: Mapping[str, Any], control_rate_hz: float, lead: float) -> A
         request_telemetry=v["request_telemetry"],
         limit_factor=v["telemetry_gate.limit_factor"],
         reject_run=v["telemetry_gate.reject_run"],
+        cia402=tuple((k, v[f"cia402.{k}"]) for k in CIA402_KEYS),
     )

@@ -7,8 +7,9 @@ takes the axis to the joint). Per period, in DriveAxis' order: ``torque_frame`` 
 ``cycle_frames`` gives the start-up frames and, from the last CiA 402 axis of the period, the one
 SYNC for all of them. Reports: TPDO1 -> torque + state (the CiA 402 state; closed loop = OPERATION
 ENABLED) + error (the master's latched CiA error code: EMCY, heartbeat 0x8130, ...); TPDO2 ->
-position (of the TPDO1 before it) + velocity + current. Units come from :func:`set_axis_parameters`,
-else from the drive (SDO reads of 0x608F, 0x6076, 0x6075).
+position (of the TPDO1 before it) + velocity + current. Units come from the axis' ``cia402.*``
+parameters (or :func:`set_axis_parameters`), else the EDS, else the drive (SDO reads of 0x608F,
+0x6076, 0x6075).
 
 Limits: one CiA 402 bus per process (the SYNC group counts every CiA 402 axis); a disable or
 shutdown sends quick stop and disable voltage each followed by a SYNC of its own.
@@ -111,7 +112,7 @@ class Cia402Decoder(SafeDecoder):
 class Cia402Protocol(DriveProtocol):
     def __init__(self, cfg):
         super().__init__(cfg)
-        own = _params.get(cfg.node_id) or Cia402Config(node_id=cfg.node_id)
+        own = _params.get(cfg.node_id) or Cia402Config(node_id=cfg.node_id, **dict(cfg.cia402))
         # motor side: the axis' JointConversion does gear ratio, lead, direction and zero offset
         mcfg = dataclasses.replace(own, gear_ratio=1.0, lead=0.0, direction=1, zero_offset=0.0)
         self.master = Cia402Master(mcfg)
