@@ -175,3 +175,71 @@ def test_drive_interface_parameters_reach_the_master():
     assert m.cfg.heartbeat_ms == 20 and m.cfg.node_id == 12
     with pytest.raises(ParameterError, match=r"heartbeat_ms = 0 is out of range"):
         AXIS_SCHEMA.validate({"cia402": {"heartbeat_ms": 0}}, "")
+
+
+def test_frame_level_drive_emulator_speaks_cia402_in_lock_step():
+    """DriveEmulator(protocol="cia402") (the drive_emulator / simulated_drive path) with DriveAxis, on a
+    simulated clock: start-up by SDO, enable, torque, an injected drive error as EMCY, enable again."""
+    from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig
+
+    channel = f"cia402e-{uuid.uuid4().hex[:8]}"
+    now = [100.0]
+    emu_bus = can.Bus(interface="virtual", channel=channel)
+    emu = DriveEmulator(
+        emu_bus,
+        StandInPlant(inertia=0.5, viscous=0.5, coulomb=0.2),
+        EmulatorConfig(protocol="cia402", node_id=4, conversion=CONV),
+        clock=lambda: now[0],
+    )
+    axis = DriveAxis(
+        AxisConfig(
+            protocol="cia402",
+            node_id=4,
+            conversion=CONV,
+            telemetry_period=DT,
+            torque_limit=5.0,
+            effort_source="torque_estimate",
+        )
+    )
+    link = CanBusLink("virtual", channel, 1_000_000, [axis], frame_router([axis]), 5, 1.0, Logger())
+    results = []
+
+    def run(seconds, torque=None, until=None):
+        for _ in range(round(seconds / DT)):
+            now[0] += DT
+            emu.poll(0.0)
+            time.sleep(0.0002)  # the virtual bus hands frames over between threads
+            link.receive(now[0])
+            if torque is not None:
+                axis.set_command(torque, now[0])
+            r = axis.cycle(now[0])
+            assert link.send(r.frames)
+            results.append(r)
+            if until is not None and until():
+                return True
+        return False
+
+    try:
+        assert run(1.0, until=lambda: axis.protocol.master.phase == "operational")
+        axis.request_enable()
+        assert run(1.0, 0.0, until=lambda: emu.armed)
+        run(0.2, 1.5)
+        assert emu.applied_torque == pytest.approx(0.15)  # motor side, gear ratio 10
+        assert results[-1].sample.effort == pytest.approx(1.5, abs=0.01)
+        emu.inject_axis_error()
+        assert run(0.5, 1.5, until=lambda: bool(axis.latched))
+        assert axis.fault_reason == "drive reports error 0x1000 (generic error)"
+        run(0.1, 0.0)
+        assert emu.applied_torque == 0.0 and not emu.armed
+        axis.request_enable()
+        assert run(1.0, 0.5, until=lambda: emu.armed and emu.applied_torque > 0)
+        assert link.send(axis.shutdown_frames())  # quick stop, SYNC, disable voltage, SYNC
+        time.sleep(0.01)
+        emu.poll(0.0)
+        assert not emu.armed and emu.drive.cia.state_log[-2:] == [
+            State.QUICK_STOP_ACTIVE,
+            State.SWITCH_ON_DISABLED,
+        ]
+    finally:
+        link.close()
+        emu_bus.shutdown()

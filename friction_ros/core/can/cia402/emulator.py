@@ -96,7 +96,8 @@ class Cia402DriveEmulator:
         self.applied_torque = 0.0  # motor N*m
         self.dt = 1.0 / cfg.physics_rate_hz
         self._t_phys: float | None = None
-        self.meas = plant.step(0.0, self.dt)
+        self.meas = plant.step(0.0, self.dt) if plant is not None else None
+        self.host = None  # a DriveEmulator that owns the plant instead (see .emulated)
         self.syncs = 0
         self.tpdos_sent = 0
         self.emcy_sent: list[int] = []
@@ -141,13 +142,13 @@ class Cia402DriveEmulator:
         if index == ob.OD_STATUSWORD:
             return self.sm.statusword
         if index == ob.OD_POSITION_ACTUAL:
-            return self.scaling.counts(self.conv.motor_position(self.meas.position))
+            return self.scaling.counts(self.motor_measurements()[0])
         if index == ob.OD_VELOCITY_ACTUAL:
-            return self.scaling.counts(self.conv.motor_velocity(self.meas.velocity))
+            return self.scaling.counts(self.motor_measurements()[1])
         if index == ob.OD_TORQUE_ACTUAL:
-            return self.scaling.motor_permille(self.conv.motor_torque(self.meas.effort))
+            return self.scaling.motor_permille(self.motor_measurements()[2])
         if index == ob.OD_CURRENT_ACTUAL:
-            return round(1000.0 * self.meas.motor_current / self.scaling.rated_current)
+            return round(1000.0 * self.motor_measurements()[3] / self.scaling.rated_current)
         if index == ob.OD_MODES_DISPLAY:
             return self.mode
         if index == ob.OD_ERROR_CODE:
@@ -155,6 +156,19 @@ class Cia402DriveEmulator:
         if index == ob.OD_ERROR_REGISTER:
             return 0x01 if self.sm.state in (State.FAULT, State.FAULT_REACTION_ACTIVE) else 0
         return None
+
+    def motor_measurements(self) -> tuple[float, float, float, float]:
+        """Motor position [rad], velocity [rad/s], torque [N*m], current [A] of the plant now."""
+        h = self.host
+        if h is not None:
+            return h.motor_position, h.motor_velocity, h.motor_torque_measured, h.meas.motor_current
+        m, c = self.meas, self.conv
+        return (
+            c.motor_position(m.position),
+            c.motor_velocity(m.velocity),
+            c.motor_torque(m.effort),
+            m.motor_current,
+        )
 
     def _on_read(self, index, subindex, od):
         return self._live(index)
@@ -296,17 +310,20 @@ class Cia402DriveEmulator:
             self.sm.apply(self.controlword)  # reaction done: FAULT
             self._log_state()
 
-    def _motor_torque(self) -> float:
+    def motor_torque(self) -> float:
+        """Motor torque the drive applies now [N*m]: the target in OPERATION ENABLED and mode 10, else 0."""
         if self.sm.state != State.OPERATION_ENABLED or self.mode != ob.MODE_CYCLIC_SYNC_TORQUE:
             return 0.0
         return self.target_torque * self.scaling.rated_torque / 1000.0
 
     def advance(self, t: float, max_backlog: float = 0.05) -> None:
         """Step the plant in fixed ``dt`` steps up to time ``t`` (skip, not replay, a longer pause)."""
+        if self.host is not None:
+            return  # the host steps the plant
         with self.lock:
             if self._t_phys is None or t - self._t_phys > max_backlog:
                 self._t_phys = t - self.dt
-            self.applied_torque = tau = self._motor_torque()
+            self.applied_torque = tau = self.motor_torque()
             while self._t_phys + self.dt <= t + 1e-9:
                 self._t_phys += self.dt
                 self.meas = self.plant.step(self.conv.joint_torque(tau), self.dt)

@@ -23,6 +23,7 @@ import time
 from friction_ros.core.can.cia402 import frames as fr
 from friction_ros.core.can.cia402 import objects as ob
 from friction_ros.core.can.cia402.config import Cia402Config
+from friction_ros.core.can.cia402.emulated import Cia402EmulatedDrive
 from friction_ros.core.can.cia402.master import Cia402Master
 from friction_ros.core.can.cia402.state_machine import (
     CW_DISABLE_VOLTAGE,
@@ -184,3 +185,6 @@ class Cia402Protocol(DriveProtocol):
         if SYNC_GROUP.due(t, id(self), self.master.phase == "operational"):
             out.append(fr.SYNC_FRAME)
         return out
+
+
+Cia402Protocol.emulated = Cia402EmulatedDrive
