@@ -175,11 +175,10 @@ AXIS_SCHEMA = Schema(
                 Field(
                     "heartbeat_ms",
                     100,
-                    "CiA 402: heartbeat period the drive is told to send",
+                    "CiA 402: heartbeat period the drive is told to send [ms]",
                     lo=1,
                     hi=65535,
                     read_only=True,
-                    unit="ms",
                 ),
             ],
             doc="CiA 402 over CANopen (units left at 0 are read from the EDS or the drive)",

@@ -33,7 +33,7 @@ class Cia402Scaling:
 
     def __post_init__(self):
         check_int("counts_per_rev", self.counts_per_rev, 1, 2**31 - 1)
-        check_real("rated_torque", self.rated_torque, 0.0, lo_open=True, unit="N*m (motor side)")
+        check_real("rated_torque", self.rated_torque, 0.0, lo_open=True, unit="N*m")
         check_real("rated_current", self.rated_current, 0.0, lo_open=True, unit="A")
         c = self.conversion
         rad_per_count = 2.0 * math.pi / self.counts_per_rev
