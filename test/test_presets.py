@@ -1,4 +1,4 @@
-"""Presets and seed regressions (seed 000/001/002/003/004)."""
+"""Presets and seed regressions (the five source documents)."""
 
 from __future__ import annotations
 

@@ -15,7 +15,7 @@ class Dahl(DynamicModel):
 
     Time form dF/dt = (dF/dx) v. The update integrates the closed-form solution over the displacement
     v*dt (exact for v held over the step, stable for any stiffness). With alpha = 1 the model is LuGre
-    with Fs = Fc, sigma1 = 0, fv = 0 (appendix Z). Steady sliding: F = Fc sgn(v). State: [F].
+    with Fs = Fc, sigma1 = 0, fv = 0 (Olsson et al. 1998). Steady sliding: F = Fc sgn(v). State: [F].
     """
 
     name = "dahl"

@@ -11,7 +11,7 @@ from .base import DynamicModel, stribeck_np
 
 
 class LuGre(DynamicModel):
-    """LuGre (seed 004 eqs. (10)-(11); seed 001 eq. (14); appendix Z):
+    """LuGre (seed 004 eqs. (10)-(11); seed 001 eq. (14); Canudas de Wit et al. 1995):
 
     dz/dt = v - sigma0 |v| z / g(v),  g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta)
     F = sigma0 z + sigma1(v) dz/dt + fv v,  sigma1(v) = sigma1 exp(-(v/vd)^2) if vd > 0 else sigma1

@@ -107,7 +107,7 @@ class CoulombViscous(StaticModel):
 class Stribeck(StaticModel):
     """Exponential Stribeck family F = [Fc + (Fs - Fc) exp(-|v/vs|^delta)] sgn(v) + Fv v.
 
-    Seed 004 eq. (5) (delta = 1: Tustin, delta = 2: Gaussian); appendix Z of the seeds 000/002 extract.
+    Seed 004 eq. (5) (delta = 1: Tustin, delta = 2: Gaussian); the standard form reviewed by Olsson et al. 1998.
     Requires Fs >= Fc.
     """
 

@@ -46,7 +46,7 @@ class GKF(Stribeck):
 
 
 class Karnopp(GKF):
-    """Karnopp model (Karnopp 1985; extract C.1 / appendix Z): inside the zero-velocity band |v| < dv
+    """Karnopp model (Karnopp 1985; extract C.1): inside the zero-velocity band |v| < dv
 
     F = max(-Fs, min(Fs, F_e)) (the body sticks while |F_e| < Fs and is released above), outside the
     band the Stribeck sliding map of seed 004 eq. (5).
