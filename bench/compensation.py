@@ -9,7 +9,7 @@ Setups (documented choices, not in the seeds):
   0.1 ms current loop (``current_time_constant = 1e-4``; the preset's assumed 0.5 ms lag delays the
   inertia feed-forward and alone raises the large-stroke RMS from 4.1 to 10.3 mrad) and the
   truth's GMS given presliding micro-damping
-  ``sigma1 = 0.86 N*m*s/rad`` (extract C.6; = 2 zeta sqrt(sum k_i J), zeta = 0.5; the paper gives no
+  ``sigma1 = 0.86 N*m*s/rad`` (Lampaert et al. micro-damping; = 2 zeta sqrt(sum k_i J), zeta = 0.5; the paper gives no
   value). Without it the stuck elements are an undamped 617.5 N*m/rad spring on J = 0.0012 and the
   paper's PD (Kp = 200, Kd = 0.15) rings at ~140 Hz for ever. The damping is applied here as a
   plant override, not in params/abb_m19s.yaml, because the offline-identification tests fit the

@@ -52,7 +52,7 @@ SECTION = (
 )
 RE_SEED_NOUN = re.compile(r"\b(?:(the) )?" + SEED + r" " + NOUN + r"\b")
 RE_SEED = re.compile(r"\b(?:[Ee]xtract )?" + SEED)
-RE_EXTRACT = re.compile(r"\b[Ee]xtract \(?(" + SECTION + r")\)?(?=[\s,;:./)\]\"'`]|$)")
+RE_EXTRACT = re.compile(r"\b[Ee]xtract (\()?(" + SECTION + r")(?(1)\))(?=[\s,;:./)\]\"'`]|$)")
 RE_TEST_ROW = re.compile(r"(?<![\w/-])([AB])-T\d+(?:/[AB]-T\d+)*\b")
 RE_ANY_LABEL = re.compile("|".join(re.escape(v) for v in LABELS.values()) + "|" + SEED)
 
@@ -101,7 +101,7 @@ def rewrite(text: str) -> tuple[str, list[str]]:
     unresolved: list[str] = []
 
     def extract(m: re.Match) -> str:
-        section = m.group(1)
+        section = m.group(2)
         key = _resolve(section, text, m.start())
         if key is None:
             unresolved.append(m.group(0))

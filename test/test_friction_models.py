@@ -318,7 +318,7 @@ def _reference_lugre(p, v, dt, sub):
 
 
 def _reference_gms(p, v, dt, sub):
-    # independent reference: the extract A.2.4 sketch (explicit Euler in slip) at dt/sub
+    # independent reference: the GMS sketch of seed 003 A.2.4 (explicit Euler in slip) at dt/sub
     fc, fs, vs, de, c, fv = p[:6]
     n = (len(p) - 6) // 2
     k, al = p[6 : 6 + n], p[6 + n :]

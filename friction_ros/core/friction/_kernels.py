@@ -230,7 +230,7 @@ def gms_update(p, o, st, v, h):
     Slip: dF_i/dt = C (alpha_i sgn(v) - F_i / s(v)), C = ``attraction``, solved exactly (relaxation
     rate C/s).
     A slipping element sticks again on reversal (F_i v < 0) or at v = 0.
-    Presliding micro-damping (extract C.6, Lampaert: F = sum_i (k_i z_i + sigma_i dz_i/dt) + fv v)
+    Presliding micro-damping (Lampaert et al.: F = sum_i (k_i z_i + sigma_i dz_i/dt) + fv v)
     with stiffness-proportional sigma_i = sigma1 k_i / sum_j k_j, i.e. with dz_i/dt = (dF_i/dt) / k_i
     the damping force is (sigma1 / sum_j k_j) sum_i dF_i/dt, evaluated over the step as
     sum_i (F_i(t+h) - F_i(t)) / h (= sigma1 v while every element sticks).

@@ -21,7 +21,7 @@ class GMS(DynamicModel):
     stick:  dF_i/dt = k_i v
     slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|), C = attraction
     s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v + F_damp;  sum_i alpha_i = 1.
-    Optional presliding micro-damping (extract C.6, Lampaert et al.: F = sum_i (k_i z_i + sigma_i
+    Optional presliding micro-damping (Lampaert et al.: F = sum_i (k_i z_i + sigma_i
     dz_i/dt) + sigma_2 v) with one coefficient ``sigma1`` shared in proportion to the element
     stiffness, sigma_i = sigma1 k_i / sum_j k_j (Rayleigh stiffness-proportional damping), i.e.
     F_damp = (sigma1 / sum_j k_j) sum_i dF_i/dt, which is sigma1 v while every element sticks and
@@ -88,7 +88,7 @@ class GMS(DynamicModel):
             lo=0.0,
             unit="N*m*s/rad",
             doc="presliding micro-damping, shared as sigma_i = sigma1 k_i / sum_j k_j (0 = none; "
-            "extract C.6, Lampaert et al.)",
+            "Lampaert et al.)",
         ),
     )
 

@@ -124,7 +124,7 @@ class Stribeck(StaticModel):
 
 
 class Tustin(Stribeck):
-    """Tustin model: the Stribeck family with delta = 1 (seed 004 eq. (5); extract C.5)."""
+    """Tustin model: the Stribeck family with delta = 1 (seed 004 eq. (5))."""
 
     name = "tustin"
     COEFS = (_FC, _FS, _VS, _FV)

@@ -46,7 +46,7 @@ class GKF(Stribeck):
 
 
 class Karnopp(GKF):
-    """Karnopp model (Karnopp 1985; extract C.1): inside the zero-velocity band |v| < dv
+    """Karnopp model (Karnopp 1985): inside the zero-velocity band |v| < dv
 
     F = max(-Fs, min(Fs, F_e)) (the body sticks while |F_e| < Fs and is released above), outside the
     band the Stribeck sliding map of seed 004 eq. (5).
@@ -61,7 +61,7 @@ class Karnopp(GKF):
             lo=0.0,
             lo_open=True,
             unit="rad/s",
-            doc="half width of the zero-velocity band |v| < dv where the body sticks (Karnopp 1985; extract C.1)",
+            doc="half width of the zero-velocity band |v| < dv where the body sticks (Karnopp 1985)",
         ),
     )
 
