@@ -127,7 +127,7 @@ def _files(paths: list[str]) -> list[Path]:
     for arg in paths:
         path = Path(arg).resolve()
         if not path.exists():
-            sys.exit(f"cite-sources: no such file or folder: {arg!r} (give files or folders to rewrite)")
+            raise SystemExit(_fail(f"no such file or folder: {arg!r} (give existing files or folders)"))
         found = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
         for p in found:
             rel = p.relative_to(ROOT).as_posix() if p.is_relative_to(ROOT) else p.as_posix()
@@ -136,6 +136,11 @@ def _files(paths: list[str]) -> list[Path]:
                 continue
             out.append(p)
     return out
+
+
+def _fail(message: str) -> int:
+    print(f"error: {message}", file=sys.stderr)
+    return 2
 
 
 def _read(path: Path) -> str | None:
