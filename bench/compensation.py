@@ -3,13 +3,13 @@
 Run: ``.venv/bin/python bench/compensation.py`` (full length) or ``--quick`` (shortened, as in the
 tests). Prints every table and writes bench/results/compensation.json.
 
-Setups (documented choices, not in the seeds):
+Setups (documented choices, not in the source documents):
 
-* seed 003: ``abb_m19s`` preset (GMS-4 truth, encoder 1.05e-4 rad, 200 Hz velocity filter) with a
+* ABB M19-S paper: ``abb_m19s`` preset (GMS-4 truth, encoder 1.05e-4 rad, 200 Hz velocity filter) with a
   0.1 ms current loop (``current_time_constant = 1e-4``; the preset's assumed 0.5 ms lag delays the
   inertia feed-forward and alone raises the large-stroke RMS from 4.1 to 10.3 mrad) and the
   truth's GMS given presliding micro-damping
-  ``sigma1 = 0.86 N*m*s/rad`` (extract C.6; = 2 zeta sqrt(sum k_i J), zeta = 0.5; the paper gives no
+  ``sigma1 = 0.86 N*m*s/rad`` (Lampaert et al. micro-damping; = 2 zeta sqrt(sum k_i J), zeta = 0.5; the paper gives no
   value). Without it the stuck elements are an undamped 617.5 N*m/rad spring on J = 0.0012 and the
   paper's PD (Kp = 200, Kd = 0.15) rings at ~140 Hz for ever. The damping is applied here as a
   plant override, not in params/abb_m19s.yaml, because the offline-identification tests fit the
@@ -22,21 +22,21 @@ Setups (documented choices, not in the seeds):
   PTP (preset's own 0.5 ms current lag + the damped truth, 1e-4 rad = the paper's encoder
   resolution): mode 1 of gain scheduling is PD Kp = 200, Kd = 0.4 (the paper gives no mode-1 gains)
   with its Coulomb term from the reference velocity (zero after a step); mode 2 uses the
-  describing-function bias schedule (``schedule: bias``, ours; the extract's stiffness schedule is
+  describing-function bias schedule (``schedule: bias``, ours; the stiffness schedule that the ABB M19-S paper A.4.3 suggests is
   shown as a row and limit-cycles once Kp2 is high). DNPF without a dead zone is a relay inside Q_h
   and hunts around the target; with a dead zone of Q_h/4 it stops short (the paper's result). The
   cascade gains (kp_position 150 1/s, velocity PI 0.3 N*m*s/rad, 30 N*m/rad) are ours. A single
   step can land inside 1e-4 rad by chance, so a sweep of +-8 step sizes is reported too.
-* seed 001: ``seed001_harmonic_drive`` at 100 Hz, unity feedback c = sat((u - theta) + k_c F(omega_hat)),
+* GA friction thesis 2002: ``seed001_harmonic_drive`` at 100 Hz, unity feedback c = sat((u - theta) + k_c F(omega_hat)),
   omega_hat = backward difference of the held encoder position (lost-bit hold 0.1 rad, sat +-5: both
   [ASSUMED], never reached); reference model T(s) = 1/(J s^2 + B s + 1). Two truths: the thesis's
-  own model (explicit F(v), sgn(0) = 0, plant override ``stick_logic = False``; extract 9.4 finds it
+  own model (explicit F(v), sgn(0) = 0, plant override ``stick_logic = False``; GA friction thesis 2002 section 9.4 finds it
   the closer match to the identification record) and the preset's GKF stick logic. With exact
   sticking the backward difference is exactly 0 whenever the shaft stops, F_hat(0) = 0, and the
   compensator cannot help it break away (ratio 0.90); see SEED001_PLANTS.
-* seed 002: ``seed002_x`` (C_r = 0.15, 3 ms delay, 5.4 ms current lag) with the tuned Coulomb level
+* Tilakaratna et al. 2004: ``seed002_x`` (C_r = 0.15, 3 ms delay, 5.4 ms current lag) with the tuned Coulomb level
   (11.31 N = 0.01 N*m) or Stribeck stiction (fs = 16 N > fc = 11.31 N, [ASSUMED]); P gain 3.5e5 N/m
-  = 0.25 N*m/rad at the motor (B-T6: 25-count dead band) or 2e6 N/m. Under P-only control no
+  = 0.25 N*m/rad at the motor (Tilakaratna et al. 2004 B-T6: 25-count dead band) or 2e6 N/m. Under P-only control no
   variant hunts with a bounded few-count amplitude: the loop either sticks in the dead band
   |e| <= F_s/Kp or (C_r = 0.01, Kp 2e6) is destabilised by delay + lag into a current-limited
   oscillation of ~1300 counts. This is expected: with a linearly stable loop every slip ends at a
@@ -44,11 +44,11 @@ Setups (documented choices, not in the seeds):
   Coulomb friction's describing-function damping 4 F_c / (pi A w) only falls with amplitude, so
   delay-driven negative damping gives an unstable limit cycle that grows to the current limit, not a
   small one; a compliant coupling (1e6-2e6 N/m) gives sub-count stick-slip that dies out within
-  ~5 s. PI + stiction hunts (B-T8); stiction compensation from the delayed, quantised encoder
-  velocity does not remove it (it makes it larger). The seed 000 sliding-mode relay (M = the
+  ~5 s. PI + stiction hunts (Tilakaratna et al. 2004 B-T8); stiction compensation from the delayed, quantised encoder
+  velocity does not remove it (it makes it larger). The Chatterjee et al. 2017 sliding-mode relay (M = the
   stiction estimate 16 N, boundary layer 1e-4 m/s) on the paper's P stiffness ends within ~1 count
   with no hunting.
-* seed 004: ``seed004_dc_motor`` (voltage drive), PD (Kp = 0.3 N*m/rad, Kd = 8.7e-4 N*m*s/rad,
+* AI friction chapter: ``seed004_dc_motor`` (voltage drive), PD (Kp = 0.3 N*m/rad, Kd = 8.7e-4 N*m*s/rad,
   i.e. 82 V/rad, 0.24 V*s/rad) + the truth's asymmetric Stribeck model.
 """
 
@@ -71,7 +71,7 @@ from friction_ros.core.presets import load_preset, make_plant  # noqa: E402
 
 # the ABB M19-S preset's GMS-4 truth (params/abb_m19s.yaml), read from the preset so the two cannot drift
 GMS = load_preset("abb_m19s").friction.to_config()
-SIGMA1 = 0.86  # presliding micro-damping of the seed 003 truth (see the module docstring)
+SIGMA1 = 0.86  # presliding micro-damping of the ABB M19-S paper truth (see the module docstring)
 TRUTH003 = dict(GMS, sigma1=SIGMA1)
 LUGRE = dict(model="lugre", sigma0=617.5, sigma1=SIGMA1, fv=0.01, fc=0.8, fs=0.95, vs=0.05, delta=2.0)
 COULOMB = dict(model="coulomb", fc=0.8)
@@ -99,7 +99,12 @@ FF_CASES = [
 ]
 PAPER_T2 = [1.20, 1.10, 0.34, 0.13, None]
 PAPER_T3 = [21.1, 11.5, 9.40, 9.20, None]
-PAPER_T4_PD = {0.1: 0.0355, 0.5: 0.0656, 1.0: 0.0874, 10.0: 0.0959}  # seed 004 Table 3, no compensator
+PAPER_T4_PD = {
+    0.1: 0.0355,
+    0.5: 0.0656,
+    1.0: 0.0874,
+    10.0: 0.0959,
+}  # AI friction chapter Table 3, no compensator
 PAPER_T4_RED = {0.1: "53.5 / 62.8 %", 0.5: "57.8 / 61.1 %", 1.0: "56.5 / 55.4 %", 10.0: "38.8 / 36.6 %"}
 
 
@@ -227,9 +232,9 @@ def _linear_reference(t, u, J, B):
     return y
 
 
-# Seed 001 plant variants. "thesis model": the thesis's own motor model (Fig. 5.1 / Fig. 4.3, eq. (20)
+# GA friction thesis 2002 plant variants. "thesis model": the thesis's own motor model (Fig. 5.1 / Fig. 4.3, eq. (20)
 # + F(v), Simulink sgn(0) = 0) integrated with explicit friction at 1e-4 s: friction is a function of
-# velocity only, there is no separate stuck state. Extract 9.4: this variant is the closer one to
+# velocity only, there is no separate stuck state. GA friction thesis 2002 section 9.4: this variant is the closer one to
 # the identification record (first peak 2.33 vs measured 2.231 rad, last motion ~215 vs 220 s;
 # GKF stick logic: 2.48 rad, 203 s). "GKF stick logic" = the preset's exact stick logic (v == 0
 # exactly while |input| <= F_ST): the backward-difference velocity is then exactly 0, F_hat(0) = 0,
@@ -291,7 +296,7 @@ def _seed001_self_motion(plant) -> dict:
 def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: bool = True) -> dict:
     """Item 7 (parabola; ratio of RMS deviations from T(s)), item 8 (random steps), item 9 (self-motion).
 
-    Loop (extract 6.1): c = sat((u - theta) + k_c F_hat(omega_hat)), omega_hat = backward
+    Loop (GA friction thesis 2002 section 6.1): c = sat((u - theta) + k_c F_hat(omega_hat)), omega_hat = backward
     difference of the held encoder position at 0.01 s, k_c = 0.95; uncompensated: k_c F_hat = 0.
     """
     F = load_preset("seed001_harmonic_drive").friction_motor.to_config()
@@ -315,13 +320,13 @@ def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: boo
     return out
 
 
-SEED002_COUNT = 1.25e-6  # m per encoder count (B-T4)
+SEED002_COUNT = 1.25e-6  # m per encoder count (Tilakaratna et al. 2004 B-T4)
 SEED002_COULOMB = {"model": "coulomb", "fc": 11.31}  # tuned 0.01 N*m at the motor [PAPER]
 SEED002_STICTION = {"model": "stribeck", "fc": 11.31, "fs": 16.0, "vs": 2e-4, "delta": 2.0, "fv": 0.0}
-# seed 000 A.5.1 sliding-mode compensator on the paper's P stiffness: k_s lambda = 3.5e5 N/m, relay
+# Chatterjee et al. 2017 A.5.1 sliding-mode compensator on the paper's P stiffness: k_s lambda = 3.5e5 N/m, relay
 # M = the stiction level 16 N, boundary layer 1e-4 m/s (|e| < phi / lambda = 2e-6 m = 1.6 counts)
 SEED002_SMC = {"lambda": 50.0, "k_s": 3.5e5 / 50.0, "gain": 16.0, "boundary_layer": 1e-4}
-# Kp = 3.5e5 N/m = 0.246 N*m/rad at the motor (Kp_joint / (r^2 eta)): B-T6's 25-count dead band.
+# Kp = 3.5e5 N/m = 0.246 N*m/rad at the motor (Kp_joint / (r^2 eta)): Tilakaratna et al. 2004 B-T6's 25-count dead band.
 SEED002_CASES = (
     # name, plant overrides, P/PI gains [N/m, N/(m*s)], compensation model, paper / goal
     (
@@ -348,13 +353,19 @@ SEED002_CASES = (
         "goal: few counts",
     ),
     (
-        "P + seed 000 SMC relay (F_s estimate)",
+        "P + Chatterjee et al. 2017 SMC relay (F_s estimate)",
         {"friction_load": SEED002_STICTION},
         {"mode": "sliding_mode", "sliding_mode": SEED002_SMC},
         None,
         "goal: few counts",
     ),
-    ("PI, stiction", {"friction_load": SEED002_STICTION}, {"p": 3.5e5, "i": 3.5e6}, None, "- (B-T8: hunts)"),
+    (
+        "PI, stiction",
+        {"friction_load": SEED002_STICTION},
+        {"p": 3.5e5, "i": 3.5e6},
+        None,
+        "- (Tilakaratna et al. 2004 B-T8: hunts)",
+    ),
     (
         "PI + comp. (blended)",
         {"friction_load": SEED002_STICTION},
@@ -366,7 +377,7 @@ SEED002_CASES = (
 
 
 def seed002(duration: float = 20.0, cases=None) -> list[dict]:
-    """x axis, 200-count step from rest (B-T7/B-T8): dead band, hunting, compensation.
+    """x axis, 200-count step from rest (Tilakaratna et al. 2004 B-T7/B-T8): dead band, hunting, compensation.
 
     Preset ``seed002_x`` (C_r = 0.15 N*m*s/rad, 5.4 ms current lag, 3 ms measurement delay, 4000-count
     encoder, 100 Hz velocity filter) unless overridden. Hunting is measured over the second half of the
@@ -451,7 +462,7 @@ def main() -> None:
             rows = seed003_ff_table(amp, dur, sensing)
             figures[f"seed003_{label}_{sensing}"] = rows
             print_table(
-                f"Seed 003 {label} analogue (band-limited random, max stroke {amp:.4g} rad, {dur:g} s, "
+                f"ABB M19-S paper {label} analogue (band-limited random, max stroke {amp:.4g} rad, {dur:g} s, "
                 f"{sensing} sensing); RMS in mrad",
                 ["feed-forward", "RMS ours", "reduction", "RMS paper", "paper reduction", "max err"],
                 [
@@ -470,7 +481,7 @@ def main() -> None:
         rows = seed003_ptp(2.0, sensing)
         figures[f"seed003_ptp_{sensing}"] = rows
         print_table(
-            f"Seed 003 0.4 rad point-to-point ({sensing} sensing); errors in mrad, settle = stays within 1e-4 rad",
+            f"ABB M19-S paper 0.4 rad point-to-point ({sensing} sensing); errors in mrad, settle = stays within 1e-4 rad",
             [
                 "controller",
                 "enters Q_h [s]",
@@ -500,7 +511,7 @@ def main() -> None:
     rows = seed003_ptp_sweep()
     figures["seed003_ptp_sweep"] = rows
     print_table(
-        "Seed 003 point-to-point sweep: steps of +-"
+        "ABB M19-S paper point-to-point sweep: steps of +-"
         + "/".join(f"{a:g}" for a in PTP_SWEEP_AMPLITUDES)
         + " rad (preset sensing); settle = stays within 1e-4 rad",
         [
@@ -527,7 +538,10 @@ def main() -> None:
     )
     s1 = seed001(q)
     figures["seed001"] = s1
-    paper7 = {"uncompensated": "0.797 / 1.30 (extract 9.7 [D])", "compensated k_c=0.95": "0.138 / 1.03"}
+    paper7 = {
+        "uncompensated": "0.797 / 1.30 (GA friction thesis 2002 section 9.7 [D])",
+        "compensated k_c=0.95": "0.138 / 1.03",
+    }
     rows = []
     for variant, res in s1["item7"].items():
         for case in ("uncompensated", "compensated k_c=0.95"):
@@ -535,14 +549,14 @@ def main() -> None:
             rows.append([variant, case, v["rms_deviation"], v["max_deviation"], paper7[case]])
         rows.append([variant, "ratio compensated / uncompensated", res["ratio"], "", "<= 0.25 (9.7); 0.17"])
     print_table(
-        f"Seed 001 item 7: parabola input (Table C.1, {40 if q else 141} s), deviation from T(s) = "
+        f"GA friction thesis 2002 item 7: parabola input (Table C.1, {40 if q else 141} s), deviation from T(s) = "
         "1/(J s^2 + B s + 1) [rad]",
-        ["plant", "case", "RMS deviation", "max deviation", "extract RMS / max"],
+        ["plant", "case", "RMS deviation", "max deviation", "notes RMS / max"],
         rows,
     )
     print_table(
-        "Seed 001 item 8: random steps U(-1, 1) rad held 2 s, 40 s; deviation from T(s) [rad]",
-        ["plant", "RMS uncompensated", "RMS compensated", "ratio", "extract (own draw)"],
+        "GA friction thesis 2002 item 8: random steps U(-1, 1) rad held 2 s, 40 s; deviation from T(s) [rad]",
+        ["plant", "RMS uncompensated", "RMS compensated", "ratio", "notes (own draw)"],
         [
             [
                 variant,
@@ -555,7 +569,7 @@ def main() -> None:
         ],
     )
     print_table(
-        "Seed 001 item 9: zero input, initial 0.05 rad/s nudge, max |theta| over 20 s [rad]",
+        "GA friction thesis 2002 item 9: zero input, initial 0.05 rad/s nudge, max |theta| over 20 s [rad]",
         ["plant", "compensator", "max |theta|", "paper"],
         [
             [variant, k, v, "self-motion" if "1.1" in k else "no self-motion"]
@@ -566,7 +580,7 @@ def main() -> None:
     s2 = seed002(10.0 if q else 20.0)
     figures["seed002"] = s2
     print_table(
-        f"Seed 002 x axis: 200-count step, 3 ms delay, 5.4 ms current lag ({10 if q else 20} s; "
+        f"Tilakaratna et al. 2004 x axis: 200-count step, 3 ms delay, 5.4 ms current lag ({10 if q else 20} s; "
         "hunting over the second half); errors in counts (1.25 um)",
         ["controller", "final e", "settle (2 counts) [s]", "p-p e", "stick-slip starts", "paper / goal"],
         [
@@ -584,7 +598,7 @@ def main() -> None:
     s4 = seed004(3.0)
     figures["seed004"] = s4
     print_table(
-        "Seed 004: 1 Hz sinusoid tracking RMSE [deg]",
+        "AI friction chapter: 1 Hz sinusoid tracking RMSE [deg]",
         [
             "amplitude [deg]",
             "PD",

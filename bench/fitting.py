@@ -1,7 +1,7 @@
-"""Benchmark: offline friction fitting on 50 s of seed 003 data at 1 kHz (ABB M19-S, GMS-4 truth).
+"""Benchmark: offline friction fitting on 50 s of ABB M19-S paper data at 1 kHz (ABB M19-S, GMS-4 truth).
 
 Goals (issue 8): LuGre fit < 10 s, GMS-4 fit < 60 s, static fit < 1 s on this 2-core machine;
-plus the seed 003 Table 1 analogue (validation NMSE high/low velocity, 10 s train + 40 s test)
+plus the ABB M19-S paper Table 1 analogue (validation NMSE high/low velocity, 10 s train + 40 s test)
 next to the paper's figures, and the fit -> controller round trip against the compensation
 benchmark's own truth (bench/compensation.py TRUTH003: GMS-4 with presliding damping sigma1 = 0.86):
 16 s record of that truth (envelope 0.05-5 rad/s, as test_identification_fit.py), fitted with the
@@ -37,7 +37,7 @@ from friction_ros.core.identification.plateau_detection import find_plateaus  # 
 from friction_ros.core.identification.static_fit import fit_plateaus  # noqa: E402
 from friction_ros.core.presets import make_plant  # noqa: E402
 
-PAPER = {  # seed 003 Table 1: high / low velocity NMSE [%] (max err)
+PAPER = {  # ABB M19-S paper Table 1: high / low velocity NMSE [%] (max err)
     "coulomb": (4.00, 0.6757, 17.92, 1.2993),
     "stribeck": (0.55, 0.2762, 9.59, 1.2604),
     "lugre": (0.41, 0.2440, 4.30, 0.6466),
@@ -139,7 +139,7 @@ def main() -> None:
     figures["table1"] = t1
     figures["recommended"] = res.recommended
     print_table(
-        f"Seed 003 Table 1 analogue: validation NMSE % (max err), {duration:g} s at 1 kHz, 10 s train",
+        f"ABB M19-S paper Table 1 analogue: validation NMSE % (max err), {duration:g} s at 1 kHz, 10 s train",
         ["model", "high ours", "high paper", "low ours", "low paper", "params", "fit [s]"],
         rows,
     )
@@ -152,7 +152,7 @@ def main() -> None:
         timings[name] = {"seconds": time.perf_counter() - t0, "evaluations": f.evaluations}
     t0 = time.perf_counter()
     f = fit_time_domain(spec_for("lugre"), tr, optimizer="ga", maxiter=30)
-    timings["lugre (seed 001 GA)"] = {"seconds": time.perf_counter() - t0, "evaluations": f.evaluations}
+    timings["lugre (thesis GA)"] = {"seconds": time.perf_counter() - t0, "evaluations": f.evaluations}
     t0 = time.perf_counter()
     fit_time_domain(spec_for("stribeck"), tr)
     timings["stribeck (time domain)"] = {"seconds": time.perf_counter() - t0}

@@ -30,7 +30,7 @@ TITLES = {
     "demo": "Main job: identify and compensate the simulated ABB M19-S joint",
     "robustness": "Main job on every preset x 3 experiment seeds",
     "models": "Friction models and plant speed",
-    "compensation": "Compensation experiments of the seeds",
+    "compensation": "Compensation experiments of the source documents",
     "fitting": "Offline identification",
     "loop": "Closed loop across processes over DDS",
     "can": "CAN codec and drive node",

@@ -171,7 +171,7 @@ def test_addon_node_sums_the_arm_command_and_switches_off(tmp_path):
 
 
 def _pd_plus_addon(addon_cfg, seconds=4.0):
-    """abb_m19s with the seed 003 PD (an arm's own controller) plus an add-on; RMS error, add-on."""
+    """abb_m19s with the ABB M19-S paper PD (an arm's own controller) plus an add-on; RMS error, add-on."""
     import numpy as np
 
     from friction_ros.core.experiment.references import reference_from_config

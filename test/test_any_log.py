@@ -116,7 +116,7 @@ def _expect_error(argv, capsys, *words) -> str:
 # ------------------------------------------------------------------------------------------ fixtures
 @pytest.fixture(scope="module")
 def run():
-    """20 s of seed 003's excitation on the simulated ABB joint (deterministic)."""
+    """20 s of ABB M19-S paper's excitation on the simulated ABB joint (deterministic)."""
     return synthetic.seed003_experiment(20.0, low=0.05)
 
 

@@ -137,7 +137,7 @@ def test_a_good_model_is_enabled_and_the_file_carries_the_verdicts(abb):
     assert v["feedforward"].enabled and v["feedforward"].worst_ratio < 0.8, _summary(v)
     assert v["feedback"].worst_ratio > 0.9 and "limited for loop stability" in v["feedback"].reason
     assert compensation_section(v)["source"] == "feedforward"
-    # the stiffer seed 003 PD: every mode helps in every case (measured worst 0.58, 0.72, 0.36)
+    # the stiffer ABB M19-S paper PD: every mode helps in every case (measured worst 0.58, 0.72, 0.36)
     v = _gate(truth, SEED003_PD, scale, reference=REF)
     assert all(x.enabled and x.worst_ratio < 0.8 for x in v.values()), _summary(v)
     assert compensation_section(v)["source"] == "blended" and "refused" not in compensation_section(v)

@@ -2,10 +2,10 @@
 
 Goals of issue 4 that the simulation does NOT reach are not asserted here; the benchmark prints
 their figures (see the report / README): the 0.4 rad PTP ranking (gain scheduling does not end
-within 1e-4 rad, the cascade is faster; DNPF hunts instead of stopping short) and the seed 002
-P-control limit cycle. Seed 001 item 7 is met on the thesis's own plant model (explicit F(v),
+within 1e-4 rad, the cascade is faster; DNPF hunts instead of stopping short) and the Tilakaratna et al. 2004
+P-control limit cycle. GA friction thesis 2002 item 7 is met on the thesis's own plant model (explicit F(v),
 sgn(0) = 0, no stick logic); with the preset's GKF stick logic it is not (ratio ~1, asserted as the
-documented cause: the backward-difference velocity is exactly 0 while stuck, so F_hat = 0). Seed 003 runs use the truth GMS with presliding micro-damping
+documented cause: the backward-difference velocity is exactly 0 while stuck, so F_hat = 0). ABB M19-S paper runs use the truth GMS with presliding micro-damping
 (bench.SIGMA1, see bench/compensation.py).
 """
 
@@ -70,7 +70,9 @@ def seed001():
 
 
 def test_seed001_item7_compensated_rms_at_most_25_percent_thesis_model(seed001):
-    res = seed001["item7"]["thesis model"]  # 40 s of the parabola (extract 9.7 full 141 s: 0.797 / 0.138)
+    res = seed001["item7"][
+        "thesis model"
+    ]  # 40 s of the parabola (GA friction thesis 2002 section 9.7 full 141 s: 0.797 / 0.138)
     unc = res["uncompensated"]["rms_deviation"]
     comp = res["compensated k_c=0.95"]["rms_deviation"]
     assert 0.6 < unc < 1.0  # lags T(s) by ~ the 1 rad break-away error
@@ -157,7 +159,9 @@ def seed002():
 
 
 def test_seed002_p_control_dead_band_25_counts_and_compensation_few_counts(seed002):
-    coul = seed002["P, Coulomb, Kp_eff 0.25"]  # paper x axis: SSE 25 counts (B-T6/B-T7)
+    coul = seed002[
+        "P, Coulomb, Kp_eff 0.25"
+    ]  # paper x axis: SSE 25 counts (Tilakaratna et al. 2004 B-T6/B-T7)
     assert abs(coul["final_error_counts"]) == pytest.approx(25.0, abs=3.0)
     assert coul["stick_slip_starts"] == 0
     p, comp = seed002["P, stiction, Kp 2e6"], seed002["P + comp. (blended)"]
@@ -173,7 +177,7 @@ def test_seed002_p_only_does_not_hunt_documented_gap(seed002):
     for case in ("P, stiction 16 N", "P, stiction, Kp 2e6"):
         assert seed002[case]["stick_slip_starts"] == 0 and seed002[case]["hunting_amplitude_counts"] < 1.0
     assert seed002["P, stiction, Kp 2e6, C_r 0.01"]["hunting_amplitude_counts"] > 500.0
-    # PI + stiction hunts (B-T8); stiction compensation on the delayed encoder velocity does not remove it
+    # PI + stiction hunts (Tilakaratna et al. 2004 B-T8); stiction compensation on the delayed encoder velocity does not remove it
     assert seed002["PI, stiction"]["stick_slip_starts"] >= 1
     assert (
         seed002["PI + comp. (blended)"]["stick_slip_starts"] >= seed002["PI, stiction"]["stick_slip_starts"]
@@ -181,10 +185,10 @@ def test_seed002_p_only_does_not_hunt_documented_gap(seed002):
 
 
 def test_seed002_smc_relay_compensation_reaches_a_few_counts_without_hunting(seed002):
-    """Seed 000's sliding-mode relay (M = the stiction estimate) on the paper's P stiffness: the
+    """Chatterjee et al. 2017's sliding-mode relay (M = the stiction estimate) on the paper's P stiffness: the
     36-count dead band of P + stiction and the PI hunting are both gone (ends within ~1 count)."""
     smc, p, pi = (
-        seed002["P + seed 000 SMC relay (F_s estimate)"],
+        seed002["P + Chatterjee et al. 2017 SMC relay (F_s estimate)"],
         seed002["P, stiction 16 N"],
         seed002["PI, stiction"],
     )

@@ -1,4 +1,4 @@
-"""Reference generators: seed 001 parabola/chirp/random steps, seed 003 band-limited random, others."""
+"""Reference generators: GA friction thesis 2002 parabola/chirp/random steps, ABB M19-S paper band-limited random, others."""
 
 import math
 

@@ -107,7 +107,7 @@ def test_sliding_mode_and_relay():
     assert s.compute(-0.01, 0.05, (0, 0, 0), (0, 0), 1e-3).friction_feedback == -2.0 + 4.0 * 0  # S = -0.05
     b = SlidingMode({"lambda": 10.0, "gain": 2.0, "boundary_layer": 0.2})
     assert b.compute(0.01, 0.0, (0, 0, 0), (0, 0), 1e-3).friction_feedback == pytest.approx(1.0)
-    # seed 000 A-T7
+    # Chatterjee et al. 2017 A-T7
     assert list(seed000_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]
 
 

@@ -13,7 +13,7 @@ from friction_ros.core.experiment.velocity_programs import random_velocity
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 
-FS = 0.95  # seed 003 static friction of the ABB M19-S [N*m]
+FS = 0.95  # ABB M19-S paper static friction of the ABB M19-S [N*m]
 
 
 def run(config, *, max_time=None, plant=None):
@@ -96,7 +96,7 @@ def test_random_velocity_is_band_limited_under_the_rectangular_envelope():
     cfg = make_program({"program": "random"}).config
     v = random_velocity(cfg)
     dt = cfg["dt"]
-    assert v.size == 50000  # seed 003: 50 s at 1 kHz
+    assert v.size == 50000  # ABB M19-S paper: 50 s at 1 kHz
     spec = np.abs(np.fft.rfft(v)) ** 2
     f = np.fft.rfftfreq(v.size, dt)
     assert spec[f > 8.0].sum() < 0.01 * spec.sum()  # 4 Hz band limit

@@ -149,7 +149,7 @@ def test_seed001_identified_exponential_model_table():
     v = np.array(list(table))
     np.testing.assert_allclose(m.torque(v), list(table.values()), atol=6e-5)
     np.testing.assert_allclose(m.torque(-v), -m.torque(v))
-    # limits of the other GA models (extract 9.1)
+    # limits of the other GA models (GA friction thesis 2002 section 9.1)
     nl = make_model("ga_nonlinear", **EXAMPLES["ga_nonlinear"])
     assert nl.torque(1e-12) == pytest.approx(0.3 + 0.2) and nl.torque(1e3) == pytest.approx(0.3 + 0.1)
     du = make_model("ga_dupont", **EXAMPLES["ga_dupont"])
@@ -318,7 +318,7 @@ def _reference_lugre(p, v, dt, sub):
 
 
 def _reference_gms(p, v, dt, sub):
-    # independent reference: the extract A.2.4 sketch (explicit Euler in slip) at dt/sub
+    # independent reference: the GMS sketch of ABB M19-S paper A.2.4 (explicit Euler in slip) at dt/sub
     fc, fs, vs, de, c, fv = p[:6]
     n = (len(p) - 6) // 2
     k, al = p[6 : 6 + n], p[6 + n :]

@@ -1,5 +1,5 @@
 """Parameter recovery on simulator bags with known truth (encoder quantisation + current noise),
-the seed 003 Table 1 ordering, outputs (JSON / YAML) and the fit -> controller round trip."""
+the ABB M19-S paper Table 1 ordering, outputs (JSON / YAML) and the fit -> controller round trip."""
 
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ NOISY = {"current_noise_std": 0.005}  # 2.5 mN*m torque noise on top of the 1.05
 
 @pytest.fixture(scope="module")
 def gms_fit(tmp_path_factory):
-    """Seed 003 excitation on the ABB M19-S preset (GMS-4 truth): 10 s train + 6 s validation.
+    """ABB M19-S paper excitation on the ABB M19-S preset (GMS-4 truth): 10 s train + 6 s validation.
 
     Envelope high level 5 rad/s (peaks ~12 rad/s; the paper gives no amplitude): the identification
     must cover the velocities of the round-trip benchmark (its large stroke reaches 10-15 rad/s).
@@ -35,7 +35,7 @@ def gms_fit(tmp_path_factory):
         d / "out",
         maxiter={"gms10": 5},
         plant_preset="abb_m19s",
-        train_window="first",  # seed 003's protocol: the first 10 s train, the rest validates
+        train_window="first",  # ABB M19-S paper's protocol: the first 10 s train, the rest validates
     )
     return rec, res, d / "out"
 
@@ -46,7 +46,7 @@ def test_gms4_nmse_at_or_below_table1(gms_fit):
     assert m["nmse_high_percent"] <= 0.40, m
     assert m["nmse_low_percent"] <= 1.39, m
     c = res.models["gms4"].coefficients
-    assert abs(c["J"] / 0.0012 - 1) < 0.10  # seed 003: identified J within 10 %
+    assert abs(c["J"] / 0.0012 - 1) < 0.10  # ABB M19-S paper: identified J within 10 %
 
 
 def test_seed003_ordering_low_velocity(gms_fit):
@@ -96,7 +96,7 @@ REFERENCE_SEEDS = (1, 2, 3, 4, 5)
 
 
 def _round_trip(out):
-    """Seed 003 Table 2/3 analogue (PD Kp = 200, Kd = 0.15, 1 kHz, ABB M19-S, GMS-4 truth): RMS
+    """ABB M19-S paper Table 2/3 analogue (PD Kp = 200, Kd = 0.15, 1 kHz, ABB M19-S, GMS-4 truth): RMS
     tracking error of 4 s band-limited random references (small and large stroke) with the true,
     the fitted (from the parameter file) and no friction feed-forward, per reference seed."""
     from friction_ros.core.harness import run_closed_loop
@@ -133,7 +133,7 @@ def round_trip(gms_fit):
 
 
 def test_round_trip_parameter_file_drives_the_controller(round_trip):
-    """fit -> parameter file -> controller loads it -> seed 003 Table 2/3 analogue: the fitted
+    """fit -> parameter file -> controller loads it -> ABB M19-S paper Table 2/3 analogue: the fitted
     feed-forward clearly beats no compensation at low and high stroke."""
     low, high = round_trip[0.005]["mean"], round_trip[math.pi]["mean"]
     assert low["truth"] < low["none"] and high["truth"] < high["none"]
@@ -193,7 +193,7 @@ def test_round_trip_within_10_percent_of_truth_over_references(round_trip):
 
 
 def _benchmark_truth003() -> dict:
-    """The seed 003 truth of the compensation benchmark (bench/compensation.py TRUTH003): the
+    """The ABB M19-S paper truth of the compensation benchmark (bench/compensation.py TRUTH003): the
     preset's GMS-4 with presliding micro-damping sigma1 = 0.86 N*m*s/rad."""
     from friction_ros.core.presets import load_preset
 
@@ -222,7 +222,7 @@ def damped_fit(tmp_path_factory):
         d / "out",
         plots=False,
         plant_preset="abb_m19s",
-        train_window="first",  # seed 003's protocol
+        train_window="first",  # ABB M19-S paper's protocol
     )
     return res, d / "out", _round_trip_damped(d / "out")
 
@@ -318,7 +318,9 @@ def test_lugre_sigma_recovery_within_15_percent():
     }
     rec = synthetic.seed003_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
-    res = fit_records(d, ["lugre"], identifiability_check=False, train_window="first")  # seed 003's protocol
+    res = fit_records(
+        d, ["lugre"], identifiability_check=False, train_window="first"
+    )  # ABB M19-S paper's protocol
     c = res.models["lugre"].coefficients
     assert abs(c["sigma0"] / truth["sigma0"] - 1) < 0.15, c
     assert abs(c["sigma1"] / truth["sigma1"] - 1) < 0.15, c

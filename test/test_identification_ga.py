@@ -1,4 +1,4 @@
-"""Seed 001 GA: extract section 9 item 6 (mechanics) and item 5 (self-recovery), identifiability."""
+"""GA friction thesis 2002 GA: section 9 item 6 (mechanics) and item 5 (self-recovery), identifiability."""
 
 from __future__ import annotations
 

@@ -39,6 +39,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("synthetic_logs", ("synthetic_logs",)),  # synthetic machines and their logs
     ("simulation", ("harness", "compensation_gate")),  # closed loop without ROS, the fitter's gate
     ("identification", ("identification",)),  # offline fitting, report, export
+    ("fleet", ("fleet",)),  # many runs of many robots: table, trends, wear alarms
 ]
 
 #: third-party packages a core function may import on first use (heavy and optional)
@@ -54,6 +55,9 @@ LAZY_THIRD_PARTY = {
     "ament_index_python",  # installed share directory (ROS installs only)
     "can",  # python-can
     "yaml",
+    "pyarrow",  # the fleet table (Parquet)
+    "dask",  # the fleet's distributed fits
+    "distributed",
 }
 
 

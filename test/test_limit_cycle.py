@@ -100,7 +100,7 @@ def test_the_detector_does_not_fire_on_normal_tracking(ref):
     ]  # bounded
     for gains, model, source in cases:
         if ref["type"] == "step" and gains is SEED003_PD and source in ("feedback", "blended", "observer"):
-            # documented limit: the seed 003 PD has damping ratio Kd / (2 sqrt(Kp J)) = 0.15 here;
+            # documented limit: the ABB M19-S paper PD has damping ratio Kd / (2 sqrt(Kp J)) = 0.15 here;
             # feedback compensation removes the friction that damped its step response, which then
             # rings at +-35 mrad, ~50 Hz, for ~0.15 s: the detector takes that for a limit cycle
             continue
@@ -109,7 +109,7 @@ def test_the_detector_does_not_fire_on_normal_tracking(ref):
 
 
 def test_the_detector_fires_on_an_oscillating_loop_but_only_watches_a_feedback_path():
-    """The seed 003 PD on this plant limit-cycles by itself (~100 Hz, no compensation): the detector
+    """The ABB M19-S paper PD on this plant limit-cycles by itself (~100 Hz, no compensation): the detector
     sees it, but the controller does not watch without compensation or with feed-forward only
     (a function of the reference cannot make the loop oscillate)."""
     res, ctrl = _run(None, "none", ref={**REF, "seed": 7}, duration=3.0)

@@ -221,7 +221,7 @@ def test_bad_runtime_parameter_and_nan_reference_keep_the_last_good_state(tmp_pa
 
 
 def test_three_namespaced_joints_run_without_cross_talk(tmp_path):
-    """Seed 002's Cartesian x/y/z axes side by side: each controller sees only its own joint."""
+    """Tilakaratna et al. 2004's Cartesian x/y/z axes side by side: each controller sees only its own joint."""
     from friction_msgs.msg import ControllerState
     from sensor_msgs.msg import JointState
 

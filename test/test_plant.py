@@ -107,7 +107,7 @@ def test_voltage_mode_reproduces_seed004_transfer_function_E113():
 
 
 def test_lead_screw_gravity_and_backlash():
-    # linear axis: joint in metres; gravity pulls down; reflected inertia per seed 002 eq. (2)
+    # linear axis: joint in metres; gravity pulls down; reflected inertia per Tilakaratna et al. 2004 eq. (2)
     p = PlantParams(
         motor_inertia=3e-5,
         transmission_inertia=8.37e-5,

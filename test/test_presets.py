@@ -1,4 +1,4 @@
-"""Presets and seed regressions (seed 000/001/002/003/004)."""
+"""Presets and seed regressions (the five source documents)."""
 
 from __future__ import annotations
 
@@ -115,7 +115,9 @@ def test_seed001_identified_exponential_model_resimulated_section9():
         i = int(np.argmax(ys[: int(12 / dt)]))
         moving = np.nonzero(np.abs(np.diff(ys)) > 0)[0]
         res[stick] = (ys[i], ts[i], ts[moving[-1]])
-    peak, _, last = res[True]  # stick logic = extract's "Karnopp stick with F_ST breakaway": 2.48 rad, 203 s
+    peak, _, last = res[
+        True
+    ]  # stick logic = the GA friction thesis 2002 notes' "Karnopp stick with F_ST breakaway": 2.48 rad, 203 s
     assert peak == pytest.approx(2.48, rel=0.02) and last == pytest.approx(203.0, abs=5.0)
     peak, tpk, _ = res[False]  # explicit friction at h = 1e-4: 2.33 rad at ~7.0 s
     assert peak == pytest.approx(2.33, rel=0.01) and tpk == pytest.approx(7.0, abs=0.2)

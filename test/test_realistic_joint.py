@@ -147,7 +147,7 @@ def test_defaults_are_a_harmonic_drive_joint_with_active_terms(runs):
     assert t.fs > t.fc and 0.02 <= t.vs <= 0.05 and 0.02 <= t.load_friction <= 0.05
     assert 0.1 <= t.sensor_offset <= 0.3 and t.sample_period == 0.002
     d = t.to_dict()
-    assert d["J"] == t.J and d["ripple_cos"] == t.ripple_cos and "seed 004 eq. 5" in d["equations"]
+    assert d["J"] == t.J and d["ripple_cos"] == t.ripple_cos and "AI friction chapter eq. 5" in d["equations"]
     yaml.safe_dump(d)  # plain types only
     fast = runs[-1]
     load_fric = fast.true_friction - t.friction_map(fast.true_velocity)

@@ -8,7 +8,7 @@ Examples::
     # lockstep (deterministic, faster than real time) with a controller parameter file
     friction-bringup --preset abb_m19s --mode lockstep --params params/controller_abb_m19s.yaml
 
-    # several joints side by side, one namespace each (seed 002 Cartesian manipulator)
+    # several joints side by side, one namespace each (Tilakaratna et al. 2004 Cartesian manipulator)
     friction-bringup --config params/bringup_cartesian_xyz.yaml
 
     # a 7-joint arm: one plant, a plain PD and the friction add-on (lockstep, composed)

@@ -107,7 +107,8 @@ def track(
     joint: str = "joint1",
     period: float = 1e-3,
 ) -> TrackingRun:
-    """Run plant_simulator + compensating_controller in lockstep for ``duration`` simulated seconds.
+    """Run plant_simulator + compensating_controller (composed: one process) in lockstep for ``duration``
+    simulated seconds.
 
     The figures come from the controller's own terms file (``terms_file``: one row per computed
     period, :mod:`friction_ros.nodes.terms_file`), not from a subscription that a busy machine can
@@ -134,7 +135,7 @@ def _track_once(
     from rclpy.executors import SingleThreadedExecutor
     from rosgraph_msgs.msg import Clock
 
-    from friction_ros.cli.bringup import Bringup, NodeSpec, pin_latency_chain
+    from friction_ros.cli.bringup import Bringup, NodeSpec, composed_spec
     from friction_ros.nodes.qos import STATE_QOS
 
     # the figures come from the controller's own terms file: one row per computed period, whatever
@@ -150,7 +151,6 @@ def _track_once(
             {"use_sim_time": True, "joint_name": joint, "terms_file": str(terms_path)},
         ),
     ]
-    pin_latency_chain(specs)
     if not rclpy.ok():
         rclpy.init()
     node = rclpy.create_node(f"friction_demo_{label.replace('-', '_').replace('+', '_')}")
@@ -170,21 +170,20 @@ def _track_once(
 
     th = threading.Thread(target=spin, daemon=True)
     th.start()
-    # both at once: in lockstep the plant re-sends its first state until the controller answers it,
-    # so neither start order nor a late match changes a byte of the run
-    bring_ctrl = Bringup(specs[1:], quiet=True)
-    bring_plant = Bringup(specs[:1], quiet=True)
+    # plant and controller in one process, one executor (as composable components on a robot): a
+    # period costs ~40 % less CPU than across two processes; in lockstep the plant re-sends its first
+    # state until the controller answers it, so no start order or late match changes a byte of the run
+    bring = Bringup([composed_spec(specs)], quiet=True)
     t0 = time.monotonic()
-    bring_ctrl.start()
-    bring_plant.start()
+    bring.start()
     n_periods = int(round(duration / period))
     try:
         last_print = 0.0
         # the plant publishes /clock = t only after the command for t - period: once it passed the
         # run's end by two periods, the controller has computed (and written) every period of the run
         while clock[0] < duration + 2 * period - 1e-9:
-            if bring_ctrl.failed() or bring_plant.failed():
-                out = "\n".join(sum([*bring_ctrl.output.values(), *bring_plant.output.values()], [])[-20:])
+            if bring.failed():
+                out = "\n".join(sum(bring.output.values(), [])[-20:])
                 raise RuntimeError(f"tracking run {label}: a node failed\n{out}")
             if time.monotonic() - t0 > 60 + 20 * duration:
                 raise RuntimeError(f"tracking run {label}: timed out at t = {clock[0]:.2f} s")
@@ -194,8 +193,7 @@ def _track_once(
             time.sleep(0.02)
     finally:
         wall = time.monotonic() - t0
-        bring_ctrl.stop()  # the torque commander first
-        bring_plant.stop()
+        bring.stop()  # the torque commander stops first inside
         stop.set()
         th.join(timeout=2)
         node.destroy_subscription(sub)

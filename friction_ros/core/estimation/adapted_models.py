@@ -4,11 +4,11 @@ Each :class:`AdaptedModel` is linear in its coefficients, ``F = phi(v) . c`` (re
 filtered velocity; ``vs``, ``delta`` of the Stribeck shape held fixed, E = exp(-|v/vs|^delta)):
 
 ==============================  ==================================================================
-``viscous``                     F = fv v  (seed 004 eq. (2))
-``coulomb_viscous``             F = fc sgn(v) + fv v  (seed 004 eq. (3))
+``viscous``                     F = fv v  (AI friction chapter eq. (2))
+``coulomb_viscous``             F = fc sgn(v) + fv v  (AI friction chapter eq. (3))
 ``asymmetric_coulomb_viscous``  F = positive.fc + positive.fv v (v > 0),
-                                F = -negative.fc + negative.fv v (v < 0)  (seed 004 B.3)
-``stribeck``                    F = [fc (1 - E) + fs E] sgn(v) + fv v  (seed 004 eq. (5))
+                                F = -negative.fc + negative.fv v (v < 0)  (AI friction chapter B.3)
+``stribeck``                    F = [fc (1 - E) + fs E] sgn(v) + fv v  (AI friction chapter eq. (5))
 ``asymmetric_stribeck``         the same with a set per direction
 ==============================  ==================================================================
 

@@ -1,6 +1,6 @@
 """Friction "measurements" from motor torque and motion: torque balance and disturbance observer.
 
-Torque balance (seed 003 eq. (1) ``tau_m = J theta_ddot + tau_f (+ tau_0)``):
+Torque balance (ABB M19-S paper eq. (1) ``tau_m = J theta_ddot + tau_f (+ tau_0)``):
 
     tau_f_hat = Q(s) tau_m - J s Q(s) theta_dot
 

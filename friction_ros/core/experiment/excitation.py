@@ -9,15 +9,15 @@ A program drives a joint directly with a joint torque [N*m], one call per contro
 Programs (``excitation_config.PROGRAM_NAMES``), each a list of segments planned upfront (``total_duration`` is known
 before the run; a breakaway ramp counts with its longest possible duration):
 
-``plateaus``   seed 004 B.3 exp. 2: constant-velocity plateaus at ``count`` log-spaced speeds in
+``plateaus``   AI friction chapter B.3 exp. 2: constant-velocity plateaus at ``count`` log-spaced speeds in
                [v_min, v_max], both directions (+v then -v at each speed, so the joint returns), each
-               ``settle`` (transient, discarded: seed 004 0.2 s) + ``hold`` s, ``repeats`` times
-               (seed 004: 5). Tracked by the internal velocity PI (``velocity_loop``, with the
+               ``settle`` (transient, discarded: AI friction chapter 0.2 s) + ``hold`` s, ``repeats`` times
+               (AI friction chapter: 5). Tracked by the internal velocity PI (``velocity_loop``, with the
                feed-forward ``inertia a + damping v + coulomb sgn(v)`` of the reference). A plateau at
                speed ``v`` settles at least ``settle_travel / v`` and holds at least ``hold_travel / v``
                seconds (default 0: fixed times), so slow plateaus cover a distance: enough encoder
                counts, and several stick-slip cycles below the Stribeck velocity.
-``breakaway``  seed 004 B.3 exp. 1: open-loop torque ramp, first a preload to ``start`` (ramped over 60 % of
+``breakaway``  AI friction chapter B.3 exp. 1: open-loop torque ramp, first a preload to ``start`` (ramped over 60 % of
                ``preload_time``, held for the rest so the joint comes to rest), then steps of ``step`` N*m every ``step_time`` s until the joint moves
                ``counts`` encoder counts (``resolution`` rad per count) within one step, then release
                (``release`` s: the torque is ramped to zero over the first
@@ -28,11 +28,11 @@ before the run; a breakaway ramp counts with its longest possible duration):
                ``detection_lag`` [N*m] (0: unknown): how far above the true breakaway the detection
                may read (one step plus the excess torque that moves ``counts`` counts within one
                step); stated in the START note as ``lag=`` so a fit can judge the reading.
-``random``     seed 003 A.3: band-limited random velocity (Butterworth ``bandwidth`` Hz, seeded) under
+``random``     ABB M19-S paper A.3: band-limited random velocity (Butterworth ``bandwidth`` Hz, seeded) under
                the envelope made of the first three non-zero Fourier terms of a rectangle of period
                ``envelope_period`` (levels ``low_level`` and 1) times ``amplitude`` (rad/s, RMS at the
-               high level), ``duration`` s (seed 003: 50 s), tracked by the velocity PI.
-``chirp``      seed 001 sec. 4.1: torque chirp, linear frequency sweep ``f0`` -> ``f1`` Hz (low to
+               high level), ``duration`` s (ABB M19-S paper: 50 s), tracked by the velocity PI.
+``chirp``      GA friction thesis 2002 sec. 4.1: torque chirp, linear frequency sweep ``f0`` -> ``f1`` Hz (low to
                high) with an amplitude decreasing linearly from ``amplitude`` to ``final_amplitude``
                N*m (motion stops near the end because the amplitude falls below breakaway).
 ``presliding`` small-amplitude torque cycles (sine, ``frequency`` Hz, ``cycles`` per amplitude) below

@@ -1,6 +1,6 @@
 """Excitation programs sized to a joint (:class:`~friction_ros.core.experiment.joint_scale.JointScale`).
 
-**Experiment rule** (seed 004 B.3 procedures, seed 003 A.3 excitation, scaled), ``F_b`` the
+**Experiment rule** (AI friction chapter B.3 procedures, ABB M19-S paper A.3 excitation, scaled), ``F_b`` the
 breakaway estimate, ``F_c`` the Coulomb level, ``v_s`` the Stribeck velocity (1/e of the drop):
 
 * control period = the joint's (the preset's ``control_period``);
@@ -171,7 +171,7 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     # away, x = (step / J) t^2 / 2 >= counts * resolution, so the step time follows from the step;
     # the ramp from 0.5 F_b to 2.5 F_b must fit the time budget (coarse steps for a coarse encoder)
     b = c["breakaway"]
-    counts = 2  # seed 004 B.3: "moves" = at least 2 encoder counts
+    counts = 2  # AI friction chapter B.3: "moves" = at least 2 encoder counts
     thr = counts * scale.resolution
     b_max = min(3.0 * Fb, t_max - abs(load))
     start = 0.5 * Fb

@@ -11,24 +11,24 @@ Types (``type`` key):
 ``constant``           hold ``offset``.
 ``step``               ``offset`` until ``start_time``, then ``offset + amplitude``; with
                        ``rise_time > 0`` the step is a bang-bang (triangular velocity) move so
-                       velocity and acceleration are finite (point-to-point, seed 003 Fig. 11).
+                       velocity and acceleration are finite (point-to-point, ABB M19-S paper Fig. 11).
 ``ramp``               ``offset + slope * (t - start_time)`` for ``0 <= t - start_time <= ramp_time``.
-``sinusoid``           ``offset + amplitude * sin(2 pi f (t - start_time) + phase)`` (seed 004 1 Hz sines).
+``sinusoid``           ``offset + amplitude * sin(2 pi f (t - start_time) + phase)`` (AI friction chapter 1 Hz sines).
 ``velocity_reversals`` trapezoidal velocity alternating +-``velocity`` every ``half_period`` s with
                        ``acceleration`` ramps, starting from rest (stick-slip / reversal tests).
-``band_limited_random`` seed 003 A.5: white noise through a 4th-order digital Butterworth low-pass
+``band_limited_random`` ABB M19-S paper A.5: white noise through a 4th-order digital Butterworth low-pass
                        (``cutoff`` = 1 Hz), scaled so that max |pos - offset| = ``amplitude``.
-``chirp``              seed 001 section 8.1: ``(amplitude - amplitude_decay t) sin(phi(t))`` with the
+``chirp``              GA friction thesis 2002 section 8.1: ``(amplitude - amplitude_decay t) sin(phi(t))`` with the
                        frequency swept linearly from ``omega_start`` to ``omega_end`` rad/s over
                        ``sweep_time`` (phi = w0 t + (w1 - w0) t^2 / (2 T)).
-``parabola``           seed 001 App. C Table C.1: C^1 composition of up/down parabolas; each row
+``parabola``           GA friction thesis 2002 App. C Table C.1: C^1 composition of up/down parabolas; each row
                        ``[dt, dA, end_t]`` rises 2 dA in 2 dt; rows with dt = dA = 0 hold to end_t.
-``random_steps``       seed 001 section 8.3: a new uniform random value in [low, high] every
+``random_steps``       GA friction thesis 2002 section 8.3: a new uniform random value in [low, high] every
                        ``hold`` seconds (piecewise constant, seeded).
 
 Time before ``start_time`` holds the initial value for every type.
 
-The base class is in :mod:`.reference_base`, the seeds' identification signals (band-limited
+The base class is in :mod:`.reference_base`, the source documents' identification signals (band-limited
 random, chirp, parabola, random steps) in :mod:`.seed_references`.
 """
 

@@ -1,6 +1,6 @@
-"""The identification signals of the seeds as references (:mod:`.references` builds them from a
-config): band-limited random (seed 003 A.5), chirp (seed 001 section 8.1), the parabola composition
-(seed 001 App. C Table C.1) and random steps (seed 001 section 8.3)."""
+"""The identification signals of the source documents as references (:mod:`.references` builds them from a
+config): band-limited random (ABB M19-S paper A.5), chirp (GA friction thesis 2002 section 8.1), the parabola composition
+(GA friction thesis 2002 App. C Table C.1) and random steps (GA friction thesis 2002 section 8.3)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from friction_ros.core.validation import (
 
 from .reference_base import Reference, _pwl_velocity
 
-#: Seed 001 App. C Table C.1: (dt [s], dA [rad], end time [s]); dt = dA = 0 is a hold.
+#: GA friction thesis 2002 App. C Table C.1: (dt [s], dA [rad], end time [s]); dt = dA = 0 is a hold.
 SEED001_PARABOLA_TABLE: tuple[tuple[float, float, float], ...] = (
     (3.5, 1.0, 7.0),
     (3.5, 1.0, 14.0),
@@ -48,7 +48,7 @@ SEED001_PARABOLA_TABLE: tuple[tuple[float, float, float], ...] = (
 
 
 class BandLimitedRandom(Reference):
-    """Seed 003 A.5: seeded white noise -> 4th-order digital Butterworth low-pass (1 Hz), scaled.
+    """ABB M19-S paper A.5: seeded white noise -> 4th-order digital Butterworth low-pass (1 Hz), scaled.
 
     The noise is generated on a grid of ``sample_time`` for ``duration`` seconds, filtered with zero
     initial state (so the reference starts at rest at ``offset``), scaled so max |pos| = amplitude.
@@ -129,7 +129,7 @@ class BandLimitedRandom(Reference):
 
 
 class Chirp(Reference):
-    """Seed 001 section 8.1 (variant A): (A0 - r t) sin(w0 t + (w1 - w0) t^2 / (2 T))."""
+    """GA friction thesis 2002 section 8.1 (variant A): (A0 - r t) sin(w0 t + (w1 - w0) t^2 / (2 T))."""
 
     kind = "chirp"
 
@@ -173,7 +173,7 @@ class Chirp(Reference):
 
 
 class Parabola(Reference):
-    """Seed 001 App. C: each section (dt, dA) is A0 + dA (tau/dt)^2 then A0 + 2dA - dA ((2dt - tau)/dt)^2."""
+    """GA friction thesis 2002 App. C: each section (dt, dA) is A0 + dA (tau/dt)^2 then A0 + 2dA - dA ((2dt - tau)/dt)^2."""
 
     kind = "parabola"
 
@@ -210,7 +210,7 @@ class Parabola(Reference):
 
 
 class RandomSteps(Reference):
-    """Seed 001 section 8.3: piecewise constant, a new U(low, high) value every ``hold`` seconds."""
+    """GA friction thesis 2002 section 8.3: piecewise constant, a new U(low, high) value every ``hold`` seconds."""
 
     kind = "random_steps"
 

@@ -109,7 +109,7 @@ def plateau_segments(c: dict) -> list[Segment]:
 
 
 def random_velocity(c: dict) -> np.ndarray:
-    """Seed 003 excitation: 4 Hz band-limited noise times the 3-term rectangular envelope [rad/s]."""
+    """ABB M19-S paper excitation: 4 Hz band-limited noise times the 3-term rectangular envelope [rad/s]."""
     from scipy.signal import butter, sosfiltfilt
 
     r, dt = c["random"], c["dt"]

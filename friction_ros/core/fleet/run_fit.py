@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import datetime as dt
 import math
+import os
 
 import numpy as np
 
@@ -108,8 +109,6 @@ def flat_coefficients(coefficients: dict, stderr: dict | None) -> tuple[list[str
 
 def run_rows(task: RunTask, options: dict | None = None) -> list[dict]:
     """The rows of one (run, joint) (see module doc); ``options``: :data:`QUICK_OPTIONS` overrides."""
-    import os
-
     mark = os.environ.get(CRASH_MARK_ENV)
     if mark and mark in task.path:
         os._exit(17)  # test hook: the worker dies mid-fit

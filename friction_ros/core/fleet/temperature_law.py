@@ -11,7 +11,7 @@ studies build on (Bittencourt, Axelsson, Jung, Brogardh, "Modeling and experimen
 identification of wear in a robot joint under load and temperature uncertainties based on friction
 data", IEEE/ASME Trans. Mechatronics 19(5), 2014): a wear change of a few per cent is smaller than
 the temperature effect and is seen only once the coefficients are normalised to one temperature.
-The project's sources name the same dependence (seed 001, section 2: friction "varies with material
+The project's sources name the same dependence (GA friction thesis 2002, section 2: friction "varies with material
 properties, temperature, wear"; its compensation chapter: "component wear, lubricant temperature and
 aging"), without a law. The laws used here, per coefficient c of one joint:
 

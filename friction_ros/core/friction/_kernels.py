@@ -60,7 +60,7 @@ K_GMS = 32
 
 @jit
 def sgn(v):
-    """sgn(v) with sgn(0) = 0 (seed 004 eq. (6))."""
+    """sgn(v) with sgn(0) = 0 (AI friction chapter eq. (6))."""
     if v > 0.0:
         return 1.0
     if v < 0.0:
@@ -70,7 +70,7 @@ def sgn(v):
 
 @jit
 def stribeck_s(av, fc, fs, vs, delta):
-    """Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) (seed 004 eq. (5))."""
+    """Stribeck magnitude s(|v|) = Fc + (Fs - Fc) exp(-(|v|/vs)^delta) (AI friction chapter eq. (5))."""
     return fc + (fs - fc) * math.exp(-((av / vs) ** delta))
 
 
@@ -169,7 +169,7 @@ def lugre_update(p, o, z, v, h):
     dz/dt = v - sigma0 |v| z / g(v) is linear in z for constant v, so
     z(h) = z_ss + (z - z_ss) exp(-a h), a = sigma0 |v| / g(v), z_ss = g(v) sgn(v) / sigma0
     (unconditionally stable for any sigma0 and h). Torque F = sigma0 z + sigma1(v) dz/dt + fv v at the
-    end of the step (seed 004 eqs. (10)-(11), Canudas de Wit 1995).
+    end of the step (AI friction chapter eqs. (10)-(11), Canudas de Wit 1995).
     p = sigma0, sigma1, fv, fc, fs, vs, delta, vd
     """
     sigma0 = p[o]
@@ -194,7 +194,7 @@ def lugre_update(p, o, z, v, h):
 def dahl_update(p, o, f, v, h):
     """Exact Dahl update over the displacement dx = v h; returns the new friction torque.
 
-    dF/dx = sigma |1 - F sgn(v)/Fc|^alpha sgn(1 - F sgn(v)/Fc) (seed 004 eq. (9)); with
+    dF/dx = sigma |1 - F sgn(v)/Fc|^alpha sgn(1 - F sgn(v)/Fc) (AI friction chapter eq. (9)); with
     y = 1 - F sgn(v)/Fc this is dy/d|x| = -(sigma/Fc) |y|^alpha sgn(y), solved in closed form.
     p = sigma, fc, alpha
     """
@@ -222,7 +222,7 @@ def dahl_update(p, o, f, v, h):
 
 @jit
 def gms_update(p, o, st, v, h):
-    """GMS update (seed 003 eqs. (2)-(3), sign fixed per extract A.2.4), exact for constant ``v``.
+    """GMS update (ABB M19-S paper eqs. (2)-(3), sign fixed per ABB M19-S paper A.2.4), exact for constant ``v``.
 
     State ``st`` = [F_1..F_N, stuck_1..stuck_N] (stuck as 1.0/0.0), updated in place.
     Stick: dF_i/dt = k_i v (exact: F_i += k_i v h); an element breaks away when
@@ -230,7 +230,7 @@ def gms_update(p, o, st, v, h):
     Slip: dF_i/dt = C (alpha_i sgn(v) - F_i / s(v)), C = ``attraction``, solved exactly (relaxation
     rate C/s).
     A slipping element sticks again on reversal (F_i v < 0) or at v = 0.
-    Presliding micro-damping (extract C.6, Lampaert: F = sum_i (k_i z_i + sigma_i dz_i/dt) + fv v)
+    Presliding micro-damping (Lampaert et al.: F = sum_i (k_i z_i + sigma_i dz_i/dt) + fv v)
     with stiffness-proportional sigma_i = sigma1 k_i / sum_j k_j, i.e. with dz_i/dt = (dF_i/dt) / k_i
     the damping force is (sigma1 / sum_j k_j) sum_i dF_i/dt, evaluated over the step as
     sum_i (F_i(t+h) - F_i(t)) / h (= sigma1 v while every element sticks).

@@ -1,4 +1,4 @@
-"""Asymmetric friction: separate parameter sets for positive and negative motion (seed 004 B.3)."""
+"""Asymmetric friction: separate parameter sets for positive and negative motion (AI friction chapter B.3)."""
 
 from __future__ import annotations
 
@@ -15,8 +15,8 @@ from .catalog import BASE_MODEL_CLASSES
 
 
 class Asymmetric(FrictionModel):
-    """Direction-dependent wrapper around any base model (seed 004: stiction 0.2279 A positive vs
-    0.2120 A negative, extract B.3, "justifies the asymmetric nature of friction").
+    """Direction-dependent wrapper around any base model (AI friction chapter: stiction 0.2279 A positive vs
+    0.2120 A negative, AI friction chapter B.3, "justifies the asymmetric nature of friction").
 
     F(v) = F_pos(v) for v >= 0 and F_neg(v) for v < 0, where F_pos / F_neg are the base model with the
     ``positive`` / ``negative`` coefficient sets. For a dynamic base the state is shared and the set is

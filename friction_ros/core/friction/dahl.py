@@ -1,4 +1,4 @@
-"""Dahl model (Dahl 1968) as written in seed 004 eq. (9)."""
+"""Dahl model (Dahl 1968) as written in AI friction chapter eq. (9)."""
 
 from __future__ import annotations
 
@@ -11,11 +11,11 @@ from .base import DynamicModel
 
 
 class Dahl(DynamicModel):
-    """Dahl: dF/dx = sigma |1 - F sgn(v)/Fc|^alpha sgn(1 - F sgn(v)/Fc) (seed 004 eq. (9)).
+    """Dahl: dF/dx = sigma |1 - F sgn(v)/Fc|^alpha sgn(1 - F sgn(v)/Fc) (AI friction chapter eq. (9)).
 
     Time form dF/dt = (dF/dx) v. The update integrates the closed-form solution over the displacement
     v*dt (exact for v held over the step, stable for any stiffness). With alpha = 1 the model is LuGre
-    with Fs = Fc, sigma1 = 0, fv = 0 (appendix Z). Steady sliding: F = Fc sgn(v). State: [F].
+    with Fs = Fc, sigma1 = 0, fv = 0 (Olsson et al. 1998). Steady sliding: F = Fc sgn(v). State: [F].
     """
 
     name = "dahl"
@@ -28,15 +28,21 @@ class Dahl(DynamicModel):
             lo=0.0,
             lo_open=True,
             unit="N*m/rad",
-            doc="rest stiffness: dF/dx = sigma at F = 0 (seed 004 eq. (9))",
+            doc="rest stiffness: dF/dx = sigma at F = 0 (AI friction chapter eq. (9))",
         ),
-        Field("fc", lo=0.0, lo_open=True, unit="N*m", doc="Coulomb level: F -> Fc sgn(v) (seed 004 eq. (9))"),
+        Field(
+            "fc",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="Coulomb level: F -> Fc sgn(v) (AI friction chapter eq. (9))",
+        ),
         Field(
             "alpha",
             1.0,
             lo=0.0,
             lo_open=True,
-            doc="shape exponent [-]: |1 - F sgn(v)/Fc|^alpha (seed 004 eq. (9))",
+            doc="shape exponent [-]: |1 - F sgn(v)/Fc|^alpha (AI friction chapter eq. (9))",
         ),
     )
 

@@ -1,4 +1,4 @@
-"""Seed 000's spur-gear dynamic-transmission-error model with sliding friction (extract A.1.2).
+"""Spur-gear dynamic-transmission-error model with sliding friction (Chatterjee et al. 2017 A.1.2).
 
 J_e d'' + B(t) d' + K(t) d = u, with (exactly as coded in ``friction_model*.m``)
 B(t) = c1 (1 + fac1 sgn) + c0 fac0, K(t) = k1 (1 + fac1 sgn) + k0 fac0,
@@ -24,10 +24,10 @@ def _msign(x: float) -> float:
 def spur_gear_dte(
     modified: bool = False, t_sim: float | None = None, h: float = 1e-3
 ) -> dict[str, np.ndarray]:
-    """Simulate the seed 000 gear model; returns ``{"t", "delta", "delta_dot", "K", "B"}``.
+    """Simulate the Chatterjee et al. 2017 gear model; returns ``{"t", "delta", "delta_dot", "K", "B"}``.
 
     ``modified=False``: ``friction_model.m`` with all-unit parameters (15 s): d'' + d' + d = 0.5
-    (extract A-T1: peak 0.5817 near 3.63 s). ``modified=True``: ``friction_model_modified.m`` (0.5 s).
+    (Chatterjee et al. 2017 A-T1: peak 0.5817 near 3.63 s). ``modified=True``: ``friction_model_modified.m`` (0.5 s).
     """
     if not modified:
         c1 = c0 = k1 = k0 = 1.0

@@ -1,4 +1,4 @@
-"""Generalized Maxwell-Slip model (Al-Bender, Lampaert, Swevers 2005; seed 003)."""
+"""Generalized Maxwell-Slip model (Al-Bender, Lampaert, Swevers 2005; ABB M19-S paper)."""
 
 from __future__ import annotations
 
@@ -16,18 +16,18 @@ ALPHA_SUM_TOL = 1e-6
 
 
 class GMS(DynamicModel):
-    """GMS with N Maxwell-slip elements (seed 003 eqs. (2)-(3), sign fixed per extract A.2.4):
+    """GMS with N Maxwell-slip elements (ABB M19-S paper eqs. (2)-(3), sign fixed per ABB M19-S paper A.2.4):
 
     stick:  dF_i/dt = k_i v
     slip:   dF_i/dt = sgn(v) C (alpha_i - F_i / s(v)) = C (alpha_i sgn(v) - F_i / |s(v)|), C = attraction
     s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);  F = sum_i F_i + fv v + F_damp;  sum_i alpha_i = 1.
-    Optional presliding micro-damping (extract C.6, Lampaert et al.: F = sum_i (k_i z_i + sigma_i
+    Optional presliding micro-damping (Lampaert et al.: F = sum_i (k_i z_i + sigma_i
     dz_i/dt) + sigma_2 v) with one coefficient ``sigma1`` shared in proportion to the element
     stiffness, sigma_i = sigma1 k_i / sum_j k_j (Rayleigh stiffness-proportional damping), i.e.
     F_damp = (sigma1 / sum_j k_j) sum_i dF_i/dt, which is sigma1 v while every element sticks and
-    fades as elements slip. ``sigma1 = 0`` (default) is the undamped model of seed 003.
+    fades as elements slip. ``sigma1 = 0`` (default) is the undamped model of the ABB M19-S paper.
     An element slips when |F_i| reaches alpha_i s(v) and sticks again on reversal or at v = 0.
-    Virgin curve y(x) = sum_i min(k_i x, alpha_i Fs); Masing rule and wiping-out follow (extract E.1.7).
+    Virgin curve y(x) = sum_i min(k_i x, alpha_i Fs); Masing rule and wiping-out follow (ABB M19-S paper E.1.7).
 
     Integration: sticking is exact (F_i += k_i v dt) with break-away clipped inside the step; slipping
     uses the exact exponential solution with rate C/s: stable for k_i = 1e5 at dt = 1 ms.
@@ -44,26 +44,38 @@ class GMS(DynamicModel):
             lo=0.0,
             lo_open=True,
             unit="N*m",
-            doc="Coulomb level of s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 003 eq. (3), A.2.4)",
+            doc="Coulomb level of s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (ABB M19-S paper eq. (3), A.2.4)",
         ),
         Field(
-            "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of s(v), s(0) = Fs (seed 003 eq. (3))"
+            "fs",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="static level of s(v), s(0) = Fs (ABB M19-S paper eq. (3))",
         ),
-        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of s(v) (seed 003 eq. (3))"),
-        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (seed 003 eq. (3))"),
+        Field(
+            "vs",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="Stribeck velocity of s(v) (ABB M19-S paper eq. (3))",
+        ),
+        Field(
+            "delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of s(v) [-] (ABB M19-S paper eq. (3))"
+        ),
         Field(
             "attraction",
             lo=0.0,
             lo_open=True,
             unit="N*m/s",
-            doc="attraction parameter C: slip dF_i/dt = C (alpha_i sgn(v) - F_i / |s(v)|) (seed 003 eq. (3))",
+            doc="attraction parameter C: slip dF_i/dt = C (alpha_i sgn(v) - F_i / |s(v)|) (ABB M19-S paper eq. (3))",
         ),
         Field(
             "fv",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
-            doc="viscous coefficient: F = sum_i F_i + fv v (seed 003 eq. (2))",
+            doc="viscous coefficient: F = sum_i F_i + fv v (ABB M19-S paper eq. (2))",
         ),
         Field(
             "k",
@@ -71,7 +83,7 @@ class GMS(DynamicModel):
             lo_open=True,
             unit="N*m/rad",
             is_list=True,
-            doc="element stiffnesses k_i: stick dF_i/dt = k_i v (seed 003 eq. (2))",
+            doc="element stiffnesses k_i: stick dF_i/dt = k_i v (ABB M19-S paper eq. (2))",
         ),
         Field(
             "alpha",
@@ -79,7 +91,7 @@ class GMS(DynamicModel):
             lo_open=True,
             hi=1.0,
             is_list=True,
-            doc="element weights alpha_i [-] (sum 1): element i slips at |F_i| = alpha_i s(v) (seed 003 eq. (3))",
+            doc="element weights alpha_i [-] (sum 1): element i slips at |F_i| = alpha_i s(v) (ABB M19-S paper eq. (3))",
         ),
         # appended last so positional users of param_names / param_vector() keep their indices
         Field(
@@ -88,7 +100,7 @@ class GMS(DynamicModel):
             lo=0.0,
             unit="N*m*s/rad",
             doc="presliding micro-damping, shared as sigma_i = sigma1 k_i / sum_j k_j (0 = none; "
-            "extract C.6, Lampaert et al.)",
+            "Lampaert et al.)",
         ),
     )
 
@@ -131,7 +143,7 @@ class GMS(DynamicModel):
         return stribeck_np(np.abs(v), c["fc"], c["fs"], c["vs"], c["delta"]) * np.sign(v) + c["fv"] * v
 
     def virgin_curve(self, x):
-        """Quasi-static first-loading curve y(x) = sum_i min(k_i |x|, alpha_i Fs) sgn(x) (extract A.2.4)."""
+        """Quasi-static first-loading curve y(x) = sum_i min(k_i |x|, alpha_i Fs) sgn(x) (ABB M19-S paper A.2.4)."""
         x = np.asarray(x, dtype=float)
         k = np.asarray(self._c["k"])
         a = np.asarray(self._c["alpha"]) * self._c["fs"]

@@ -15,7 +15,7 @@ A geared joint on a robot carries more than friction. The torque it needs (REP-1
 * ``R(q) = sum_k c_k cos(k w q) + s_k sin(k w q)``, ``w = 2 pi / ripple_period``: position-dependent
   friction, the Coulomb level rippling with gear meshing or harmonic-drive wave-generator angle
   (``ripple_period`` = 2 pi / N for a ripple at the motor angle of an N:1 gear);
-* ``sgn_eps(v) = clip(v / eps, -1, 1)`` (seed 003 A.2.1).
+* ``sgn_eps(v) = clip(v / eps, -1, 1)`` (ABB M19-S paper A.2.1).
 
 ``F(v)`` is the friction model (any of the library's); this module holds the rest, identified
 jointly with inertia and friction by :mod:`friction_ros.core.identification.load_terms` and used by

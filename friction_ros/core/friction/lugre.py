@@ -11,7 +11,7 @@ from .base import DynamicModel, stribeck_np
 
 
 class LuGre(DynamicModel):
-    """LuGre (seed 004 eqs. (10)-(11); seed 001 eq. (14); appendix Z):
+    """LuGre (AI friction chapter eqs. (10)-(11); GA friction thesis 2002 eq. (14); Canudas de Wit et al. 1995):
 
     dz/dt = v - sigma0 |v| z / g(v),  g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta)
     F = sigma0 z + sigma1(v) dz/dt + fv v,  sigma1(v) = sigma1 exp(-(v/vd)^2) if vd > 0 else sigma1
@@ -33,34 +33,50 @@ class LuGre(DynamicModel):
             lo=0.0,
             lo_open=True,
             unit="N*m/rad",
-            doc="bristle stiffness: sigma0 z in F and sigma0 |v| z / g(v) in dz/dt (seed 004 eqs. (10)-(11))",
+            doc="bristle stiffness: sigma0 z in F and sigma0 |v| z / g(v) in dz/dt (AI friction chapter eqs. (10)-(11))",
         ),
         Field(
             "sigma1",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
-            doc="bristle micro-damping: sigma1 dz/dt in F (seed 004 eq. (11))",
+            doc="bristle micro-damping: sigma1 dz/dt in F (AI friction chapter eq. (11))",
         ),
         Field(
             "fv",
             0.0,
             lo=0.0,
             unit="N*m*s/rad",
-            doc="viscous coefficient (the papers' sigma2): fv v in F (seed 004 eq. (11))",
+            doc="viscous coefficient (the papers' sigma2): fv v in F (AI friction chapter eq. (11))",
         ),
         Field(
             "fc",
             lo=0.0,
             lo_open=True,
             unit="N*m",
-            doc="Coulomb level of g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (10))",
+            doc="Coulomb level of g(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (AI friction chapter eq. (10))",
         ),
         Field(
-            "fs", lo=0.0, lo_open=True, unit="N*m", doc="static level of g(v), g(0) = Fs (seed 004 eq. (10))"
+            "fs",
+            lo=0.0,
+            lo_open=True,
+            unit="N*m",
+            doc="static level of g(v), g(0) = Fs (AI friction chapter eq. (10))",
         ),
-        Field("vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity of g(v) (seed 004 eq. (10))"),
-        Field("delta", 2.0, lo=0.0, lo_open=True, doc="Stribeck exponent of g(v) [-] (seed 004 eq. (10))"),
+        Field(
+            "vs",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="Stribeck velocity of g(v) (AI friction chapter eq. (10))",
+        ),
+        Field(
+            "delta",
+            2.0,
+            lo=0.0,
+            lo_open=True,
+            doc="Stribeck exponent of g(v) [-] (AI friction chapter eq. (10))",
+        ),
         Field(
             "vd",
             0.0,

@@ -1,6 +1,6 @@
 """Static (memoryless) friction maps, vectorised over velocity arrays.
 
-Every map is odd in v unless stated (sgn(0) = 0, seed 004 eq. (6)) and returns the torque that
+Every map is odd in v unless stated (sgn(0) = 0, AI friction chapter eq. (6)) and returns the torque that
 opposes motion (``F * v >= 0``).
 """
 
@@ -19,35 +19,35 @@ _FC = Field(
     "fc",
     lo=0.0,
     unit="N*m",
-    doc="Coulomb (kinetic) friction level Fc: F = Fc sgn(v) (seed 004 eq. (1)), the high-speed "
-    "level of the Stribeck curve s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (seed 004 eq. (5))",
+    doc="Coulomb (kinetic) friction level Fc: F = Fc sgn(v) (AI friction chapter eq. (1)), the high-speed "
+    "level of the Stribeck curve s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta) (AI friction chapter eq. (5))",
 )
 _FS = Field(
     "fs",
     lo=0.0,
     unit="N*m",
-    doc="static friction (stiction) level Fs: s(0) = Fs in the Stribeck curve (seed 004 eq. (5))",
+    doc="static friction (stiction) level Fs: s(0) = Fs in the Stribeck curve (AI friction chapter eq. (5))",
 )
 _VS = Field(
     "vs",
     lo=0.0,
     lo_open=True,
     unit="rad/s",
-    doc="Stribeck velocity vs: exp(-|v/vs|^delta) in the Stribeck curve (seed 004 eq. (5))",
+    doc="Stribeck velocity vs: exp(-|v/vs|^delta) in the Stribeck curve (AI friction chapter eq. (5))",
 )
 _DELTA = Field(
     "delta",
     2.0,
     lo=0.0,
     lo_open=True,
-    doc="Stribeck shape exponent delta [-]: exp(-|v/vs|^delta) (seed 004 eq. (5); 1 Tustin, 2 Gaussian)",
+    doc="Stribeck shape exponent delta [-]: exp(-|v/vs|^delta) (AI friction chapter eq. (5); 1 Tustin, 2 Gaussian)",
 )
 _FV = Field(
     "fv",
     0.0,
     lo=0.0,
     unit="N*m*s/rad",
-    doc="viscous coefficient Fv: the term Fv v (seed 004 eqs. (2), (3), (5))",
+    doc="viscous coefficient Fv: the term Fv v (AI friction chapter eqs. (2), (3), (5))",
 )
 
 
@@ -62,7 +62,7 @@ class ZeroFriction(StaticModel):
 
 
 class Coulomb(StaticModel):
-    """Coulomb friction F = Fc sgn(v) (seed 004 eq. (1); seed 002 eq. (3); seed 001 eq. (2))."""
+    """Coulomb friction F = Fc sgn(v) (AI friction chapter eq. (1); Tilakaratna et al. 2004 eq. (3); GA friction thesis 2002 eq. (2))."""
 
     name = "coulomb"
     KIND = _kernels.K_COULOMB
@@ -73,12 +73,17 @@ class Coulomb(StaticModel):
 
 
 class Viscous(StaticModel):
-    """Viscous friction F = Fv v (seed 004 eq. (2); seed 001 eq. (3))."""
+    """Viscous friction F = Fv v (AI friction chapter eq. (2); GA friction thesis 2002 eq. (3))."""
 
     name = "viscous"
     KIND = _kernels.K_VISCOUS
     COEFS = (
-        Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient Fv: F = Fv v (seed 004 eq. (2))"),
+        Field(
+            "fv",
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient Fv: F = Fv v (AI friction chapter eq. (2))",
+        ),
     )
 
     def _steady(self, v):
@@ -86,7 +91,7 @@ class Viscous(StaticModel):
 
 
 class CoulombViscous(StaticModel):
-    """Coulomb + viscous F = Fc sgn(v) + Fv v (seed 004 eq. (3); seed 002 eq. (1) with C_r)."""
+    """Coulomb + viscous F = Fc sgn(v) + Fv v (AI friction chapter eq. (3); Tilakaratna et al. 2004 eq. (1) with C_r)."""
 
     name = "coulomb_viscous"
     KIND = _kernels.K_COULOMB_VISCOUS
@@ -96,7 +101,7 @@ class CoulombViscous(StaticModel):
             "fv",
             lo=0.0,
             unit="N*m*s/rad",
-            doc="viscous coefficient Fv: F = Fc sgn(v) + Fv v (seed 004 eq. (3))",
+            doc="viscous coefficient Fv: F = Fc sgn(v) + Fv v (AI friction chapter eq. (3))",
         ),
     )
 
@@ -107,7 +112,7 @@ class CoulombViscous(StaticModel):
 class Stribeck(StaticModel):
     """Exponential Stribeck family F = [Fc + (Fs - Fc) exp(-|v/vs|^delta)] sgn(v) + Fv v.
 
-    Seed 004 eq. (5) (delta = 1: Tustin, delta = 2: Gaussian); appendix Z of the seeds 000/002 extract.
+    AI friction chapter eq. (5) (delta = 1: Tustin, delta = 2: Gaussian); the standard form reviewed by Olsson et al. 1998.
     Requires Fs >= Fc.
     """
 
@@ -124,7 +129,7 @@ class Stribeck(StaticModel):
 
 
 class Tustin(Stribeck):
-    """Tustin model: the Stribeck family with delta = 1 (seed 004 eq. (5); extract C.5)."""
+    """Tustin model: the Stribeck family with delta = 1 (AI friction chapter eq. (5))."""
 
     name = "tustin"
     COEFS = (_FC, _FS, _VS, _FV)
@@ -139,7 +144,7 @@ class Tustin(Stribeck):
 
 
 class Gaussian(Tustin):
-    """Gaussian Stribeck model: the Stribeck family with delta = 2 (seed 004 eq. (5))."""
+    """Gaussian Stribeck model: the Stribeck family with delta = 2 (AI friction chapter eq. (5))."""
 
     name = "gaussian"
 
@@ -153,7 +158,7 @@ class Gaussian(Tustin):
 
 
 class Lorentzian(StaticModel):
-    """Lorentzian (Hess & Soom) F = [Fc + (Fs - Fc) / (1 + (v/vs)^2)] sgn(v) + Fv v (seed 004 eq. (7))."""
+    """Lorentzian (Hess & Soom) F = [Fc + (Fs - Fc) / (1 + (v/vs)^2)] sgn(v) + Fv v (AI friction chapter eq. (7))."""
 
     name = "lorentzian"
     KIND = _kernels.K_LORENTZIAN
@@ -168,7 +173,7 @@ class Lorentzian(StaticModel):
 
 
 class StribeckEps(StaticModel):
-    """Seed 003 Stribeck with a linear zone of width eps (extract A.2.2, corrected reading).
+    """ABB M19-S paper Stribeck with a linear zone of width eps (ABB M19-S paper A.2.2, corrected reading).
 
     s(v) = Fc + (Fs - Fc) exp(-|v/vs|^delta);
     F = s(v) sgn(v) + Fv v for |v| > eps, F = (v/eps) s(v) + Fv v for |v| <= eps
@@ -184,7 +189,7 @@ class StribeckEps(StaticModel):
             lo=0.0,
             lo_open=True,
             unit="rad/s",
-            doc="linear-zone half width: F = (v/eps) s(v) + Fv v for |v| <= eps (seed 003 A.2.2)",
+            doc="linear-zone half width: F = (v/eps) s(v) + Fv v for |v| <= eps (ABB M19-S paper A.2.2)",
         ),
     )
 
@@ -199,7 +204,7 @@ class StribeckEps(StaticModel):
 
 
 class GAExponential(StaticModel):
-    """Seed 001 modified Exponential model, eq. (21) (the model the GA selected):
+    """GA friction thesis 2002 modified Exponential model, eq. (21) (the model the GA selected):
 
     F = (Fc + (Fs - Fc) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v); Fs = F_ST, Fc = F_kmin (Table 5.2).
     """
@@ -207,22 +212,34 @@ class GAExponential(StaticModel):
     name = "ga_exponential"
     KIND = _kernels.K_GA_EXPONENTIAL
     COEFS = (
-        Field("fs", lo=0.0, unit="N*m", doc="static level F_ST (seed 001 eq. (21), Table 5.2)"),
+        Field(
+            "fs", lo=0.0, unit="N*m", doc="static level F_ST (GA friction thesis 2002 eq. (21), Table 5.2)"
+        ),
         Field(
             "gamma",
             lo=0.0,
             lo_open=True,
             unit="s/rad",
-            doc="inverse Stribeck velocity: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
+            doc="inverse Stribeck velocity: exp(-(gamma |v|)^delta) (GA friction thesis 2002 eq. (21))",
         ),
         Field(
             "delta",
             lo=0.0,
             lo_open=True,
-            doc="shape exponent [-]: exp(-(gamma |v|)^delta) (seed 001 eq. (21))",
+            doc="shape exponent [-]: exp(-(gamma |v|)^delta) (GA friction thesis 2002 eq. (21))",
         ),
-        Field("fc", lo=0.0, unit="N*m", doc="minimum kinetic level F_kmin (seed 001 eq. (21), Table 5.2)"),
-        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (21))"),
+        Field(
+            "fc",
+            lo=0.0,
+            unit="N*m",
+            doc="minimum kinetic level F_kmin (GA friction thesis 2002 eq. (21), Table 5.2)",
+        ),
+        Field(
+            "sigma",
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient: sigma |v| (GA friction thesis 2002 eq. (21))",
+        ),
     )
 
     def _steady(self, v):
@@ -234,22 +251,39 @@ class GAExponential(StaticModel):
 
 
 class GATustin(StaticModel):
-    """Seed 001 modified Tustin model, eq. (22): F = (Ff0 - Ffc [1 - exp(-(|v|/Vc)^x)] + sigma |v|) sgn(v)."""
+    """GA friction thesis 2002 modified Tustin model, eq. (22): F = (Ff0 - Ffc [1 - exp(-(|v|/Vc)^x)] + sigma |v|) sgn(v)."""
 
     name = "ga_tustin"
     KIND = _kernels.K_GA_TUSTIN
     COEFS = (
-        Field("ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (seed 001 eq. (22))"),
-        Field("ffc", lo=0.0, unit="N*m", doc="static minus dynamic friction Ffc (seed 001 eq. (22))"),
+        Field(
+            "ff0", lo=0.0, unit="N*m", doc="static friction constant Ff0 (GA friction thesis 2002 eq. (22))"
+        ),
+        Field(
+            "ffc",
+            lo=0.0,
+            unit="N*m",
+            doc="static minus dynamic friction Ffc (GA friction thesis 2002 eq. (22))",
+        ),
         Field(
             "vc",
             lo=0.0,
             lo_open=True,
             unit="rad/s",
-            doc="threshold velocity Vc: 1 - exp(-(|v|/Vc)^x) (seed 001 eq. (22))",
+            doc="threshold velocity Vc: 1 - exp(-(|v|/Vc)^x) (GA friction thesis 2002 eq. (22))",
         ),
-        Field("x", lo=0.0, lo_open=True, doc="Armstrong exponent [-]: (|v|/Vc)^x (seed 001 eq. (22))"),
-        Field("sigma", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: sigma |v| (seed 001 eq. (22))"),
+        Field(
+            "x",
+            lo=0.0,
+            lo_open=True,
+            doc="Armstrong exponent [-]: (|v|/Vc)^x (GA friction thesis 2002 eq. (22))",
+        ),
+        Field(
+            "sigma",
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient: sigma |v| (GA friction thesis 2002 eq. (22))",
+        ),
     )
 
     def _steady(self, v):
@@ -261,7 +295,7 @@ class GATustin(StaticModel):
 
 
 class GANonLinear(StaticModel):
-    """Seed 001 Non-Linear model (Canudas de Wit), eq. (23):
+    """GA friction thesis 2002 Non-Linear model (Canudas de Wit), eq. (23):
 
     F = (alpha0 + alpha1 exp(-beta1 |v|) + alpha2 (1 - exp(-beta2 |v|))) sgn(v).
     """
@@ -269,13 +303,31 @@ class GANonLinear(StaticModel):
     name = "ga_nonlinear"
     KIND = _kernels.K_GA_NONLINEAR
     COEFS = (
-        Field("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (seed 001 eq. (23))"),
-        Field("alpha1", lo=0.0, unit="N*m", doc="decaying level: alpha1 exp(-beta1 |v|) (seed 001 eq. (23))"),
+        Field("alpha0", lo=0.0, unit="N*m", doc="constant level alpha0 (GA friction thesis 2002 eq. (23))"),
         Field(
-            "alpha2", lo=0.0, unit="N*m", doc="rising level: alpha2 (1 - exp(-beta2 |v|)) (seed 001 eq. (23))"
+            "alpha1",
+            lo=0.0,
+            unit="N*m",
+            doc="decaying level: alpha1 exp(-beta1 |v|) (GA friction thesis 2002 eq. (23))",
         ),
-        Field("beta1", lo=0.0, unit="s/rad", doc="decay rate of the alpha1 term (seed 001 eq. (23))"),
-        Field("beta2", lo=0.0, unit="s/rad", doc="rise rate of the alpha2 term (seed 001 eq. (23))"),
+        Field(
+            "alpha2",
+            lo=0.0,
+            unit="N*m",
+            doc="rising level: alpha2 (1 - exp(-beta2 |v|)) (GA friction thesis 2002 eq. (23))",
+        ),
+        Field(
+            "beta1",
+            lo=0.0,
+            unit="s/rad",
+            doc="decay rate of the alpha1 term (GA friction thesis 2002 eq. (23))",
+        ),
+        Field(
+            "beta2",
+            lo=0.0,
+            unit="s/rad",
+            doc="rise rate of the alpha2 term (GA friction thesis 2002 eq. (23))",
+        ),
     )
 
     def _steady(self, v):
@@ -289,16 +341,27 @@ class GANonLinear(StaticModel):
 
 
 class GADupont(StaticModel):
-    """Seed 001 Dupont model, eq. (24): F = (c0 + c1 |v| + c2 exp(-(|v|/c3)^c4)) sgn(v)."""
+    """GA friction thesis 2002 Dupont model, eq. (24): F = (c0 + c1 |v| + c2 exp(-(|v|/c3)^c4)) sgn(v)."""
 
     name = "ga_dupont"
     KIND = _kernels.K_GA_DUPONT
     COEFS = (
-        Field("c0", lo=0.0, unit="N*m", doc="constant level c0 (seed 001 eq. (24))"),
-        Field("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (seed 001 eq. (24))"),
-        Field("c2", lo=0.0, unit="N*m", doc="Stribeck level: c2 exp(-(|v|/c3)^c4) (seed 001 eq. (24))"),
-        Field("c3", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity c3 (seed 001 eq. (24))"),
-        Field("c4", lo=0.0, lo_open=True, doc="Stribeck exponent c4 [-] (seed 001 eq. (24))"),
+        Field("c0", lo=0.0, unit="N*m", doc="constant level c0 (GA friction thesis 2002 eq. (24))"),
+        Field("c1", lo=0.0, unit="N*m*s/rad", doc="viscous term c1 |v| (GA friction thesis 2002 eq. (24))"),
+        Field(
+            "c2",
+            lo=0.0,
+            unit="N*m",
+            doc="Stribeck level: c2 exp(-(|v|/c3)^c4) (GA friction thesis 2002 eq. (24))",
+        ),
+        Field(
+            "c3",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="Stribeck velocity c3 (GA friction thesis 2002 eq. (24))",
+        ),
+        Field("c4", lo=0.0, lo_open=True, doc="Stribeck exponent c4 [-] (GA friction thesis 2002 eq. (24))"),
     )
 
     def _steady(self, v):
@@ -308,7 +371,7 @@ class GADupont(StaticModel):
 
 
 class GASevenParameter(StaticModel):
-    """Seed 001 reduced seven-parameter model, eq. (25), steady-sliding part with sgn(v) restored:
+    """GA friction thesis 2002 reduced seven-parameter model, eq. (25), steady-sliding part with sgn(v) restored:
 
     F = (Fc + Fv |v| + Fs / (1 + (v/vs)^2)) sgn(v). The dwell-time rise F_SF(gamma, t2) and the
     frictional-lag delay tau_L are not modelled: Fs is F_SF after a long dwell (F_s,inf).
@@ -317,16 +380,25 @@ class GASevenParameter(StaticModel):
     name = "ga_seven_parameter"
     KIND = _kernels.K_GA_SEVEN
     COEFS = (
-        Field("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (seed 001 eq. (25))"),
-        Field("fv", lo=0.0, unit="N*m*s/rad", doc="viscous coefficient: Fv |v| (seed 001 eq. (25))"),
+        Field("fc", lo=0.0, unit="N*m", doc="Coulomb level Fc (GA friction thesis 2002 eq. (25))"),
+        Field(
+            "fv",
+            lo=0.0,
+            unit="N*m*s/rad",
+            doc="viscous coefficient: Fv |v| (GA friction thesis 2002 eq. (25))",
+        ),
         Field(
             "fs",
             lo=0.0,
             unit="N*m",
-            doc="Stribeck magnitude F_s,inf, added to fc at rest: Fs / (1 + (v/vs)^2) (seed 001 eq. (25))",
+            doc="Stribeck magnitude F_s,inf, added to fc at rest: Fs / (1 + (v/vs)^2) (GA friction thesis 2002 eq. (25))",
         ),
         Field(
-            "vs", lo=0.0, lo_open=True, unit="rad/s", doc="Stribeck velocity: (v/vs)^2 (seed 001 eq. (25))"
+            "vs",
+            lo=0.0,
+            lo_open=True,
+            unit="rad/s",
+            doc="Stribeck velocity: (v/vs)^2 (GA friction thesis 2002 eq. (25))",
         ),
     )
 
@@ -336,10 +408,10 @@ class GASevenParameter(StaticModel):
 
 
 class Polynomial(StaticModel):
-    """Per-direction polynomial (seed 004 eq. (8), fitted separately for each direction):
+    """Per-direction polynomial (AI friction chapter eq. (8), fitted separately for each direction):
 
     F = sum_j pos[j] v^j for v > 0; F = -sum_j neg[j] |v|^j for v < 0; F(0) = 0.
-    ``pos``/``neg`` are flat lists c0..cn (same length); seed 004 uses c1 = 0 and degree 8.
+    ``pos``/``neg`` are flat lists c0..cn (same length); AI friction chapter uses c1 = 0 and degree 8.
     """
 
     name = "polynomial"
@@ -350,14 +422,14 @@ class Polynomial(StaticModel):
             lo=None,
             unit="N*m",
             is_list=True,
-            doc="coefficients c0..cn of F = sum_j c_j v^j for v > 0 (c_j in N*m*(s/rad)^j; seed 004 eq. (8))",
+            doc="coefficients c0..cn of F = sum_j c_j v^j for v > 0 (c_j in N*m*(s/rad)^j; AI friction chapter eq. (8))",
         ),
         Field(
             "neg",
             lo=None,
             unit="N*m",
             is_list=True,
-            doc="coefficients c0..cn of |F| = sum_j c_j |v|^j for v < 0 (as pos; seed 004 eq. (8))",
+            doc="coefficients c0..cn of |F| = sum_j c_j |v|^j for v < 0 (as pos; AI friction chapter eq. (8))",
         ),
     )
 

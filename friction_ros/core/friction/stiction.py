@@ -1,6 +1,6 @@
-"""Stiction handling: Karnopp zero-velocity band and seed 004's GKF switching rule.
+"""Stiction handling: Karnopp zero-velocity band and AI friction chapter's GKF switching rule.
 
-Both carry a Stribeck sliding map (seed 004 eq. (5)) and add ``torque_stick(v, applied)``, the friction
+Both carry a Stribeck sliding map (AI friction chapter eq. (5)) and add ``torque_stick(v, applied)``, the friction
 torque given the net non-friction torque ``applied`` acting on the body. The plant uses these rules
 (and the GKF rule for every static model at exact rest).
 """
@@ -16,7 +16,7 @@ from .static import _DELTA, _FC, _FS, _FV, _VS, Stribeck
 
 
 class GKF(Stribeck):
-    """General kinetic friction switching rule (seed 004 eq. (4), standard reading; seed 001 eq. (5)):
+    """General kinetic friction switching rule (AI friction chapter eq. (4), standard reading; GA friction thesis 2002 eq. (5)):
 
     F = F(v) (Stribeck map) if v != 0; F = F_e if v = 0 and |F_e| < Fs; F = Fs sgn(F_e) otherwise.
     """
@@ -46,10 +46,10 @@ class GKF(Stribeck):
 
 
 class Karnopp(GKF):
-    """Karnopp model (Karnopp 1985; extract C.1 / appendix Z): inside the zero-velocity band |v| < dv
+    """Karnopp model (Karnopp 1985): inside the zero-velocity band |v| < dv
 
     F = max(-Fs, min(Fs, F_e)) (the body sticks while |F_e| < Fs and is released above), outside the
-    band the Stribeck sliding map of seed 004 eq. (5).
+    band the Stribeck sliding map of AI friction chapter eq. (5).
     """
 
     name = "karnopp"
@@ -61,7 +61,7 @@ class Karnopp(GKF):
             lo=0.0,
             lo_open=True,
             unit="rad/s",
-            doc="half width of the zero-velocity band |v| < dv where the body sticks (Karnopp 1985; extract C.1)",
+            doc="half width of the zero-velocity band |v| < dv where the body sticks (Karnopp 1985)",
         ),
     )
 

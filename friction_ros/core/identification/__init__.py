@@ -3,11 +3,11 @@
 Modules: ``records`` (time alignment, differentiation: the uniform record), ``bag_loading`` (a
 joint of a bag as a record), ``velocity_regimes``, ``plateau_detection``, ``breakaway_detection``,
 ``plateau_map`` (the static map printed after an experiment), ``training_split``,
-``excitation_checks`` (what a record excites), ``static_fit`` (robust LS on the plateau map), ``ga`` (seed 001's genetic algorithm),
+``excitation_checks`` (what a record excites), ``static_fit`` (robust LS on the plateau map), ``ga`` (GA friction thesis 2002's genetic algorithm),
 ``dynamic_fit`` (output error with DE/GA + Nelder-Mead, inertia jointly), ``learned`` (ANFIS,
 nu-SVR per direction), ``identifiability`` (collinearity flags, confidence intervals), ``metrics``
-(seed 003 eq. 4 NMSE, AIC/BIC, recommendation), ``report`` (Markdown, PNG, JSON, YAML),
-``seed001`` (seed 001's unity-feedback position output error), ``synthetic`` (known-truth runs),
+(ABB M19-S paper eq. 4 NMSE, AIC/BIC, recommendation), ``report`` (Markdown, PNG, JSON, YAML),
+``seed001`` (GA friction thesis 2002's unity-feedback position output error), ``synthetic`` (known-truth runs),
 ``load_terms`` (gravity, offset, spring, load- and position-dependent friction regressors, chosen by
 validation), ``diagnosis`` (what a poor fit's residual follows), ``residual_learning`` (learned
 residual on a physics backbone), ``csv_loading``/``log_loading`` (CSV logs, any bag),

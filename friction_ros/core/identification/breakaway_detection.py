@@ -1,7 +1,7 @@
 """Breakaway torques of a record.
 
-**Breakaway** (seed 004 B.3 experiment 1): the torque at the first sample where the position
-   has moved ``breakaway_counts`` (seed 004: 2) encoder counts from rest, inside ``breakaway``
+**Breakaway** (AI friction chapter B.3 experiment 1): the torque at the first sample where the position
+   has moved ``breakaway_counts`` (AI friction chapter: 2) encoder counts from rest, inside ``breakaway``
    segments or automatically after a dwell at rest.
 """
 
@@ -19,7 +19,7 @@ from friction_ros.core.identification.records import JointData
 
 @dataclass
 class Breakaway:
-    """Torque at which the joint left rest (seed 004: 2 encoder counts of motion)."""
+    """Torque at which the joint left rest (AI friction chapter: 2 encoder counts of motion)."""
 
     time: float
     torque: float
@@ -55,7 +55,7 @@ def _gross_sliding_onset(pos: np.ndarray, i_rest: int, i_end: int, thr: float, s
 
 
 def find_breakaways(data: JointData, *, counts: int = 2, dwell: float = 0.2) -> list[Breakaway]:
-    """Breakaway torques (seed 004 B.3): from the experiment's breakaway END events (their
+    """Breakaway torques (AI friction chapter B.3): from the experiment's breakaway END events (their
     ``target`` is the torque of the step that moved the joint ``counts`` counts), else the peak
     torque of a rising ramp (``dwell`` seconds without sliding before) at the onset of gross
     sliding: more than 30 encoder counts within 50 ms, which the elastic creep under a preload

@@ -1,9 +1,9 @@
-"""Output-error fitting on the recorded trajectory (seed 003 A.3; BAM's simulate-and-compare).
+"""Output-error fitting on the recorded trajectory (ABB M19-S paper A.3; BAM's simulate-and-compare).
 
 For a candidate ``theta`` the friction model is *simulated* along the measured velocity trajectory
 (its internal states -- bristle deflection, Maxwell-slip element forces -- are never measured) and
-the predicted joint torque ``tau_hat = J a + F_hat`` (seed 003 eq. 1) is compared with the measured
-torque; the inertia ``J`` is identified jointly, as in seed 003. The cost is the mean squared torque
+the predicted joint torque ``tau_hat = J a + F_hat`` (ABB M19-S paper eq. 1) is compared with the measured
+torque; the inertia ``J`` is identified jointly, as in the ABB M19-S paper. The cost is the mean squared torque
 error on the training data, after a causal low-pass applied alike to the torque and to every
 regressor (GMS: states driven by a narrow-window velocity, see :class:`Signals`).
 
@@ -12,8 +12,8 @@ Optimisation:
 1. global search over the few nonlinear coefficients (log10 space for scale parameters) with
    scipy's ``differential_evolution`` (population vectorised: one compiled, multi-threaded batch
    simulation per generation; stopped early once its best cost stalls, see STALL_GENERATIONS) or
-   seed 001's GA (:mod:`ga`);
-2. local refinement with Nelder-Mead (seed 003's optimiser), bounded;
+   GA friction thesis 2002's GA (:mod:`ga`);
+2. local refinement with Nelder-Mead (ABB M19-S paper's optimiser), bounded;
 3. the linear coefficients are solved exactly per candidate (variable projection, :mod:`linsolve`).
 """
 
@@ -260,7 +260,7 @@ def fit_time_domain(
         best_x = res.x
         history.append(float(res.fun))
     elif optimizer == "ga":
-        # seed 001 GA in search coordinates shifted to be positive: its abs() repair then acts as a
+        # GA friction thesis 2002 GA in search coordinates shifted to be positive: its abs() repair then acts as a
         # reflection at the lower bound; initialisation ranges = the bounds.
         shift = lo - 0.01
 

@@ -56,7 +56,7 @@ def check_motion(data: JointData, label: str) -> None:
         raise ExcitationError(
             f"{label}: no motion (position range {np.ptp(data.position):.3g} rad, max |v| "
             f"{np.max(np.abs(data.velocity)):.3g} rad/s); the joint must move: record the 'plateaus' "
-            "experiment (constant-velocity plateaus in both directions) or seed 003's 'random' "
+            "experiment (constant-velocity plateaus in both directions) or ABB M19-S paper's 'random' "
             "excitation (band-limited random velocity under a 10 s envelope)"
         )
 
@@ -89,7 +89,7 @@ def check_excitation(ex: Excitation, *, dynamic: bool, static_from_plateaus: boo
         )
     if dynamic and ex.reversals < 4:
         missing.append(
-            f"velocity reversals for presliding dynamics (found {ex.reversals}, need >= 4; run seed 003's "
+            f"velocity reversals for presliding dynamics (found {ex.reversals}, need >= 4; run ABB M19-S paper's "
             "'random' excitation or the 'presliding' cycles)"
         )
     if missing:

@@ -1,7 +1,7 @@
 """The built-in fittable families as :class:`~.fit_model.FitModel` implementations.
 
-* ``coulomb`` / ``coulomb_viscous``: phi = sat(v/eps) (seed 003 A.2.1), linear ``fc`` (+ ``fv``);
-* ``stribeck``: phi = [sat(v/eps), sat(v/eps) exp(-|v/vs|^delta)] (seed 003 A.2.2), theta =
+* ``coulomb`` / ``coulomb_viscous``: phi = sat(v/eps) (ABB M19-S paper A.2.1), linear ``fc`` (+ ``fv``);
+* ``stribeck``: phi = [sat(v/eps), sat(v/eps) exp(-|v/vs|^delta)] (ABB M19-S paper A.2.2), theta =
   ``vs, delta, eps`` (the linear-zone width is fitted), linear ``fc, dfs = fs - fc``;
 * ``dahl``, ``lugre``, ``gms<N>[d]``: the regressors of the compiled kernels (:mod:`kernels`; the
   normalised theta ``sigma_n = sigma/fc``, ``r = fc/fs``, ``sigma0_n = sigma0/fs``,
@@ -102,7 +102,7 @@ class StribeckFit(_StaticStribeckFamily):
     family = help = plateau_shape = "stribeck"
 
     def nonlinear(self):
-        # seed 003 A.2.2: the linear-zone width eps is a coefficient of this model (fitted)
+        # ABB M19-S paper A.2.2: the linear-zone width eps is a coefficient of this model (fitted)
         return [Coef("vs", 1e-4, 2.0, True, 1), Coef("delta", 0.3, 4.0), Coef("eps", 1e-4, 0.5, True, 1)]
 
     def linear(self):

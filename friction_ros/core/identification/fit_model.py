@@ -2,7 +2,7 @@
 
 A :class:`FitModel` describes one fittable family (``coulomb``, ``stribeck``, ``lugre``, ``gms<N>``
 ... or a model defined outside the package, see docs/architecture.md "Adding a friction model").
-Every family predicts the friction as (seed 003 A.3, eq. 1)
+Every family predicts the friction as (ABB M19-S paper A.3, eq. 1)
 
     F_hat(v trajectory) = sum_j beta_j phi_j(v; theta) + fv v
 
@@ -49,7 +49,7 @@ def mid_velocity(v: np.ndarray) -> np.ndarray:
 
 
 def sat_sign(v: np.ndarray, eps: float) -> np.ndarray:
-    """sgn(v) with a linear zone of width eps (seed 003 A.2.1): clip(v / eps, -1, 1)."""
+    """sgn(v) with a linear zone of width eps (ABB M19-S paper A.2.1): clip(v / eps, -1, 1)."""
     return np.clip(np.asarray(v, dtype=float) / eps, -1.0, 1.0)
 
 

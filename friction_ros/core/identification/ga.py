@@ -1,4 +1,4 @@
-"""Seed 001's genetic algorithm (thesis sections 3.1-3.6), exactly as specified in the extract.
+"""The genetic algorithm of the GA friction thesis 2002 (sections 3.1-3.6), exactly as its notes specify it.
 
 * Real-valued encoding ``P = {p_1..p_n}`` with a **mask** selecting the genes that may change.
 * ``N_P`` Parents, each an independent search, ``N_C`` Children per Parent (experiment: 10 and 8).
@@ -35,7 +35,7 @@ from friction_ros.core.validation import ParameterError, check_int, check_real
 
 
 def initial_population(lo: np.ndarray, hi: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
-    """n Parents uniform in [lo, hi] per gene (seed 001 sec. 3.3)."""
+    """n Parents uniform in [lo, hi] per gene (GA friction thesis 2002 sec. 3.3)."""
     return lo + (hi - lo) * rng.random((n, lo.shape[0]))
 
 
@@ -121,7 +121,7 @@ def run_ga(
     seed: int | None = 0,
     callback: Callable[[int, float], None] | None = None,
 ) -> GAResult:
-    """Minimise ``cost_batch(P) -> fits`` with seed 001's GA (see module docstring)."""
+    """Minimise ``cost_batch(P) -> fits`` with GA friction thesis 2002's GA (see module docstring)."""
     lo = np.asarray(lo, dtype=float)
     hi = np.asarray(hi, dtype=float)
     if lo.shape != hi.shape or lo.ndim != 1:

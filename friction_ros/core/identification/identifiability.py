@@ -5,7 +5,7 @@ the search coordinates, analytic for the linear ones), scaled to unit column nor
 
 * singular values below ``tol`` x the largest reveal (near-)collinear directions; every coefficient
   with a large component in such a direction is flagged **not separately identifiable** and the
-  combination that *is* identifiable is reported (seed 001 sec. 3.8: sigma and B_m enter as
+  combination that *is* identifiable is reported (GA friction thesis 2002 sec. 3.8: sigma and B_m enter as
   (sigma + B_m) v, exactly collinear; only their sum is identifiable);
 * pairwise correlations |rho| > 0.99 of the covariance ``s^2 (Jr^T Jr)^+`` are listed;
 * 95 % confidence intervals ``+- 1.96 sqrt(diag cov)``. They assume white residuals and are

@@ -5,8 +5,8 @@ the convention of :mod:`friction_ros.core.friction.joint_load` (REP-103 signs, S
     tau      = J a + tau_load(q) + F(v) + k_L |tau_tr| sgn_eps(v) + sgn_eps(v) R(q)
     tau_load = gravity sin(q + gravity_phase) + offset + spring q,   tau_tr = tau_load(q) + J a
     R(q)     = sum_k c_k cos(k w q) + s_k sin(k w q),                w = 2 pi / ripple_period
-    F(v)     = sgn_eps(v) (fc + (fs - fc) exp(-|v / vs|^delta)) + fv v     (seed 004 eq. 5)
-    sgn_eps(v) = clip(v / eps, -1, 1)                                      (seed 003 A.2.1)
+    F(v)     = sgn_eps(v) (fc + (fs - fc) exp(-|v / vs|^delta)) + fv v     (AI friction chapter eq. 5)
+    sgn_eps(v) = clip(v / eps, -1, 1)                                      (ABB M19-S paper A.2.1)
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ class JointTruth:
             "tau = J a + tau_load(q) + F(v) + k_L |tau_load(q) + J a| sgn_eps(v) + sgn_eps(v) R(q); "
             "tau_load = gravity sin(q + gravity_phase) + offset + spring q; "
             "R(q) = sum_k c_k cos(k w q) + s_k sin(k w q), w = 2 pi / ripple_period; "
-            "F(v) = sgn_eps(v) (fc + (fs - fc) exp(-|v/vs|^delta)) + fv v (seed 004 eq. 5); "
+            "F(v) = sgn_eps(v) (fc + (fs - fc) exp(-|v/vs|^delta)) + fv v (AI friction chapter eq. 5); "
             "sgn_eps(v) = clip(v / eps, -1, 1); effort = tau + sensor_offset + noise"
         )
         return d

@@ -12,15 +12,15 @@ Normalised model forms (derivations from the standard equations, see models.py).
 names are the friction library's (``fc, fs, vs, delta, fv, sigma, sigma0, sigma1, attraction, k,
 alpha``, see docs/coefficients.md); ``F_C = fc``, ``F_S = fs``, ``C = attraction``:
 
-* Stribeck shape (seed 004 eq. 5, seed 003 A.2.2): ``s~(v) = r + (1 - r) exp(-|v/vs|^delta)``,
+* Stribeck shape (AI friction chapter eq. 5, ABB M19-S paper A.2.2): ``s~(v) = r + (1 - r) exp(-|v/vs|^delta)``,
   ``r = fc / fs``, so ``s(v) = fs s~(v)``.
-* Dahl (seed 004 eq. 9, alpha = 1): ``G = F/fc``, ``dG/dx = sigma_n (1 - G sgn v)``,
+* Dahl (AI friction chapter eq. 9, alpha = 1): ``G = F/fc``, ``dG/dx = sigma_n (1 - G sgn v)``,
   ``sigma_n = sigma / fc``; exact update for piecewise-constant v:
   ``G+ = sgn v + (G - sgn v) exp(-sigma_n |v| dt)``.
-* LuGre (seed 004 eqs. 10-11): ``w = sigma0 z / fs``, ``dw/dt = sigma0_n v - sigma0_n |v| w / s~(v)``
+* LuGre (AI friction chapter eqs. 10-11): ``w = sigma0 z / fs``, ``dw/dt = sigma0_n v - sigma0_n |v| w / s~(v)``
   with ``sigma0_n = sigma0 / fs``; exact exponential update with rate ``a = sigma0_n |v| / s~``;
   ``dz/dt = (v - |v| w / s~)``; ``F = fs w + sigma1 dz/dt + fv v``.
-* GMS-N (seed 003 A.2.4, sign-corrected eq. 3): element ``i`` force ``F_i = fs alpha_i G_i``;
+* GMS-N (ABB M19-S paper A.2.4, sign-corrected eq. 3): element ``i`` force ``F_i = fs alpha_i G_i``;
   stick ``dG_i/dt = v / x_i`` (``x_i = alpha_i fs / k_i`` is the element's breakaway
   displacement), slip ``dG_i/dt = attraction_n (sgn v - G_i / s~(v))`` with
   ``attraction_n = attraction / fs`` (exact exponential update), stick -> slip when
@@ -334,10 +334,10 @@ def gms_gram(P, vm, E, dt, sos, damped=False):
     return _pick(_GMS, P.shape[0])(P, vm, E, dt, sos, damped)
 
 
-# ---------------------------------------------------------------- seed 001 unity-feedback loop
+# ---------------------------------------------------------------- GA friction thesis 2002 unity-feedback loop
 @njit(cache=True, inline="always")
 def exp_friction(w, f_st, gamma, delta, f_kmin, sigma):
-    """Seed 001 eq. (21): (F_kmin + (F_ST - F_kmin) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v)."""
+    """GA friction thesis 2002 eq. (21): (F_kmin + (F_ST - F_kmin) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v)."""
     if w == 0.0:
         return 0.0
     aw = abs(w)
@@ -347,10 +347,10 @@ def exp_friction(w, f_st, gamma, delta, f_kmin, sigma):
 
 @njit(cache=True)
 def seed001_simulate(P, u, substeps, h):
-    """Simulated output phi[k] of seed 001's loop J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi').
+    """Simulated output phi[k] of GA friction thesis 2002's loop J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi').
 
     P = [F_ST, gamma, delta, F_kmin, sigma, J_m, B_m]; u is held over each sample (ZOH) and
-    integrated with ``substeps`` explicit-Euler steps of size ``h`` (seed 001 section 9 item 4).
+    integrated with ``substeps`` explicit-Euler steps of size ``h`` (GA friction thesis 2002 section 9 item 4).
     """
     n = u.shape[0]
     out = np.empty(n)
@@ -369,7 +369,7 @@ def seed001_simulate(P, u, substeps, h):
 
 @njit(cache=True, parallel=True)
 def seed001_fit_batch(P, u, theta, substeps, h):
-    """Seed 001 eq. (17) Fit = sum_k (theta[k] - phi[k])^2 for every row of P (inf if invalid)."""
+    """GA friction thesis 2002 eq. (17) Fit = sum_k (theta[k] - phi[k])^2 for every row of P (inf if invalid)."""
     npop = P.shape[0]
     n = u.shape[0]
     fits = np.empty(npop)

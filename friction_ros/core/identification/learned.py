@@ -1,18 +1,18 @@
-"""Seed 004's learned friction maps: ANFIS and nu-SVR, one model per direction (B.4).
+"""AI friction chapter's learned friction maps: ANFIS and nu-SVR, one model per direction (B.4).
 
-**ANFIS** (first-order Takagi-Sugeno, Jang 1993; extract B.4.1), one input x = v, two Gaussian
+**ANFIS** (first-order Takagi-Sugeno, Jang 1993; AI friction chapter B.4.1), one input x = v, two Gaussian
 membership functions, two rules:
 
     mu_j(x) = exp(-(x - c_j)^2 / (2 s_j^2)),  wbar_j = mu_j / (mu_1 + mu_2),
     F(x) = wbar_1 (p_1 x + r_1) + wbar_2 (p_2 x + r_2)
 
 Initialised with epsilon-completeness 0.5 (centres at the data range ends,
-s = range / (2 sqrt(2 ln 2)), extract E.1.12); **hybrid training**: each epoch solves the
+s = range / (2 sqrt(2 ln 2)), AI friction chapter E.1.12); **hybrid training**: each epoch solves the
 consequents (p_j, r_j) by linear least squares with the premises fixed, then takes a gradient step
 on the premises (c_j, s_j) with the consequents fixed (step size adapted: x1.1 after a decrease,
 x0.5 after an increase); error target 1e-4 (RMS, normalised by the output RMS), 100 epochs.
 
-**nu-SVR** (Schoelkopf & Smola; extract B.4.2): scikit-learn ``NuSVR`` with a Gaussian (RBF)
+**nu-SVR** (Schoelkopf & Smola; AI friction chapter B.4.2): scikit-learn ``NuSVR`` with a Gaussian (RBF)
 kernel on the standardised velocity; nu, C and the kernel width are chosen by validation over a
 small grid, per direction, as the paper describes ("cross-validated with testing data for both
 directions").
@@ -148,7 +148,7 @@ def fit_nusvr(x, y, *, max_points: int = 1500, seed: int = 4) -> SvrMap:
     X = ((x - xm) / xs)[:, None]
     Y = (y - ym) / ys
     perm = rng.permutation(x.size)
-    n_val = max(int(0.4 * x.size), 1) if x.size >= 10 else 0  # seed 004: 60/40 split
+    n_val = max(int(0.4 * x.size), 1) if x.size >= 10 else 0  # AI friction chapter: 60/40 split
     tr, va = (perm[n_val:], perm[:n_val]) if n_val else (perm, perm)
     best = None
     for nu in (0.2, 0.5, 0.8):

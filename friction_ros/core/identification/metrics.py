@@ -1,6 +1,6 @@
-"""Model comparison metrics (seed 003 Table 1) and information criteria.
+"""Model comparison metrics (ABB M19-S paper Table 1) and information criteria.
 
-* NMSE in percent, seed 003 eq. (4): ``MSE = 100 / (N sigma_y^2) sum (yhat_i - y_i)^2`` with y the
+* NMSE in percent, ABB M19-S paper eq. (4): ``MSE = 100 / (N sigma_y^2) sum (yhat_i - y_i)^2`` with y the
   measured joint torque (eq. 1: tau_m = J a + tau_f; the inertial part is small at these rates)
   and sigma_y^2 its variance over the same samples; yhat = mean(y) gives 100 %.
 * Relative error in percent, ``100 ||y - yhat|| / ||y||`` (the figure published system
@@ -11,7 +11,7 @@
   including J), on the validation samples.
 * Recommended model (:func:`recommend_with_rule`): lowest validation BIC; a model with fewer
   parameters replaces it when its validation NMSE is within 5 % (relative) of it, overall and at
-  low velocity (seed 003: GMS-10 is "not worth the extra 12 parameters"). Unavailable metrics (a
+  low velocity (ABB M19-S paper: GMS-10 is "not worth the extra 12 parameters"). Unavailable metrics (a
   subset without signal above the noise) never decide.
 """
 
@@ -23,7 +23,7 @@ import numpy as np
 
 
 def nmse_percent(y_hat, y) -> float:
-    """Seed 003 eq. (4) normalised MSE in percent."""
+    """ABB M19-S paper eq. (4) normalised MSE in percent."""
     y = np.asarray(y, dtype=float)
     e = np.asarray(y_hat, dtype=float) - y
     var = float(np.var(y))

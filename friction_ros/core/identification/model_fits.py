@@ -149,7 +149,7 @@ def direction_part(per: dict, joint: dict) -> Callable[[np.ndarray], np.ndarray]
 
 
 def with_direction_levels(m: ModelResult, per: dict, joint: dict) -> ModelResult:
-    """A symmetric dynamic fit made direction-dependent (an asymmetric joint, seed 004 B.3): the
+    """A symmetric dynamic fit made direction-dependent (an asymmetric joint, AI friction chapter B.3): the
     time-domain fit saw the torque less ``d(v)`` (:func:`direction_part`); prediction and steady
     state add it back, and the exported config is the library's ``asymmetric`` wrapper with the
     presliding coefficients shared and each direction's ``fc, fs, vs, delta, fv`` from the plateaus."""

@@ -1,6 +1,6 @@
 """Fit specifications: each fittable model as (nonlinear search space) + (linear coefficients).
 
-Every model predicts the measured joint torque as (seed 003 A.3, eq. 1 with tau_0 = 0)
+Every model predicts the measured joint torque as (ABB M19-S paper A.3, eq. 1 with tau_0 = 0)
 
     tau_hat = J a + F_hat(v trajectory),      F_hat = sum_j beta_j phi_j(v; theta) + fv v
 
@@ -31,7 +31,7 @@ from friction_ros.core.identification.fit_registry import LEARNED, fit_model, mo
 from friction_ros.core.identification.load_terms import LoadTerms
 from friction_ros.core.validation import ParameterError
 
-DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (seed 003 A.2.1/A.2.2)
+DEFAULT_EPS = 1e-3  # [rad/s] width of the linear zone replacing sgn(v) (ABB M19-S paper A.2.1/A.2.2)
 CONSTRAINT_WEIGHT = 1e6  # linear equality constraints: pseudo-observation weight (see FitSpec._constrain)
 
 
@@ -234,7 +234,7 @@ class FitSpec:
         return g
 
     def fix_steady_state(self, static: dict) -> None:
-        """Two-stage identification (anchors 3.3; seed 004 B.3): hold the whole steady-state curve
+        """Two-stage identification (anchors 3.3; AI friction chapter B.3): hold the whole steady-state curve
         at a static fit's ``fc, fs, vs, delta, fv`` (from constant-velocity plateaus, where the
         friction is measured directly) and leave only the presliding/dynamic coefficients and ``J``
         to the time-domain search.

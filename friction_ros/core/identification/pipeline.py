@@ -117,7 +117,7 @@ def fit_records(
     (:func:`~friction_ros.core.identification.training_split.training_segments`, about ``train_seconds``
     in all) and validates on the rest; ``"window"`` on the single most exciting ``train_seconds``
     window (:func:`~friction_ros.core.identification.training_split.training_window`); ``"first"`` on the
-    first ``train_seconds`` (seed 003 A.3).
+    first ``train_seconds`` (ABB M19-S paper A.3).
 
     ``load``: the load, gravity and position terms identified jointly with every model
     (:mod:`~friction_ros.core.identification.load_terms`): ``"auto"`` (default: chosen by validation
@@ -229,7 +229,7 @@ def fit_records(
         if ex_train.reversals < 4:
             why = (
                 f"too little excitation in the {train_seconds:g} s training window: "
-                f"{ex_train.reversals} velocity reversals, need >= 4 for presliding dynamics (run seed 003's "
+                f"{ex_train.reversals} velocity reversals, need >= 4 for presliding dynamics (run ABB M19-S paper's "
                 "'random' excitation, or lower/raise --train-seconds)"
             )
             dynamic = [n for n in names if n not in LEARNED and spec_for(n).dynamic]

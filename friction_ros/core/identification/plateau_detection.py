@@ -1,9 +1,9 @@
 """Constant-velocity plateaus of a record and what they say about the load.
 
-**Plateaus** (constant-velocity segments, seed 004 B.3 experiment 2): from ExperimentEvent
+**Plateaus** (constant-velocity segments, AI friction chapter B.3 experiment 2): from ExperimentEvent
    START/END markers (program containing ``plateau``) when present, otherwise detected
    automatically as runs where the velocity stays within a tolerance of its running mean; the first
-   ``settle`` seconds (seed 004: 0.2 s) of each are discarded; each gives (mean v, mean tau,
+   ``settle`` seconds (AI friction chapter: 0.2 s) of each are discarded; each gives (mean v, mean tau,
    spread).
 """
 
@@ -22,7 +22,7 @@ from friction_ros.core.identification.velocity_regimes import mask_runs
 
 @dataclass
 class Plateau:
-    """A constant-velocity segment: mean velocity and torque with their spread (seed 004)."""
+    """A constant-velocity segment: mean velocity and torque with their spread (AI friction chapter)."""
 
     t_start: float
     t_end: float

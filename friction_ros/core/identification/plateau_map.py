@@ -4,13 +4,13 @@
 bag recorded by ``friction-experiment`` (or any bag with ``plateau`` START/END markers) and returns
 one row per constant-velocity plateau: mean velocity and torque with their spread (standard
 deviation over the plateau, first ``settle`` seconds discarded), plus :meth:`PlateauMap.aggregate`,
-the seed 004 "mean over the repeats per set-point" with the spread across repeats.
+the AI friction chapter "mean over the repeats per set-point" with the spread across repeats.
 
 It reuses the offline fitting's data preparation (:func:`friction_ros.core.identification.bag_loading.load_bag`:
 uniform grid, Savitzky-Golay velocity from position, torque from ``effort``) and its event-based
 plateau extraction (:func:`friction_ros.core.identification.plateau_detection.find_plateaus`), so the map printed
 after an experiment is exactly what ``friction-fit`` fits. ``settle`` defaults to what each
-plateau's START note says (``settle=<s>``, sized per plateau by the runner), else seed 004's 0.2 s.
+plateau's START note says (``settle=<s>``, sized per plateau by the runner), else AI friction chapter's 0.2 s.
 
 ``breakaway_torques(bag_or_path)`` lists the breakaway torques the runner detected (END events of
 ``breakaway`` segments carry the torque in ``target``), ``experiment_events(...)`` all markers.

@@ -8,8 +8,8 @@ the convention of :mod:`friction_ros.core.friction.joint_load` (REP-103 signs, S
     tau      = J a + tau_load(q) + F(v) + k_L |tau_tr| sgn_eps(v) + sgn_eps(v) R(q)
     tau_load = gravity sin(q + gravity_phase) + offset + spring q,   tau_tr = tau_load(q) + J a
     R(q)     = sum_k c_k cos(k w q) + s_k sin(k w q),                w = 2 pi / ripple_period
-    F(v)     = sgn_eps(v) (fc + (fs - fc) exp(-|v / vs|^delta)) + fv v     (seed 004 eq. 5)
-    sgn_eps(v) = clip(v / eps, -1, 1)                                      (seed 003 A.2.1)
+    F(v)     = sgn_eps(v) (fc + (fs - fc) exp(-|v / vs|^delta)) + fv v     (AI friction chapter eq. 5)
+    sgn_eps(v) = clip(v / eps, -1, 1)                                      (ABB M19-S paper A.2.1)
 
 ``k_L |tau_tr|`` is the friction a gear adds in proportion to the torque it transmits (gear
 efficiency; Rhoban BAM's load-dependent models); ``R(q)`` the Coulomb level rippling with the
@@ -151,7 +151,7 @@ class Run:
 
     ``stamp_ns`` [int ns since the epoch] is each sample's header stamp and log time; ``t`` [s] is
     ``(stamp_ns - start_ns) 1e-9``, the time the trajectory was evaluated at.
-    ``noise_floor_nmse_percent = 100 var(torque_noise) / var(effort)``: the NMSE (seed 003 eq. 4)
+    ``noise_floor_nmse_percent = 100 var(torque_noise) / var(effort)``: the NMSE (ABB M19-S paper eq. 4)
     a perfect model of the effort would score on this run; ``friction_noise_floor_nmse_percent =
     100 var(noise) / var(true_friction + noise)``, the same for the friction part alone (effort minus
     the true J a, tau_load and sensor offset), much higher because gravity dominates var(effort).

@@ -3,14 +3,14 @@
 Steps (all SI, REP-103 signs):
 
 1. **Torque**: ``sensor_msgs/JointState.effort`` is the joint torque [N*m]; or a current [A]
-   converted as ``tau = K_t * N * i`` (torque constant x gear ratio; seed 003 A.1: "the measured
+   converted as ``tau = K_t * N * i`` (torque constant x gear ratio; ABB M19-S paper A.1: "the measured
    current is assumed to correspond to the torque").
 2. **Time alignment**: messages are sorted by stamp, duplicates dropped, and everything (also a
    current from another topic) is linearly interpolated onto one uniform grid with the median
    sample period (``dt``) of the joint states.
 3. **Velocity / acceleration** from position by Savitzky-Golay differentiation (polynomial order 3,
    zero phase, so no lag offline): velocity window ``velocity_window`` (default 21 ms),
-   acceleration window ``acceleration_window`` (default 41 ms). With the seed 003 encoder
+   acceleration window ``acceleration_window`` (default 41 ms). With the ABB M19-S paper encoder
    (1.05e-4 rad) at 1 kHz the velocity noise is ~1e-3 rad/s and the -3 dB bandwidth ~30 Hz, well
    above the 4 Hz excitation. If only a velocity field exists, it is used and differentiated.
 

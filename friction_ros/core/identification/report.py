@@ -2,7 +2,7 @@
 
 Layout of ``out_dir`` (FIGAROH-style report + machine-readable summary):
 
-* ``report.md``: data, excitation, plateaus/breakaway, seed 003 Table 1 analogue (validation NMSE
+* ``report.md``: data, excitation, plateaus/breakaway, ABB M19-S paper Table 1 analogue (validation NMSE
   high/low velocity, max error, parameter count, AIC/BIC), recommended model, coefficients with
   95 % confidence intervals, identifiability flags, notes;
 * ``summary.json``: for every model ``coefficients``, ``config`` (library form or null),
@@ -131,7 +131,7 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         + (f"{tr[0].resolution:.3g} {u['position']}" if tr[0].resolution > 0 else "unknown (no position)"),
         (
             f"- split: first {res.options['train_seconds']:g} s of each record for training, the rest for validation "
-            "(seed 003 A.3)"
+            "(ABB M19-S paper A.3)"
             if res.options.get("train_window") == "first"
             else f"- split: the {res.options['train_seconds']:g} s window of each record with the most velocity reversals "
             "and speed range for training (chosen by content: "
@@ -158,7 +158,7 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
         f"whatever torque holds the joint; {_n_rest(res)} samples left out); a subset metric whose measured torque "
         "varies no more than its noise, or with fewer than 200 samples, is n/a",
         "",
-        "## Model comparison (validation data; seed 003 Table 1 analogue)",
+        "## Model comparison (validation data; ABB M19-S paper Table 1 analogue)",
         "",
         "| model | method | NMSE high [%] (max err) | NMSE low [%] (max err) | NMSE all [%] | rel. error [%] "
         "| params | AIC | BIC | fit [s] |",
@@ -184,7 +184,7 @@ def markdown(res, sources=None, plots: dict | None = None) -> str:
     ]
     L += [
         "",
-        "Seed 003 Table 1 (paper, ABB M19-S): Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
+        "ABB M19-S paper Table 1: Coulomb 4.00 / 17.92 %, Stribeck 0.55 / 9.59 %, LuGre 0.41 / 4.30 %, "
         "GMS-4 0.40 / 1.39 %, GMS-10 0.38 / 1.19 % (high / low velocity).",
         "",
     ]

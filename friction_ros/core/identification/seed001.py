@@ -1,18 +1,18 @@
-"""Seed 001's identification set-up: unity-feedback loop, position output error, GA.
+"""GA friction thesis 2002's identification set-up: unity-feedback loop, position output error, GA.
 
-Plant with the modified Exponential friction model (thesis eqs. 20-21, extract 1.2-1.3):
+Plant with the modified Exponential friction model (thesis eqs. 20-21, GA friction thesis 2002 section 1.2-1.3):
 
     J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi'),
     F_Exp(v) = (F_kmin + (F_ST - F_kmin) exp(-(gamma |v|)^delta) + sigma |v|) sgn(v),  sgn(0) = 0
 
-driven by the decreasing-amplitude chirp (variant A, extract 4.2)
+driven by the decreasing-amplitude chirp (variant A, GA friction thesis 2002 section 4.2)
 ``u(t) = (pi - 0.01 t) sin(0.3 t + 0.003 t^2)`` sampled at 0.01 s, integrated with explicit
-Euler sub-steps (extract 9 item 4). Fitness, eq. (17): ``Fit = sum_k (theta[k] - phi[k])^2``
+Euler sub-steps (GA friction thesis 2002 section 9 item 4). Fitness, eq. (17): ``Fit = sum_k (theta[k] - phi[k])^2``
 (positions only). Genes ``P = {F_ST, gamma, delta, F_kmin, sigma, J_m, B_m}``; GA per :mod:`ga`
 with 10 Parents x 8 Children, initialisation U[0.01, 1.5], age threshold 4.
 
 Identifiability: sigma |v| sgn(v) = sigma v is the same regressor as B_m v, so only sigma + B_m is
-identifiable (extract 3.8); :func:`identifiability_report` shows it from the Jacobian.
+identifiable (GA friction thesis 2002 section 3.8); :func:`identifiability_report` shows it from the Jacobian.
 """
 
 from __future__ import annotations
@@ -26,12 +26,12 @@ from friction_ros.core.identification.ga import GAResult, run_ga
 from friction_ros.core.identification.kernels import seed001_fit_batch, seed001_simulate
 
 GENES = ["F_ST", "gamma", "delta", "F_kmin", "sigma", "J_m", "B_m"]
-#: Tables 5.2 / 5.3 of the thesis (extract section 5)
+#: Tables 5.2 / 5.3 of the thesis (GA friction thesis 2002 section 5)
 THESIS = np.array([1.5281, 4.3743, 0.1992, 0.3303, 0.0588, 0.2734, 0.2738])
 
 
 def chirp_input(duration: float = 200.0, dt: float = 0.01) -> np.ndarray:
-    """Variant-A decreasing-amplitude chirp (extract 4.2)."""
+    """Variant-A decreasing-amplitude chirp (GA friction thesis 2002 section 4.2)."""
     t = np.arange(int(round(duration / dt))) * dt
     return (math.pi - 0.01 * t) * np.sin(0.3 * t + 0.003 * t**2)
 
@@ -42,7 +42,7 @@ def simulate(P, u, dt: float = 0.01, substeps: int = 10) -> np.ndarray:
 
 
 def fit(u, theta, dt: float = 0.01, substeps: int = 10, **ga_options) -> GAResult:
-    """Run seed 001's GA on (u, theta); ``ga_options`` go to :func:`ga.run_ga`."""
+    """Run GA friction thesis 2002's GA on (u, theta); ``ga_options`` go to :func:`ga.run_ga`."""
     u = np.ascontiguousarray(u, float)
     theta = np.ascontiguousarray(theta, float)
     h = dt / substeps
@@ -54,7 +54,7 @@ def fit(u, theta, dt: float = 0.01, substeps: int = 10, **ga_options) -> GAResul
 
 
 def friction_curve(P, v) -> np.ndarray:
-    """Total dissipative curve F_Exp(v) + B_m v (what the data determine; extract 9 item 5d)."""
+    """Total dissipative curve F_Exp(v) + B_m v (what the data determine; GA friction thesis 2002 section 9 item 5d)."""
     f_st, gamma, delta, f_kmin, sigma, _jm, bm = P
     av = np.abs(v)
     return (f_kmin + (f_st - f_kmin) * np.exp(-((gamma * av) ** delta)) + sigma * av) * np.sign(v) + bm * v

@@ -1,7 +1,7 @@
-"""Static friction maps fitted to constant-velocity plateaus (seed 004 B.3 experiment 2).
+"""Static friction maps fitted to constant-velocity plateaus (AI friction chapter B.3 experiment 2).
 
 At a plateau the acceleration is zero, so the mean torque is the steady-sliding friction
-``F(v)``. The exponential Stribeck family (seed 004 eq. 5; seed 003 A.2.2)
+``F(v)``. The exponential Stribeck family (AI friction chapter eq. 5; ABB M19-S paper A.2.2)
 
     F(v) = [F_C + (F_S - F_C) exp(-|v/v_S|^delta)] sgn(v) + F_v v
 

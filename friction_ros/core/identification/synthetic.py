@@ -1,15 +1,15 @@
 """Known-truth identification records from the simulated plant (tests, benchmarks, demos).
 
-``seed003_experiment`` runs seed 003's identification excitation (A.3) on a plant preset
+``seed003_experiment`` runs ABB M19-S paper's identification excitation (A.3) on a plant preset
 (default ``abb_m19s``: J = 0.0012 kg m^2, GMS-4 truth, 1.05e-4 rad encoder, current noise) in
 closed velocity loop at 1 kHz:
 
     v_ref(t) = e(t) r(t),  r = 4th-order Butterworth (4 Hz) band-limited white noise, unit RMS,
-    e(t) = (H+L)/2 + (H-L)(2/pi)[sin w0 t + sin(3 w0 t)/3],  w0 = 2 pi / 10 s   (extract A.3 (a)),
+    e(t) = (H+L)/2 + (H-L)(2/pi)[sin w0 t + sin(3 w0 t)/3],  w0 = 2 pi / 10 s   (ABB M19-S paper A.3 (a)),
     floored at L (the 3-term series undershoots);
 
 ``plateau_experiment`` runs constant-velocity plateaus in both directions over a log-spaced speed
-range (seed 004 B.3 experiment 2) with ExperimentEvent markers. ``write_bag`` stores either as a
+range (AI friction chapter B.3 experiment 2) with ExperimentEvent markers. ``write_bag`` stores either as a
 rosbag2 MCAP directory (sensor_msgs/JointState + friction_msgs/ExperimentEvent).
 """
 
@@ -44,7 +44,7 @@ class Record:
 
 
 def seed003_velocity(duration: float, dt: float, high: float, low: float, seed: int = 3) -> np.ndarray:
-    """Seed 003's excitation velocity (module docstring)."""
+    """ABB M19-S paper's excitation velocity (module docstring)."""
     n = int(round(duration / dt))
     t = np.arange(n) * dt
     rng = np.random.default_rng(seed)
@@ -143,7 +143,7 @@ def seed003_experiment(
     friction=None,
     overrides: dict | None = None,
 ) -> Record:
-    """Seed 003's identification run (50 s at 1 kHz by default) on a plant preset."""
+    """ABB M19-S paper's identification run (50 s at 1 kHz by default) on a plant preset."""
     v = seed003_velocity(duration, dt, high, low, seed)
     ev = [Event(0.0, "random", "seed003", 0, START, math.nan), Event(duration, "random", "seed003", 0, END)]
     return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=ev)

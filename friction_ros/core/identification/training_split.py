@@ -1,6 +1,6 @@
 """Train/validation split of a record.
 
-**Train/validation split**: seed 003 A.3 trains on the first 10 s and validates on the rest.
+**Train/validation split**: ABB M19-S paper A.3 trains on the first 10 s and validates on the rest.
 """
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ from friction_ros.core.validation import check_real
 
 
 def split(data: JointData, train_seconds: float = 10.0) -> tuple[JointData, JointData]:
-    """Seed 003 A.3: the first ``train_seconds`` for training, the remainder for validation."""
+    """ABB M19-S paper A.3: the first ``train_seconds`` for training, the remainder for validation."""
     check_real("train_seconds", train_seconds, 0.0, lo_open=True, unit="s")
     i = int(round(train_seconds / data.dt))
     if i >= data.n - 10:
         raise ExcitationError(
             f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
-            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+            "record longer (ABB M19-S paper: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
         )
     return data.slice(0, i), data.slice(i, data.n)
 
@@ -41,7 +41,7 @@ def training_window(data: JointData, train_seconds: float = 10.0, step: float = 
     if w >= n - 10:
         raise ExcitationError(
             f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
-            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+            "record longer (ABB M19-S paper: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
         )
     v = data.velocity
     mv = moving_mask(v, data.resolution, data.dt)
@@ -85,7 +85,7 @@ def training_segments(
     if int(round(train_seconds / dt)) >= n - 10:
         raise ExcitationError(
             f"train_seconds = {train_seconds:g} leaves no validation data in a {data.duration:.1f} s record: "
-            "record longer (seed 003: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
+            "record longer (ABB M19-S paper: 50 s, 10 s train + 40 s validation) or lower --train-seconds"
         )
     L = max(int(round((chunk or max(train_seconds / 4.0, 1.0)) / dt)), 2)
     cuts = {0, n}

@@ -15,7 +15,7 @@ def mask_runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def velocity_envelope(v: np.ndarray, dt: float, window: float = 1.0) -> np.ndarray:
-    """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of seed 003's envelope."""
+    """Moving RMS of the velocity over ``window`` seconds (centred), a proxy of ABB M19-S paper's envelope."""
     # a record shorter than the window (e.g. the part of a cut-off bag that survived): the whole record
     w = min(max(int(round(window / dt)), 1), max(len(v), 1))
     k = np.ones(w) / w
@@ -42,7 +42,7 @@ def motion_floor(v: np.ndarray, resolution: float) -> float:
 def standstill_mask(v: np.ndarray, resolution: float, dt: float, dwell: float = 0.5) -> np.ndarray:
     """Samples of a standstill: a run at rest (not :func:`moving_mask`) longer than ``dwell`` s.
 
-    At rest the friction equals whatever torque holds the joint (anywhere within +-fs, seed 004
+    At rest the friction equals whatever torque holds the joint (anywhere within +-fs, AI friction chapter
     B.3; a drive switched off at the end of a log holds 0), so a standstill before, between or
     after the experiments carries no information an output-error model can be scored on; the
     whole run is left out. Shorter stops (reversals, pauses between plateaus) are kept.
@@ -60,7 +60,7 @@ def standstill_mask(v: np.ndarray, resolution: float, dt: float, dwell: float = 
 def high_velocity_mask(
     v: np.ndarray, dt: float, threshold: float | None = None, moving: np.ndarray | None = None
 ) -> tuple[np.ndarray, float]:
-    """Classify *moving* samples as high (envelope above threshold) or low velocity (seed 003 Table 1).
+    """Classify *moving* samples as high (envelope above threshold) or low velocity (ABB M19-S paper Table 1).
 
     Default threshold: geometric mean of the 5th and 95th percentiles of the 1 s velocity RMS over
     the moving samples only (samples at rest, e.g. a standstill before or after the experiment,

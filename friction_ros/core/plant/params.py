@@ -24,7 +24,7 @@ ENCODER_LOCATIONS = ("motor", "joint")
 
 
 def voltage_params_from_transfer_function(k: float, tau: float, resistance: float = 1.0) -> dict:
-    """Voltage-mode motor constants reproducing theta/u = K / (s (tau s + 1)) (seed 004 eq. (12)).
+    """Voltage-mode motor constants reproducing theta/u = K / (s (tau s + 1)) (AI friction chapter eq. (12)).
 
     With L = 0 and no viscous term: Ke = Kt = 1/K, J = Kt tau / (R K) gives
     theta'' = -theta'/tau + (K/tau) u. ``resistance`` is free (the paper does not give it).
@@ -215,7 +215,7 @@ class PlantParams:
 
     @property
     def reflected_inertia(self) -> float:
-        """J_total at the motor = J_motor + J_transmission + J_load / (r^2 eta) (seed 002 eq. (2))."""
+        """J_total at the motor = J_motor + J_transmission + J_load / (r^2 eta) (Tilakaratna et al. 2004 eq. (2))."""
         return (
             self.motor_inertia
             + self.transmission_inertia
@@ -223,7 +223,7 @@ class PlantParams:
         )
 
     def reflect(self, joint_torque: float) -> float:
-        """Joint-side torque/force reflected to the motor: T / (r eta) (seed 002 eqs. (3)-(4))."""
+        """Joint-side torque/force reflected to the motor: T / (r eta) (Tilakaratna et al. 2004 eqs. (3)-(4))."""
         return joint_torque / (self.ratio * self.gear_efficiency)
 
     @classmethod

@@ -1,5 +1,5 @@
 """What the plant's sensors report: encoder quantisation, differenced and filtered velocity, current
-noise/offset and measurement delay (all seeded), plus the current-sensor calibration of seed 004.
+noise/offset and measurement delay (all seeded), plus the current-sensor calibration of AI friction chapter.
 
 :class:`Sensors` turns the true values at the end of a control period into a :class:`Measurement`:
 
@@ -22,13 +22,13 @@ import numpy as np
 
 from friction_ros.core.plant.params import PlantParams
 
-# seed 004 eq. (13): I_s = 7.8555 V_s - 19.6544
+# AI friction chapter eq. (13): I_s = 7.8555 V_s - 19.6544
 SEED004_SENSOR_GAIN = 7.8555
 SEED004_SENSOR_OFFSET = -19.6544
 
 
 def current_from_sensor_voltage(v, gain: float = SEED004_SENSOR_GAIN, offset: float = SEED004_SENSOR_OFFSET):
-    """Current-sensor calibration of seed 004 eq. (13): I = gain * V + offset [A]."""
+    """Current-sensor calibration of AI friction chapter eq. (13): I = gain * V + offset [A]."""
     return gain * np.asarray(v, dtype=float) + offset
 
 

@@ -1,12 +1,12 @@
 """Gearhead DC servo plant (pure core): mechanics, actuation, friction and realistic sensing.
 
 Model (motor frame, SI; ``r`` = gear_ratio * (2*pi/lead_pitch for linear axes) = motor rad per joint
-unit, ``eta`` = transmission efficiency applied to reflected load quantities as in seed 002
+unit, ``eta`` = transmission efficiency applied to reflected load quantities as in Tilakaratna et al. 2004
 eqs. (2)-(4)):
 
 * rigid transmission: ``J_eq w' = Kt i - Bm w - (Bl w/r + Kl q + m_g - T_load)/(r eta) - F_m(w)
-  - F_l(w/r)/(r eta)``, ``J_eq = J_motor + J_transmission + J_load/(r^2 eta)`` (seed 002 eq. (1)-(4),
-  seed 003 eq. (1));
+  - F_l(w/r)/(r eta)``, ``J_eq = J_motor + J_transmission + J_load/(r^2 eta)`` (Tilakaratna et al. 2004 eq. (1)-(4),
+  ABB M19-S paper eq. (1));
 * gravity: ``m_g = gravity_force + gravity sin(q + gravity_phase)``: a constant load towards -q
   (a vertical linear axis) plus a pendulum load ``m g l sin(q + q0)`` [N*m] (a robot joint that
   lifts a link; ``gravity`` = m g l, ``gravity_phase`` = q0: the link hangs at q = -q0, is upright
@@ -16,11 +16,11 @@ eqs. (2)-(4)):
 * backlash / compliant transmission (``coupling_stiffness > 0``): two bodies coupled by a dead-zone
   spring-damper of total gap ``backlash`` (joint units);
 * actuation: ``current`` (command = amplifier input, i_ref = amplifier_gain*cmd, current loop as a
-  first-order lag with ``current_time_constant``, seed 002 eq. (9)), ``torque`` (command = joint
+  first-order lag with ``current_time_constant``, Tilakaratna et al. 2004 eq. (9)), ``torque`` (command = joint
   torque, i_ref = cmd/(Kt r eta), same lag) or ``voltage`` (L di/dt = u - R i - Ke w; L = 0 gives
-  seed 004's K/(s(tau s + 1)), see :func:`~friction_ros.core.plant.params.voltage_params_from_transfer_function`);
+  AI friction chapter's K/(s(tau s + 1)), see :func:`~friction_ros.core.plant.params.voltage_params_from_transfer_function`);
 * friction: any model of :mod:`friction_ros.core.friction` at the motor and/or load side. Static
-  models get exact stick logic (GKF rule of seed 004 eq. (4) at rest, zero-crossing detection,
+  models get exact stick logic (GKF rule of AI friction chapter eq. (4) at rest, zero-crossing detection,
   Karnopp band when the model is ``karnopp``); dynamic models use their exact/implicit updates;
 * sensing (:mod:`friction_ros.core.plant.sensing`): encoder quantisation (quadrature counts/rev,
   optional belt ratio), velocity from a filtered difference, current noise/offset, measurement and
@@ -31,7 +31,7 @@ The inner loop (sub-steps inside one control period) runs in one compiled numba 
 
 :attr:`GearheadServoPlant.command_scale` converts a joint torque into the plant's command: current
 mode 1 / (amplifier_gain Kt r eta), torque mode 1, voltage mode R / (Kt r eta) (quasi-static, the
-back-EMF is part of the plant's linear dynamics, seed 004 eq. (12)).
+back-EMF is part of the plant's linear dynamics, AI friction chapter eq. (12)).
 
 Commands are plausibility-checked: a NaN/inf command or one with ``|command| >``
 :data:`MAX_COMMAND` (1e9 A, V or N*m: no amplifier reaches it) raises ParameterError and leaves the
