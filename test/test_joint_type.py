@@ -51,6 +51,7 @@ PRISMATIC = {
     "V*s/rad": "V*s/m",
     "bit/s": "bit/s",
     "counts/rev": "counts/rev",
+    "degC": "degC",
     "kg*m^2": "kg",
     "kg*m^2 or kg": "kg",
     "m": "m",
