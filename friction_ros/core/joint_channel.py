@@ -1,5 +1,5 @@
 """One joint of a multi-joint node: the per-joint holder of the controller's
-:class:`~friction_ros.core.control.joint_group.JointGroup` and the estimator's
+:class:`~friction_ros.core.joint_group.JointGroup` and the estimator's
 :class:`~friction_ros.core.estimation.joint_estimators.EstimatorGroup` (pure, no rclpy).
 
 A channel is a joint's input gate (:class:`~friction_ros.core.input_gate.JointInputGate`), the

@@ -48,11 +48,11 @@ from trajectory_msgs.msg import JointTrajectory
 
 from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.control.controller_terms import state_floats
-from friction_ros.core.control.group_inputs import control_channel
-from friction_ros.core.control.joint_group import COMPUTED, RESEND, JointGroup
 from friction_ros.core.experiment.references import reference_from_config
 from friction_ros.core.input_gate import JointInputGate
 from friction_ros.core.joint_config import GAINS
+from friction_ros.core.joint_group import COMPUTED, RESEND, JointGroup
+from friction_ros.core.joint_group_inputs import control_channel
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import (
     CONTROLLER_STATE_FLOATS,
@@ -88,7 +88,7 @@ assert CONTROLLER_STATE_FLOATS == tuple(
 
 
 class CompensatingControllerNode(ReferenceInputs, ParameterNode):
-    """Thin adapter over a :class:`~friction_ros.core.control.joint_group.JointGroup` (one
+    """Thin adapter over a :class:`~friction_ros.core.joint_group.JointGroup` (one
     CompensatingController per joint); see the module docstring."""
 
     def __init__(self, **kwargs):

@@ -1,5 +1,5 @@
 """The compensating_controller's inputs besides joint states, unpacked from their messages for
-its :class:`~friction_ros.core.control.joint_group.JointGroup` (which checks them at the door):
+its :class:`~friction_ros.core.joint_group.JointGroup` (which checks them at the door):
 ``reference`` (trajectory_msgs/JointTrajectory), ``desired_joint_states`` (sensor_msgs/JointState)
 and ``friction_estimate`` (adopted coefficients, friction_msgs/FrictionEstimate)."""
 

@@ -1,4 +1,4 @@
-"""The inputs of a :class:`~friction_ros.core.control.joint_group.JointGroup` besides joint states
+"""The inputs of a :class:`~friction_ros.core.joint_group.JointGroup` besides joint states
 (pure, no rclpy): references per joint, adopted friction coefficients, compensation on/off and
 run-time parameter changes.
 

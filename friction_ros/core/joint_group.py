@@ -29,9 +29,9 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from friction_ros.core.control.group_inputs import GroupInputs
 from friction_ros.core.input_gate import DUPLICATE, REJECTED, RESYNC
 from friction_ros.core.joint_channel import ERROR, OK, WARN, JointChannel
+from friction_ros.core.joint_group_inputs import GroupInputs
 from friction_ros.core.validation import ParameterError
 
 #: results of :meth:`JointGroup.step`
