@@ -12,6 +12,10 @@ Per period k (t_k = k dt)::
 ``command_scale`` is the plant's (:attr:`GearheadServoPlant.command_scale`): it converts the
 controller's joint torque to the plant's command unit.
 
+N joints (:func:`run_closed_loop_group`): one plant per joint, one
+:class:`~friction_ros.core.joint_group.JointGroup` (the compensating_controller node's per-sample
+path: gate, reference, time base, timeout, fallback) fed one joint-state sample per period.
+
 Everything is seeded and stepped in one thread, so the same inputs give bit-identical outputs
 (tests, benchmarks and the ROS lockstep comparison rely on it).
 
