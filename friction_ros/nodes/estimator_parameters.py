@@ -36,7 +36,7 @@ NODE_FIELDS = [
 PLAIN_KEYS = tuple(name for name, item in ESTIMATOR_SCHEMA.items.items() if isinstance(item, Field)) + (
     "joint_type",
 )
-_ESTIMATOR_PREFIX = re.compile(r"(?<![\w.])estimator\.")
+ESTIMATOR_PREFIX = re.compile(r"(?<![\w.])estimator\.")
 
 
 JOINTS_FIELD = Field(

@@ -60,7 +60,7 @@ from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import FrictionEstimateEncoder, JointStateDecoder
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.estimator_parameters import (  # noqa: F401 (parameter_schema, core_config: the node's API)
-    _ESTIMATOR_PREFIX,
+    ESTIMATOR_PREFIX,
     PLAIN_KEYS,
     core_config,
     joint_config,
@@ -105,10 +105,10 @@ class FrictionEstimatorNode(ParameterNode):
                 j, values.get("input_gate"), period=period, need_velocity=True, need_effort=True
             )
             ch = JointChannel(j, gate)
-            ch.estimator = self._build(
-                j, cfg, overrides[j], values["joint_type"]
-            )  # refuses to start if invalid
-            ch.config = cfg
+            ch.estimator, ch.config = (
+                self._build(j, cfg, overrides[j], values["joint_type"]),
+                cfg,
+            )  # or refuse
             channels.append(ch)
         self.group = EstimatorGroup(channels, period, self.values["publish_every"])
         self._encoders = {j: FrictionEstimateEncoder(j) for j in joints}  # one struct.pack per estimate
@@ -147,7 +147,7 @@ class FrictionEstimatorNode(ParameterNode):
         except ParameterError as exc:
             if self.single:
                 raise
-            text = _ESTIMATOR_PREFIX.sub("", str(exc))
+            text = ESTIMATOR_PREFIX.sub("", str(exc))
             raise ParameterError(name_joint_error(text, self.layout, joint, overrides)) from None
 
     def _apply(self, changes: dict) -> None:
