@@ -177,9 +177,8 @@ class CompensatingControllerNode(ReferenceInputs, ParameterNode):
             if gains_only and not ch.controller.compensation_fallback:
                 plan.append((ch, None, {k[4:]: jv["pid"][k[4:]] for k in keys}, jv, ov))
                 continue
-            new_ctrl, ref_cfg = build_controller(
-                jv, self.layout, ch.joint, ov, self.single
-            )  # raises: rejected
+            # a ParameterError rejects the whole change (nothing was committed yet)
+            new_ctrl, ref_cfg = build_controller(jv, self.layout, ch.joint, ov, self.single)
             plan.append((ch, (new_ctrl, reference_from_config(ref_cfg)), None, jv, ov))
         self.values = values
         what = ", ".join(sorted(changes))
