@@ -23,6 +23,7 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
             "joint_config",
             "joint_type",
             "input_gate",
+            "joint_channel",
             "coefficient_exchange",
             "command_sources",
             "plotting",
@@ -37,7 +38,10 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("experiment", ("experiment",)),  # what a run does: excitation, references, sizing
     ("can", ("can",)),  # drive codecs, drive logic, drive emulator of a preset
     ("synthetic_logs", ("synthetic_logs",)),  # synthetic machines and their logs
-    ("simulation", ("harness", "compensation_gate")),  # closed loop without ROS, the fitter's gate
+    (
+        "simulation",
+        ("harness", "compensation_gate", "joint_group", "joint_group_inputs"),
+    ),  # closed loop without ROS (N joints: joint_group), the fitter's gate
     ("identification", ("identification",)),  # offline fitting, report, export
     ("fleet", ("fleet",)),  # many runs of many robots: table, trends, wear alarms
 ]

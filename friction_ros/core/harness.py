@@ -12,6 +12,10 @@ Per period k (t_k = k dt)::
 ``command_scale`` is the plant's (:attr:`GearheadServoPlant.command_scale`): it converts the
 controller's joint torque to the plant's command unit.
 
+N joints (:func:`run_closed_loop_group`): one plant per joint, one
+:class:`~friction_ros.core.joint_group.JointGroup` (the compensating_controller node's per-sample
+path: gate, reference, time base, timeout, fallback) fed one joint-state sample per period.
+
 Everything is seeded and stepped in one thread, so the same inputs give bit-identical outputs
 (tests, benchmarks and the ROS lockstep comparison rely on it).
 
@@ -36,9 +40,13 @@ from friction_ros.core.control.controller import CompensatingController, Control
 from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
 from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
 from friction_ros.core.experiment.references import Reference, reference_from_config
+from friction_ros.core.input_gate import JointInputGate
+from friction_ros.core.joint_group import JointGroup
+from friction_ros.core.joint_group_inputs import control_channel
 from friction_ros.core.plant.servo import GearheadServoPlant
 from friction_ros.core.presets import Preset, make_plant
 from friction_ros.core.validation import check_real
+from friction_ros.core.wire import DecodedJointState
 
 
 @dataclass
@@ -214,3 +222,132 @@ def run_closed_loop(
         t_end, R_end[:, 0], cols["tpos"], cols["tvel"], R_end[:, 1], cols["pos"], **dict(metrics or {})
     )
     return res
+
+
+@dataclass
+class GroupResult:
+    """Time series of one N-joint run (columns in ``joints`` order) plus per-joint metrics."""
+
+    joints: list[str]
+    t: np.ndarray  # end of each period [s]
+    reference: np.ndarray  # (n, N) reference position at t (the built-in generators)
+    position: np.ndarray  # (n, N) measured
+    true_position: np.ndarray  # (n, N)
+    torque: np.ndarray  # (n, N) the group's command [N*m or N]
+    received: np.ndarray  # (n, N) bool: the joint was in that period's sample
+    fallback: np.ndarray  # (n, N) bool: compensation switched off by the run-time watch
+    timed_out: np.ndarray  # (n, N) bool: no valid state for state_timeout: zero torque
+    events: list[tuple[float, int, str]]  # (t, level, text): what the node would log
+    metrics: dict[str, dict[str, float]]
+    group: JointGroup
+
+    def column(self, joint: str) -> int:
+        return self.joints.index(joint)
+
+
+def run_closed_loop_group(
+    joints: Mapping[str, tuple],
+    duration: float,
+    dt: float = DEFAULT_CONTROL_PERIOD,
+    *,
+    missing: Mapping[str, tuple[float, float]] | None = None,
+    position_offset: Mapping[str, tuple[float, float]] | None = None,
+    stamp_jump: tuple[float, float] | None = None,
+    state_timeout: float = 0.05,
+    input_gate: Mapping[str, Any] | None = None,
+    metrics: Mapping[str, Any] | None = None,
+) -> GroupResult:
+    """Lockstep loop of N joints through one :class:`~friction_ros.core.joint_group.JointGroup`
+    (the compensating_controller node's per-sample path), one plant per joint.
+
+    ``joints``: name -> (plant, controller, reference) as :func:`run_closed_loop` takes them. Per
+    period k the group gets one sample (node clock ``c_k = 1 s + k dt``, stamp ``c_k`` plus any
+    ``stamp_jump``) and ``check_timeout(t_k, state_timeout)``; plant j steps with the group's
+    command of j. Faults: ``missing``: joint -> (t0, t1), the joint is not in the samples then;
+    ``position_offset``: joint -> (t0, offset), from t0 on its reported position is offset (a
+    re-homing); ``stamp_jump``: (t0, seconds), from t0 on every stamp jumps ahead (a clock jump).
+    ``input_gate``: the gate's config of every joint.
+    """
+    duration = check_real("harness.duration", duration, 0.0, lo_open=True, unit="s")
+    dt = check_real("harness.dt", dt, 0.0, 1.0, lo_open=True, unit="s")
+    names = list(joints)
+    plants, channels, refs, scales = [], [], [], []
+    for j in names:
+        plant, controller, reference = joints[j]
+        plant = plant if isinstance(plant, GearheadServoPlant) else make_plant(plant)
+        ctrl = (
+            controller
+            if isinstance(controller, CompensatingController)
+            else CompensatingController(controller)
+        )
+        ref = reference_from_config(reference)
+        gate = JointInputGate(j, dict(input_gate or {}), period=dt)
+        channels.append(control_channel(j, ctrl, ref, gate))
+        plants.append(plant)
+        refs.append(ref)
+        scales.append(plant.command_scale)
+    group = JointGroup(channels, dt)
+    n, N = int(round(duration / dt)), len(names)
+    t = np.arange(n) * dt
+    R = np.column_stack([ref.arrays(t + dt)[0] for ref in refs])
+    cols = {k: np.zeros((n, N)) for k in ("pos", "tpos", "tau")}
+    flags = {k: np.zeros((n, N), dtype=bool) for k in ("rx", "fb", "to")}
+    meas = []
+    for ref, plant in zip(refs, plants):
+        x0 = float(ref.arrays(np.zeros(1))[0][0])
+        plant.reset(position=x0, velocity=0.0)
+        meas.append((x0, 0.0, 0.0))
+    missing, offsets = dict(missing or {}), dict(position_offset or {})
+    events: list[tuple[float, int, str]] = []
+    for k in range(n):
+        tk = t[k]
+        clock_ns = 1_000_000_000 + int(round(tk * 1e9))
+        stamp_ns = clock_ns + (int(round(stamp_jump[1] * 1e9)) if stamp_jump and tk >= stamp_jump[0] else 0)
+        present = [
+            i for i, j in enumerate(names) if not (j in missing and missing[j][0] <= tk < missing[j][1])
+        ]
+        pos = [
+            meas[i][0] + (offsets[names[i]][1] if names[i] in offsets and tk >= offsets[names[i]][0] else 0.0)
+            for i in present
+        ]
+        msg = DecodedJointState(
+            stamp_ns // 1_000_000_000,
+            stamp_ns % 1_000_000_000,
+            "",
+            tuple(names[i] for i in present),
+            tuple(pos),
+            tuple(meas[i][1] for i in present),
+            tuple(meas[i][2] for i in present),
+        )
+        group.step(msg, clock_ns, tk)
+        group.check_timeout(tk, state_timeout)
+        if group.events:
+            events.extend((tk, level, text) for level, text in group.take_events())
+        for i in present:
+            flags["rx"][k, i] = True
+        for i, (ch, plant) in enumerate(zip(group.channels, plants)):
+            m = plant.step(ch.command * scales[i], dt)
+            meas[i] = (m.position, m.velocity, m.effort)
+            cols["pos"][k, i] = m.position
+            cols["tpos"][k, i] = m.true_position
+            cols["tau"][k, i] = ch.command
+            flags["fb"][k, i] = ch.controller.compensation_fallback
+            flags["to"][k, i] = ch.timed_out
+    t_end = t + dt
+    return GroupResult(
+        joints=names,
+        t=t_end,
+        reference=R,
+        position=cols["pos"],
+        true_position=cols["tpos"],
+        torque=cols["tau"],
+        received=flags["rx"],
+        fallback=flags["fb"],
+        timed_out=flags["to"],
+        events=events,
+        metrics={
+            j: tracking_metrics(t_end, R[:, i], cols["tpos"][:, i], cols["tpos"][:, i], **dict(metrics or {}))
+            for i, j in enumerate(names)
+        },
+        group=group,
+    )

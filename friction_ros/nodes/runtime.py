@@ -255,3 +255,15 @@ def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
             executor.remove_node(node)
             node.destroy_node()
         rclpy.try_shutdown()
+
+
+def log_events(logger, events) -> None:
+    """Log the core's events ``(level, text)`` (levels of :mod:`friction_ros.core.joint_channel`:
+    0 info, 1 warning, 2 error); one call site per severity (rclpy refuses a severity change at one)."""
+    for level, text in events:
+        if level >= 2:
+            logger.error(text)
+        elif level == 1:
+            logger.warning(text)
+        else:
+            logger.info(text)

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
+from operator import attrgetter
 from typing import Any
+
+from friction_ros.core.wire import CONTROLLER_STATE_FLOATS
 
 
 @dataclass(slots=True)
@@ -38,3 +41,14 @@ class ControllerTerms:
 
     def as_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+
+#: the friction_msgs/ControllerState floats of one period's terms, in message order (one call)
+state_floats = attrgetter(*CONTROLLER_STATE_FLOATS)
+# every term but time, mode, saturated and compensation_fallback (diagnostics and the log carry it)
+assert {f.name for f in fields(ControllerTerms)} - {
+    "time",
+    "mode",
+    "saturated",
+    "compensation_fallback",
+} == set(CONTROLLER_STATE_FLOATS), "ControllerTerms and ControllerStateEncoder disagree"
