@@ -2,10 +2,10 @@
 
 Terms (N*m, added to the command; friction opposes motion so compensation has the model's sign):
 
-* feedforward (seed 003 A.4.1, Fig. 6; seed 004 section 2):
+* feedforward (ABB M19-S paper A.4.1, Fig. 6; AI friction chapter section 2):
   ``tau_ff = g_c * w * F_hat(theta_dot_d)``; a dynamic model (LuGre, GMS ...) has its state
-  integrated from the *desired* velocity (seed 003: "model state driven by theta_dot_d").
-* feedback (seed 001 section 6.1: ``c = sat(e + k_c F_hat(omega_hat))``; seed 004 eq. (22)
+  integrated from the *desired* velocity (ABB M19-S paper: "model state driven by theta_dot_d").
+* feedback (GA friction thesis 2002 section 6.1: ``c = sat(e + k_c F_hat(omega_hat))``; AI friction chapter eq. (22)
   ``u_in = u_c + u_f_hat(theta_dot)``): ``tau_fb = g_c * (1 - w) * F_hat(theta_dot)`` with the
   measured or estimated velocity; a dynamic model is driven by the measured velocity.
 * blended: both, weights ``w`` = ``blend`` and ``1 - w``.
@@ -18,13 +18,13 @@ Feedback-path stability bound (``feedback_bound`` f, default 0.5; :meth:`Frictio
 the presliding stiffness/damping of a dynamic model fed back from measured motion is limited to
 ``g w_fb k_hat <= f K_p`` and ``g w_fb sigma1 <= f K_d`` of the loop's gains.
 
-``g_c`` is the compensation gain (seed 001 used 0.95 so that a slightly over-estimating model does
-not act as negative friction, extract section 6.1 / 9 item 9).
+``g_c`` is the compensation gain (GA friction thesis 2002 used 0.95 so that a slightly over-estimating model does
+not act as negative friction, GA friction thesis 2002 section 6.1 / 9 item 9).
 
-Smoothing near zero velocity (extract seed 001 section 6.2, seed 002 B-T9; not in the seeds):
+Smoothing near zero velocity (GA friction thesis 2002 section 6.2, Tilakaratna et al. 2004 B-T9; in none of the source documents):
 ``none`` keeps the model as is (sgn(0) = 0), ``tanh`` uses ``F(v) tanh(|v| / v_eps)``, ``linear``
 replaces the model inside |v| < v_eps by the line ``F(v_eps sgn v) |v| / v_eps`` (the finite-slope
-zone of seed 003 A.2.1). Smoothing applies to static models only (dynamic models are already
+zone of ABB M19-S paper A.2.1). Smoothing applies to static models only (dynamic models are already
 continuous).
 """
 
@@ -50,7 +50,9 @@ COMPENSATION_SCHEMA = Schema(
     "compensation",
     [
         Field("source", "feedforward", "none, feedforward, feedback, blended or observer", choices=SOURCES),
-        Field("gain", 1.0, "compensation gain g_c in [0, 2] (seed 001 used 0.95)", allow_inf=True),
+        Field(
+            "gain", 1.0, "compensation gain g_c in [0, 2] (GA friction thesis 2002 used 0.95)", allow_inf=True
+        ),
         Field("blend", 0.5, "blended: feedforward weight w in [0, 1] (feedback gets 1 - w)", allow_inf=True),
         Field("smoothing", "none", "static models near v = 0: none, tanh or linear", choices=SMOOTHING),
         Field("smoothing_velocity", 1e-3, "v_eps of the smoothing", unit="rad/s", allow_inf=True),

@@ -1,6 +1,6 @@
 """``CompensatingController``: one façade over every controller mode, built from a config dict.
 
-Per period (seed 003 A.4.1 Fig. 6 structure, generalised)::
+Per period (ABB M19-S paper A.4.1 Fig. 6 structure, generalised)::
 
     e      = theta_d - theta,   e_dot = theta_dot_d - theta_dot_hat      (derivative on measurement)
     u      = feedback(mode) + feedforward_gain theta_dot_d + J_hat theta_ddot_d
@@ -30,19 +30,19 @@ inside the same clamp and, by default, only integrates while the output is not s
 (``pid.antiwindup_strategy`` = conditional_integration), so a saturated transient does not wind up.
 
 ``theta_dot_hat`` is the measured velocity (``velocity_source = measured``) or the filtered
-backward difference of the measured position (``differentiated``, seed 001 section 6.1, with the
+backward difference of the measured position (``differentiated``, GA friction thesis 2002 section 6.1, with the
 lost-bit hold filter ``position_jump_limit``: a sample that jumps more than the limit is replaced
 by the previous one).
 
 Modes (``mode``):
 
-``pid``             PID (control_toolbox names, section ``pid``); seed 003's PD (p = 200,
-                    d = 0.15), seed 004's PD + model compensation, seed 001's saturated unity
+``pid``             PID (control_toolbox names, section ``pid``); ABB M19-S paper's PD (p = 200,
+                    d = 0.15), AI friction chapter's PD + model compensation, GA friction thesis 2002's saturated unity
                     feedback (p = 1, friction feedback gain 0.95, u_clamp).
-``cascade``         seed 003 classical cascade (section ``cascade``).
-``dnpf``            seed 003 DNPF (section ``dnpf``).
-``gain_scheduling`` seed 003 gain scheduling (section ``gain_scheduling``).
-``sliding_mode``    seed 000 sliding mode / relay (section ``sliding_mode``).
+``cascade``         ABB M19-S paper classical cascade (section ``cascade``).
+``dnpf``            ABB M19-S paper DNPF (section ``dnpf``).
+``gain_scheduling`` ABB M19-S paper gain scheduling (section ``gain_scheduling``).
+``sliding_mode``    Chatterjee et al. 2017 sliding mode / relay (section ``sliding_mode``).
 ``compensation_only`` an add-on to an existing arm controller (a trajectory, impedance or vendor
                     controller): ``u = compensation_scale (tau_f_ff + tau_f_fb + load_feedforward
                     + tau_L + tau_r)``, no feedback of its own. The feedback-path stability bound

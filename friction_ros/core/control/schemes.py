@@ -1,15 +1,15 @@
-"""The seeds' specific control schemes (feedback parts; the façade adds feed-forward and limits).
+"""The source documents' specific control schemes (feedback parts; the façade adds feed-forward and limits).
 
-* :class:`DNPF` seed 003 A.4.2 (Southward et al. 1991): discontinuous nonlinear proportional
+* :class:`DNPF` ABB M19-S paper A.4.2 (Southward et al. 1991): discontinuous nonlinear proportional
   feedback, constant ``tau_st + epsilon`` inside the presliding distance ``Q_h``.
-* :class:`GainScheduling` seed 003 A.4.3 (Fig. 10): mode 1 PD + Coulomb compensation, mode 2
+* :class:`GainScheduling` ABB M19-S paper A.4.3 (Fig. 10): mode 1 PD + Coulomb compensation, mode 2
   presliding gains scheduled from the describing-function stiffness ``k_e(A)`` and damping
-  ``c_e(A)`` of the GMS virgin curve (eqs. (5)-(6), sign of (6) fixed as noted in the extract).
-* :class:`Cascade` seed 003 A.4.4: position P -> velocity PI with velocity feed-forward (the
+  ``c_e(A)`` of the GMS virgin curve (eqs. (5)-(6), sign of (6) fixed: the OCR text garbles it).
+* :class:`Cascade` ABB M19-S paper A.4.4: position P -> velocity PI with velocity feed-forward (the
   integrating baseline).
-* :class:`SlidingMode` seed 000 A.5.1 (b)-(d): ``S = e_dot + lambda e``,
+* :class:`SlidingMode` Chatterjee et al. 2017 A.5.1 (b)-(d): ``S = e_dot + lambda e``,
   ``u = J_hat lambda e_dot + k_s S + M sat(S / phi)`` (phi = 0: relay ``M sign(S)``).
-* :func:`seed000_relay` seed 000 A.5.2 (``f_motor_smc.m``): ``u = u0 - du sign_dz(x; band)``.
+* :func:`seed000_relay` Chatterjee et al. 2017 A.5.2 (``f_motor_smc.m``): ``u = u0 - du sign_dz(x; band)``.
 
 Every scheme has ``compute(e, e_dot, ref, meas, dt) -> SchemeOutput`` and ``reset()``.
 """
@@ -27,11 +27,11 @@ from friction_ros.core.control.pid import Pid
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 
 # ---------------------------------------------------------------------------------------------------
-# describing function of a presliding virgin curve (seed 003 A.4.3 eqs. (5)-(6))
+# describing function of a presliding virgin curve (ABB M19-S paper A.4.3 eqs. (5)-(6))
 
 
 def maxwell_virgin_curve(k: Sequence[float], alpha: Sequence[float], fs: float) -> Callable:
-    """Maxwell-slip virgin curve y(x) = sum_i min(k_i |x|, alpha_i Fs) sgn(x) (seed 003 A.2.4)."""
+    """Maxwell-slip virgin curve y(x) = sum_i min(k_i |x|, alpha_i Fs) sgn(x) (ABB M19-S paper A.2.4)."""
     k = np.asarray(k, dtype=float)[:, None]
     w = (np.asarray(alpha, dtype=float) * float(fs))[:, None]
 
@@ -45,7 +45,7 @@ def maxwell_virgin_curve(k: Sequence[float], alpha: Sequence[float], fs: float) 
 
 
 def describing_stiffness(y: Callable, A: float, n: int = 2001) -> float:
-    """k_e(A) = -(4 / (A pi)) int_0^pi y((A/2)(1 - cos th)) cos th dth  (seed 003 eq. (5))."""
+    """k_e(A) = -(4 / (A pi)) int_0^pi y((A/2)(1 - cos th)) cos th dth  (ABB M19-S paper eq. (5))."""
     th = np.linspace(0.0, math.pi, n)
     f = y(0.5 * A * (1.0 - np.cos(th))) * np.cos(th)
     return float(-4.0 / (A * math.pi) * np.trapezoid(f, th))
@@ -54,7 +54,7 @@ def describing_stiffness(y: Callable, A: float, n: int = 2001) -> float:
 def describing_damping(y: Callable, A: float, omega: float = 1.0, n: int = 2001) -> float:
     """c_e(A) = +(8 / (pi A^2 omega)) int_0^A (y(u) - y(A)/2) du >= 0.
 
-    Seed 003 eq. (6) with the sign fixed as in the extract (A.4.3): the printed form gives
+    ABB M19-S paper eq. (6) with its sign fixed (section A.4.3 of the notes on it): the printed form gives
     c_e omega <= 0 for a concave virgin curve; the magnitude is the equivalent viscous damping.
     With ``omega = 1`` the value returned is ``c_e * omega``.
     """
@@ -86,7 +86,7 @@ def _cfg(section: str, defaults: Mapping[str, Any], given: Mapping[str, Any] | N
 
 
 class DNPF:
-    """Seed 003 A.4.2 DNPF (Southward et al. 1991), used without feed-forward.
+    """ABB M19-S paper A.4.2 DNPF (Southward et al. 1991), used without feed-forward.
 
     u_P(e) = K_p e for |e| > Q_h; (tau_st + epsilon) sgn(e) for zero_band < |e| <= Q_h; 0 inside
     zero_band (default: none); u = u_P(e) + K_d e_dot. ``kp = 0`` selects the continuous choice
@@ -124,7 +124,7 @@ class DNPF:
 
 
 class GainScheduling:
-    """Seed 003 A.4.3 gain-scheduling controller (Fig. 10), no integrator.
+    """ABB M19-S paper A.4.3 gain-scheduling controller (Fig. 10), no integrator.
 
     Mode 1 (gross sliding): ``u = kp e + kd e_dot + F_c sgn(v_c)`` (Coulomb compensation with a
     linear zone |v_c| < coulomb_velocity; v_c = measured velocity, or the reference velocity with
@@ -144,7 +144,7 @@ class GainScheduling:
         u = kp e + kd2 e_dot + u_b
 
     (a linear spring reaches e = 0 in one re-adjustment; the softening virgin curve needs 1-3).
-    ``schedule = stiffness`` (extract A.4.3 suggestion, made cumulative):
+    ``schedule = stiffness`` (ABB M19-S paper A.4.3 suggestion, made cumulative):
 
         kp2 <- min(kp2 + k_e(A), kp_max)
         kd2 <- max(0, 2 zeta sqrt((kp2 + k_e(A)) J) - c_e(A) omega_A),  omega_A = sqrt((kp2 + k_e) / J)
@@ -294,7 +294,7 @@ class GainScheduling:
 
 
 class Cascade:
-    """Seed 003 A.4.4 classical cascade: v_cmd = kp_position e + velocity_feedforward v_ref;
+    """ABB M19-S paper A.4.4 classical cascade: v_cmd = kp_position e + velocity_feedforward v_ref;
     u = PI(v_cmd - v) (velocity PI with back-calculation anti-windup), integrating baseline.
     """
 
@@ -345,7 +345,7 @@ class Cascade:
 
 
 class SlidingMode:
-    """Seed 000 A.5.1 sliding-mode compensator: S = e_dot + lambda e,
+    """Chatterjee et al. 2017 A.5.1 sliding-mode compensator: S = e_dot + lambda e,
     u = J_hat lambda e_dot + k_s S + M sat(S / phi)   (phi = 0: M sign(S), the relay of (5.2.6.3)).
 
     Reachability S S_dot < 0 holds when M > |f| (bounded friction/disturbance, eq. (5.2.9.3)).
@@ -390,7 +390,7 @@ class SlidingMode:
 
 
 def seed000_relay(x, nominal: float = 1.0, amplitude: float = 0.1, deadband: float = 0.01):
-    """Seed 000 A.5.2 ``f_motor_smc.m``: u = nominal - amplitude if x >= deadband,
+    """Chatterjee et al. 2017 A.5.2 ``f_motor_smc.m``: u = nominal - amplitude if x >= deadband,
     nominal + amplitude if x <= -deadband, else nominal (x: model-predicted friction signal)."""
     x = np.asarray(x, dtype=float)
     u = np.where(x >= deadband, nominal - amplitude, np.where(x <= -deadband, nominal + amplitude, nominal))

@@ -1,5 +1,5 @@
 """The controller's velocity estimate: the measured velocity, or a filtered backward difference of the
-measured position (seed 001 section 6.1) with the lost-bit hold filter ``position_jump_limit``."""
+measured position (GA friction thesis 2002 section 6.1) with the lost-bit hold filter ``position_jump_limit``."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ class VelocityEstimator:
         """Return (position used, velocity estimate)."""
         pos = float(position)
         if self._pos is not None and abs(pos - self._pos) > self.jump_limit:
-            pos = self._pos  # seed 001 lost-bit hold
+            pos = self._pos  # GA friction thesis 2002 lost-bit hold
         if self.source == "measured" and velocity is not None:
             raw = float(velocity)
         else:
