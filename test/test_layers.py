@@ -62,6 +62,7 @@ LAZY_THIRD_PARTY = {
     "pyarrow",  # the fleet table (Parquet)
     "dask",  # the fleet's distributed fits
     "distributed",
+    "canopen",  # CiA 402 drives: the EDS reader and the emulated drive
 }
 
 
