@@ -219,13 +219,16 @@ class CanStack:
         return self
 
     def check(self) -> None:
-        """RuntimeError if a node of the stack failed or the drive faulted so far (the run is void)."""
+        """RuntimeError if a node of the stack failed or the drive faulted so far (the run is void);
+        the message has the drive node's WARN/ERROR lines (what the fault was)."""
         failure = self._failure()
         problem = self.watch.problem() if self.watch else None
         if failure or problem:
+            what = f"node failed: {failure}" if failure else f"faulted: {problem}"
+            logged = [ln for ln in self._output() if "[WARN]" in ln or "[ERROR]" in ln][-6:]
             raise RuntimeError(
-                f"{self.step}: the {self.cj.protocol} drive {'node failed: ' + failure if failure else 'faulted: ' + problem}"
-                " -- the run is not a result (real time on a busy machine: run the demo again, or with fewer other loads)"
+                f"{self.step}: the {self.cj.protocol} drive {what}; the run is not a result"
+                + "".join(f"\n  {ln}" for ln in logged)
             )
 
     def __exit__(self, *exc) -> None:
