@@ -309,9 +309,9 @@ def track_realtime(cj: CanJoint, params_file, duration: float, label: str, perio
     stamps = np.asarray(rows["stamp_ns"], dtype=np.int64)
     t_all = (stamps - stamps[0]) * 1e-9
     n_periods = int(round(duration / period))
-    k_all = np.round(t_all / period).astype(np.int64)
-    keep = np.nonzero((k_all <= n_periods) & np.concatenate(([True], np.diff(k_all) > 0)))[0]
-    if k_all[keep][-1] < n_periods - int(round(0.1 / period)):
+    # every row within the run's duration (wall-clock stamps jitter: not rounded to a period grid)
+    keep = np.nonzero((t_all <= duration + 0.5 * period) & np.concatenate(([True], np.diff(stamps) > 0)))[0]
+    if t_all[keep][-1] < duration - 0.1:
         raise RuntimeError(
             f"tracking run {label}: the controller's terms end at {t_all[keep][-1]:.2f} s of {duration:g} s"
         )
@@ -321,7 +321,7 @@ def track_realtime(cj: CanJoint, params_file, duration: float, label: str, perio
     )
     return TrackingRun(
         label=label,
-        t=k_all[keep] * period,
+        t=t_all[keep],
         reference=col("reference_position"),
         reference_velocity=col("reference_velocity"),
         position=col("position"),
@@ -331,5 +331,5 @@ def track_realtime(cj: CanJoint, params_file, duration: float, label: str, perio
         friction=col("friction_feedforward") + col("friction_feedback"),
         fallback=col("compensation_fallback"),
         wall_seconds=wall,
-        missing_periods=n_periods + 1 - keep.size,
+        missing_periods=max(0, n_periods + 1 - keep.size),
     )
