@@ -65,6 +65,8 @@ SCHEMES = ("feedforward", "feedback", "blended")
 DEFAULT_MODELS = ["coulomb", "stribeck", "lugre", "gms4"]
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
+# a real-time (CAN) run that missed more than this fraction of its periods is not a measurement
+MISSING_INVALID = 0.10
 
 
 def _resolution(preset_obj) -> float:
@@ -250,11 +252,19 @@ def can_checks(res: DemoResult, can, results_dir: Path) -> None:
         raise RuntimeError(f"the drive did not report itself disabled after: {', '.join(left)}\n{kept}")
     for label, run in res.runs.items():
         expected = run.samples + run.missing_periods
-        if run.missing_periods > 0.02 * expected:
+        if run.missing_periods > MISSING_INVALID * expected:
+            run.invalid = (
+                f"the drive node's telemetry was late for {run.missing_periods} of {expected} periods "
+                "(a busy machine): not a measurement, run the demo again on a quieter machine"
+            )
+            res.warnings.append(f"{label}: {run.invalid}")
+        elif run.missing_periods > 0.02 * expected:
             res.warnings.append(
                 f"{label}: the controller computed {run.samples} of {expected} periods (real time: late "
                 "telemetry on a busy machine); the figures are of those periods"
             )
+    if any(r.invalid for r in res.runs.values()):
+        res.warnings.append("runs whose telemetry was late are left out of the best mode")
 
 
 def save_partial(res: DemoResult, results_dir: Path, failed: str) -> str:

@@ -40,6 +40,8 @@ class TrackingRun:
     fallback: np.ndarray | None = None
     #: control periods of the run the controller did not compute (real time only; lockstep: 0)
     missing_periods: int = 0
+    #: why the run's figures are not a measurement (real time: too many periods missed), else ""
+    invalid: str = ""
 
     @property
     def rms(self) -> float:
@@ -97,7 +99,7 @@ class DemoResult:
     @property
     def best(self) -> str:
         """The enabled mode with the lowest RMS error ("none" when no mode is enabled)."""
-        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled]
+        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled and not r.invalid]
         return min(enabled, key=lambda k: self.runs[k].rms) if enabled else "none"
 
     def summary(self) -> dict:
@@ -126,6 +128,7 @@ class DemoResult:
                     "samples": r.samples,
                     "fallback_s": r.fallback_time(),
                     "missing_periods": r.missing_periods,
+                    "invalid": r.invalid,
                     **{f"{m}": v for m, v in r.metrics.items()},
                 }
                 for k, r in self.runs.items()
