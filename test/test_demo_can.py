@@ -53,16 +53,18 @@ def test_cia402_demo_identifies_and_compensates(cia402):
         r = s["runs"][label]
         # the periods the controller computed, and the ones it did not, add up to the run
         assert r["samples"] + r["missing_periods"] >= expected, (label, r)
-        assert r["samples"] >= 0.5 * expected, (label, r)
+        # a run that missed over 10 % of its periods (late telemetry) is flagged, never a result
+        assert r["samples"] >= 0.9 * expected or "telemetry was late" in r["invalid"], (label, r)
         if label != "none":  # every mode enabled or refused, with the gate's reason
             assert isinstance(r["enabled"], bool) and r["reason"], (label, r)
             assert s["gate"][label]["enabled"] == r["enabled"]
         assert f"| {label} |" in proc.stdout
     # compensation helps, or the demo says why not
     best = s["best"]
+    assert best == "none" or not s["runs"][best]["invalid"]
     red = s["reduction_percent"].get(best, 0.0) if best != "none" else 0.0
     if red < 30.0:
-        said = ("barely changes", "no compensation mode", "caps what any compensation can show")
+        said = ("barely changes", "no compensation mode", "caps what any", "telemetry was late")
         assert any(x in w for x in said for w in s["warnings"]), (red, s["warnings"])
     # the experiment and the four runs each ended with the drive reporting itself disabled
     assert s["can"]["steps"] == 5 and s["can"]["drive_disabled_after_every_step"] is True
