@@ -21,6 +21,12 @@ any load, as fast as the machine allows):
 ``--presets A B ...`` the presets named, one after another, with the same summary;
 ``--bag`` fits a bag the user already has (steps 2-4; tracking runs on ``--preset`` as the
 stand-in plant); ``--quick`` shortens the fit and the tracking runs (tests, CI).
+
+``--can PROTOCOL`` (a registered drive protocol: ``odrive_cansimple``, ``mit``, ``cia402``): the same
+four steps with the preset's plant behind an emulated drive (``drive_emulator``) and
+``drive_interface`` on the ``friction_local`` CAN bus, as on a robot (:mod:`friction_ros.cli.demo_can`).
+A CAN bus has no lockstep: the experiment and the tracking runs are real time (1 kHz wall clock);
+a step whose drive faulted or whose telemetry went stale stops the demo with the reason.
 """
 
 from __future__ import annotations
@@ -59,6 +65,8 @@ SCHEMES = ("feedforward", "feedback", "blended")
 DEFAULT_MODELS = ["coulomb", "stribeck", "lugre", "gms4"]
 # an enabled mode may not be worse than none by more than this (relative RMS), else it is reported
 WORSE_TOLERANCE = 0.02
+# a real-time (CAN) run that missed more than this fraction of its periods is not a measurement
+MISSING_INVALID = 0.10
 
 
 def _resolution(preset_obj) -> float:
@@ -80,14 +88,26 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     args.models = args.models or DEFAULT_MODELS
     scale = JointScale.from_preset(preset, period=GRAPH_PERIOD)  # the ROS graph runs at 1 kHz
     res = DemoResult(preset=preset_name)
+    can, timing, lags = None, "lockstep", preset_lags(preset)
+    if args.can:
+        from dataclasses import replace
+
+        from friction_ros.cli.demo_can import EXTRA_DELAY_PERIODS, can_joint
+
+        can = can_joint(preset, preset_name, args.can, args.joint)
+        timing = f"real time, 1 kHz wall clock, over CAN: {args.can} on friction_local"
+        res.timing, res.can = "real time", {"protocol": args.can, "bus": "friction_local"}
+        # the CAN path's delay: telemetry up to a period old, the command sent at the drive node's next period
+        lags["delay"] += EXTRA_DELAY_PERIODS * GRAPH_PERIOD
+        scale = replace(scale, delay=scale.delay + EXTRA_DELAY_PERIODS * GRAPH_PERIOD)
     results_dir.mkdir(parents=True, exist_ok=True)
     stamp = time.strftime("%Y%m%d_%H%M%S")
     bag = Path(args.bag) if args.bag else ROOT / "bags" / f"demo_{preset_name}_{stamp}"
     t_all = time.monotonic()
     if not args.bag:
-        say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, lockstep) -> {bag}")
+        say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, {timing}) -> {bag}")
         t = time.monotonic()
-        run_experiment(preset_name, args.profile, bag, args.joint, args.seed)
+        run_experiment(preset_name, args.profile, bag, args.joint, args.seed, can=can)
         res.timings["experiment"] = time.monotonic() - t
     else:
         say(f"1/4 using the bag you gave: {bag}")
@@ -103,7 +123,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     gains = tracking_gains(scale)
     reference = tracking_reference(scale, duration=max(args.duration, 1.0))
     res.gains, res.reference = dict(gains), dict(reference)
-    gate = {"scale": scale, **preset_lags(preset), "gains": gains, "reference": reference}
+    gate = {"scale": scale, **lags, "gains": gains, "reference": reference}
     fit_result = fit(bag, args.joint, args.models, fit_dir, args.quick, preset_name, params_file, gate)
     res.timings["fit"] = time.monotonic() - t
     res.fit_dir = str(fit_dir)
@@ -140,7 +160,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     res.warnings += [refusal_warning(m, v.reason) for m, v in verdicts.items() if not v.enabled]
 
     say(
-        f"3/4 tracking runs ({args.duration:g} s each, lockstep): none, "
+        f"3/4 tracking runs ({args.duration:g} s each, {timing}): none, "
         + ", ".join(SCHEMES)
         + " (refused modes run only to show why)"
     )
@@ -157,11 +177,11 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
             gains,
             load_feedforward=-scale.load,
             allow_refused=refused,
-            effort_limit=scale.torque_limit,
+            effort_limit=can.drive_params["torque_limit"] if can else scale.torque_limit,
         )
         f.write_text(dump_yaml(doc))
         try:
-            run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD)
+            run = track(preset_name, f, args.duration, label, args.joint, GRAPH_PERIOD, can=can)
         except (RuntimeError, ParameterError) as exc:  # what is done so far stays on disk, said so
             raise RuntimeError(f"{exc}\n{save_partial(res, results_dir, f'tracking run {label}')}") from None
         if label != "none":
@@ -170,6 +190,8 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         run.metrics = run_metrics(run, _resolution(preset))
         res.runs[label] = run
     res.timings["tracking"] = time.monotonic() - t
+    if can is not None:
+        can_checks(res, can, results_dir)
     base = res.runs["none"]
     for label, run in res.runs.items():
         if label == "none":
@@ -219,6 +241,32 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     return res
 
 
+def can_checks(res: DemoResult, can, results_dir: Path) -> None:
+    """After the CAN runs: the drive must have reported itself disabled after every step (else
+    RuntimeError: never a success); periods a run did not compute are warned about beyond 2 %."""
+    left = [step for step, disabled in can.disabled_after if not disabled]
+    res.can["steps"] = len(can.disabled_after)
+    res.can["drive_disabled_after_every_step"] = not left
+    if left:
+        kept = save_partial(res, results_dir, "the drive's shutdown")
+        raise RuntimeError(f"the drive did not report itself disabled after: {', '.join(left)}\n{kept}")
+    for label, run in res.runs.items():
+        expected = run.samples + run.missing_periods
+        if run.missing_periods > MISSING_INVALID * expected:
+            run.invalid = (
+                f"the drive node's telemetry was late for {run.missing_periods} of {expected} periods "
+                "(a busy machine): not a measurement, run the demo again on a quieter machine"
+            )
+            res.warnings.append(f"{label}: {run.invalid}")
+        elif run.missing_periods > 0.02 * expected:
+            res.warnings.append(
+                f"{label}: the controller computed {run.samples} of {expected} periods (real time: late "
+                "telemetry on a busy machine); the figures are of those periods"
+            )
+    if any(r.invalid for r in res.runs.values()):
+        res.warnings.append("runs whose telemetry was late are left out of the best mode")
+
+
 def save_partial(res: DemoResult, results_dir: Path, failed: str) -> str:
     """Write ``demo_summary.json`` with what is done so far (``status``: ``incomplete``, the step
     that failed, or ``running``); returns a line saying what was kept."""
@@ -244,6 +292,10 @@ def run(args):
     from friction_ros.core.presets import PRESET_NAMES, load_preset
 
     if not args.all_presets and not args.presets and arm_plant_file(args.preset) is not None:
+        if args.can:
+            raise ParameterError(
+                f"--can runs one joint behind one drive: {args.preset} is a multi-joint plant"
+            )
         return main_arm(args)
     stamp = time.strftime("%Y%m%d_%H%M%S")
     names = list(PRESET_NAMES) if args.all_presets else list(dict.fromkeys(args.presets or []))
@@ -316,6 +368,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--duration", type=float, default=10.0, help="simulated seconds per tracking run (default 10)"
     )
     p.add_argument("--results", help="results folder (default results/demo_<preset>_<time>)")
+    p.add_argument(
+        "--can",
+        metavar="PROTOCOL",
+        help="the joint behind an emulated drive on a CAN bus (friction_local), real time: "
+        "a registered drive protocol (odrive_cansimple, mit, cia402)",
+    )
     p.add_argument("--quick", action="store_true", help="shorter fit and tracking runs (tests, CI)")
     p.add_argument(
         "--seed", type=int, help="seed of the experiment's random excitation (default: the profile's)"
@@ -325,6 +383,15 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    if args.can is not None:
+        from friction_ros.core.can.protocol import protocol_names
+
+        if args.can not in protocol_names():
+            print(
+                f"error: --can {args.can!r}: not a drive protocol; allowed: {', '.join(protocol_names())}",
+                file=sys.stderr,
+            )
+            return 2
     if args.quick:
         args.duration = min(args.duration, 4.0)
     if (args.all_presets or args.presets) and args.bag:

@@ -52,7 +52,8 @@ def tracking_figure(result: DemoResult):
     axes[1].set_xlabel("time [s]")
     legend_outside(axes[1])
     fig.suptitle(
-        f"{result.preset}: tracking error before and after friction compensation (lockstep ROS graph)"
+        f"{result.preset}: tracking error before and after friction compensation "
+        + (f"(real time over CAN: {result.can.get('protocol')})" if result.can else "(lockstep ROS graph)")
     )
     fig.tight_layout()
     return fig
@@ -145,6 +146,15 @@ def print_table(result: DemoResult) -> None:
         print("\nrefused by the safety gate (the mode is written disabled):")
         for line in notes:
             print(f"  {line}")
+    if result.can:
+        computed = ", ".join(
+            f"{k} {r.samples} of {r.samples + r.missing_periods}" for k, r in result.runs.items()
+        )
+        print(
+            f"\nreal time over CAN ({result.can['protocol']} on {result.can['bus']}, 1 kHz wall clock, not "
+            f"lockstep: figures vary run to run); periods computed: {computed}; the drive reported itself "
+            f"disabled after each of the {result.can.get('steps', 0)} steps"
+        )
     if result.best == "none":
         print("\nbest: no compensation mode is enabled for this joint")
     else:

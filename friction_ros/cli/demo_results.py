@@ -38,6 +38,10 @@ class TrackingRun:
     metrics: dict = field(default_factory=dict)
     #: 1 where the controller's compensation watch had switched compensation off (terms file)
     fallback: np.ndarray | None = None
+    #: control periods of the run the controller did not compute (real time only; lockstep: 0)
+    missing_periods: int = 0
+    #: why the run's figures are not a measurement (real time: too many periods missed), else ""
+    invalid: str = ""
 
     @property
     def rms(self) -> float:
@@ -84,6 +88,9 @@ class DemoResult:
     files: list[str] = field(default_factory=list)
     timings: dict[str, float] = field(default_factory=dict)
     map_error: dict = field(default_factory=dict)
+    #: "lockstep", or "real time" with ``can`` (protocol, the drive's state after each step)
+    timing: str = "lockstep"
+    can: dict = field(default_factory=dict)
 
     def reduction(self, label: str) -> float:
         base = self.runs["none"].rms
@@ -92,7 +99,7 @@ class DemoResult:
     @property
     def best(self) -> str:
         """The enabled mode with the lowest RMS error ("none" when no mode is enabled)."""
-        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled]
+        enabled = [k for k, r in self.runs.items() if k != "none" and r.enabled and not r.invalid]
         return min(enabled, key=lambda k: self.runs[k].rms) if enabled else "none"
 
     def summary(self) -> dict:
@@ -106,6 +113,8 @@ class DemoResult:
             "map_error_vs_truth": self.map_error,
             "params_file": self.params_file,
             "control_period": GRAPH_PERIOD,
+            "timing": self.timing,
+            **({"can": self.can} if self.can else {}),
             "gains": self.gains,
             "reference": self.reference,
             "gate": self.gate,
@@ -118,6 +127,8 @@ class DemoResult:
                     "reason": r.reason,
                     "samples": r.samples,
                     "fallback_s": r.fallback_time(),
+                    "missing_periods": r.missing_periods,
+                    "invalid": r.invalid,
                     **{f"{m}": v for m, v in r.metrics.items()},
                 }
                 for k, r in self.runs.items()

@@ -18,15 +18,23 @@ def say(msg: str) -> None:
 
 
 # -- step 1 -------------------------------------------------------------------------------------------
-def run_experiment(preset: str, profile: str, bag: Path, joint: str, seed: int | None = None) -> None:
-    """friction-experiment in lockstep, sized to the preset (its default for a simulated joint)."""
+def run_experiment(
+    preset: str, profile: str, bag: Path, joint: str, seed: int | None = None, can=None
+) -> None:
+    """friction-experiment in lockstep, sized to the preset (its default for a simulated joint);
+    ``can`` (a :class:`~friction_ros.cli.demo_can.CanJoint`): in real time on the preset's plant
+    behind an emulated drive on a CAN bus instead."""
     from friction_ros.cli import experiment
 
-    argv = ["--profile", profile, "--preset", preset, "--mode", "lockstep", "-o", str(bag), "--overwrite"]
-    argv += ["--joint", joint]
+    argv = ["--profile", profile, "-o", str(bag), "--overwrite", "--joint", joint]
     if seed is not None:
         argv += ["--set", f"random.seed={int(seed)}"]
-    code = experiment.main(argv)
+    if can is not None:
+        from friction_ros.cli.demo_can import run_experiment_can
+
+        code = run_experiment_can(can, argv)
+    else:
+        code = experiment.main([*argv, "--preset", preset, "--mode", "lockstep"])
     if code == 3:
         raise RuntimeError("identification experiment stopped by a safety limit (see the ABORT lines above)")
     if code != 0:
@@ -106,9 +114,12 @@ def track(
     label: str,
     joint: str = "joint1",
     period: float = 1e-3,
+    can=None,
 ) -> TrackingRun:
     """Run plant_simulator + compensating_controller (composed: one process) in lockstep for ``duration``
-    simulated seconds.
+    simulated seconds; ``can`` (a :class:`~friction_ros.cli.demo_can.CanJoint`): the controller on
+    the preset's plant behind an emulated drive on a CAN bus, in real time, instead
+    (:func:`~friction_ros.cli.demo_can.track_realtime`).
 
     The figures come from the controller's own terms file (``terms_file``: one row per computed
     period, :mod:`friction_ros.nodes.terms_file`), not from a subscription that a busy machine can
@@ -116,6 +127,10 @@ def track(
     same bytes under any load. A run whose file misses a period (a controller killed before it
     flushed) is repeated, up to TRACK_ATTEMPTS runs, and fails after that.
     """
+    if can is not None:
+        from friction_ros.cli.demo_can import track_realtime
+
+        return track_realtime(can, params_file, duration, label, period)
     for attempt in range(1, TRACK_ATTEMPTS + 1):
         try:
             return _track_once(preset, params_file, duration, label, joint, period)

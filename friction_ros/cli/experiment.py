@@ -98,6 +98,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--no-sim", action="store_true", help="real joint: do not start the plant (run drive_interface)"
     )
+    p.add_argument(
+        "--drive-preset",
+        metavar="PRESET",
+        help="with --no-sim: the joint behind drive_interface is this plant preset in an emulated drive "
+        "(drive_emulator): the program is sized to it and the summary shows its true friction",
+    )
     p.add_argument("-o", "--output", help="bag directory (default bags/experiment_<preset>_<date>)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing bag directory")
     p.add_argument("--joint", default="joint1", help="joint name (%(default)s)")
@@ -178,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         sets = parse_sets(args.set)
         preset = None if args.no_sim else args.preset
+        if args.drive_preset and not args.no_sim:
+            raise ParameterError("--drive-preset names the plant behind an emulated drive: it needs --no-sim")
         if args.state_timeout is not None and not (
             args.state_timeout > 0 and math.isfinite(args.state_timeout)
         ):
@@ -187,10 +195,10 @@ def main(argv: list[str] | None = None) -> int:
         arm = arm_setup(args, sets)
         if arm is None:
             preset_obj = None
-            if preset:
+            if preset or args.drive_preset:
                 from friction_ros.core.presets import load_preset
 
-                preset_obj = load_preset(preset)
+                preset_obj = load_preset(preset or args.drive_preset)
             sized = sized_config(args, preset_obj, sets)
             sized_flat = typed_like_defaults(flatten(sized, keep_none=True), args.profile)
             sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
@@ -199,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
             program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))
             sized_flat = node_values(program.config, args.profile, sized_flat)
             plan = (program.name, program.marked_count, program.total_duration)
-            summary_joints = [(args.joint, preset)]
+            summary_joints = [(args.joint, preset or args.drive_preset)]
         else:
             sized_flat = arm.node_params
             plan = (arm.name, arm.marked_count, arm.total_duration(args.joint_sequence, args.joint_gap))
@@ -250,7 +258,7 @@ def main(argv: list[str] | None = None) -> int:
                     "topics": topics,
                     "output": str(out),
                     "overwrite": bool(args.overwrite),
-                    "preset": preset or "real joint",
+                    "preset": preset or args.drive_preset or "real joint",
                     "program": f"{args.program} ({args.profile})",
                 },
             )
@@ -283,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
     timeout = args.timeout if args.timeout else 60.0 + 10.0 * total
     if arm is None:
         where = f"simulated {preset} ({args.mode})" if preset else "real joint (drive_interface must run)"
+        if args.drive_preset:
+            where = f"{args.drive_preset} in an emulated drive, real time (drive_interface must run)"
     else:
         plants = ", ".join(arm.presets) if arm.presets else preset
         where = f"joints {', '.join(arm.joints)} ({args.joint_sequence}); " + (

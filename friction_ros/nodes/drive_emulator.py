@@ -147,9 +147,11 @@ def main(argv: list[str] | None = None) -> int:
                     flush=True,
                 )
     finally:
-        for emu, bus in drives:
+        for node_id, (emu, bus) in zip(ids, drives):
             emu.stop()
             bus.shutdown()
+            state = "ENABLED (torque on)" if emu.armed else "disabled"
+            print(f"drive_emulator: node {node_id} stopped, drive {state}", flush=True)
     return 0
 
 

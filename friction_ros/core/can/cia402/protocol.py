@@ -114,6 +114,9 @@ class Cia402Protocol(DriveProtocol):
     def __init__(self, cfg):
         super().__init__(cfg)
         own = _params.get(cfg.node_id) or Cia402Config(node_id=cfg.node_id, **dict(cfg.cia402))
+        if not own.max_torque:  # the axis' torque limit is the drive's max torque 0x6072 (written at
+            # start): a command within the node's limit never trips the drive's excess-torque fault
+            own = dataclasses.replace(own, max_torque=abs(cfg.conversion.motor_torque(cfg.torque_limit)))
         # motor side: the axis' JointConversion does gear ratio, lead, direction and zero offset
         mcfg = dataclasses.replace(own, gear_ratio=1.0, lead=0.0, direction=1, zero_offset=0.0)
         self.master = Cia402Master(mcfg)
