@@ -31,16 +31,13 @@ KEY_PARAMETERS = {
         "pid.d",
         "compensation.source",
         "effort_limit",
-        "reference.type",
     ],
     "drive_interface": [
+        "protocol",
         "channel",
         "node_id",
         "gear_ratio",
-        "torque_constant",
         "torque_limit",
-        "velocity_limit",
-        "enable_on_start",
     ],
 }
 

@@ -118,11 +118,18 @@ CIA402_KEYS = ("eds_path", "counts_per_rev", "rated_torque", "rated_current", "h
 AXIS_SCHEMA = Schema(
     "axis",
     [
-        Field("protocol", "odrive_cansimple", "drive protocol", choices=PROTOCOLS, read_only=True),
+        Field(
+            "protocol",
+            "odrive_cansimple",
+            "drive protocol: odrive_cansimple (ODrive CANSimple), mit (MIT mode), cia402 (CANopen CiA 402) "
+            "or a registered plugin's",
+            choices=PROTOCOLS,
+            read_only=True,
+        ),
         Field(
             "node_id",
             0,
-            "ODrive node id (0..63) or MIT motor CAN id",
+            "ODrive node id (0..63), MIT motor CAN id or CANopen node id (1..127)",
             lo=0,
             hi=0x7FF,
             read_only=True,
