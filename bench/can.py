@@ -215,7 +215,7 @@ def child(
         joints = ["-p", f"joints:=[{', '.join(f'j{i + 1}' for i in range(axes))}]"]
         joints += [x for i in range(axes) for x in ("-p", f"j{i + 1}.node_id:={i + 1}")]
     ros = ["-p", f"interface:={bus}", "-p", f"channel:={channel}", *joints,
-           "-p", "enable_on_start:=true", "-p", f"control_rate_hz:={rate}", "-p", "torque_constant:=0.49",
+           "-p", "enable_on_start:=true", "-p", f"control_period:={1.0 / rate!r}", "-p", "torque_constant:=0.49",
            "-p", "telemetry_timeout:=0.05", "-p", "command_timeout:=0.2", "-p", f"loop_spin:={spin}",
            "-p", f"cpu_affinity:={1 if pin else -1}"]  # fmt: skip
     try:
@@ -306,7 +306,7 @@ def node_work_per_cycle(n: int = 20_000) -> float:
 
     v = flatten(parameter_schema().defaults())
     v.update(node_id=1, enable_on_start=True, torque_constant=0.49)
-    axis = DriveAxis(axis_config(v, v["control_rate_hz"]))
+    axis = DriveAxis(axis_config(v, 1.0 / v["control_period"]))
     axis.request_enable()
     packets, decoder = StatePackets("j1", "odrive_cansimple"), JointStateDecoder()
     raw = serialize_message(JointState(name=["j1"], effort=[0.1]))

@@ -247,6 +247,8 @@ def _node_cmd(channel: str, *params: str) -> list[str]:
         (["joints:=[a, a]"], ["appears twice"]),
         (["joints:=[a, mit]"], ["clashes"]),
         (["c.node_id:=3"], ["unknown parameter", "c.node_id"]),
+        # the old name of the drive's rate is named with what replaced it
+        (["control_rate_hz:=500.0"], ["unknown parameter", "control_rate_hz is now control_period [s]"]),
     ],
 )
 def test_several_drives_bad_parameters_refuse_to_start_with_one_line(channel, params, words):

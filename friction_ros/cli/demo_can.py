@@ -65,7 +65,7 @@ def drive_parameters(preset_obj, protocol: str, joint: str, channel: str) -> dic
         "protocol": protocol,
         "node_id": NODE_ID,
         "joint_name": joint,
-        "control_rate_hz": 1000.0,
+        "control_period": 0.001,
         "enable_on_start": True,
         "gear_ratio": float(p.ratio),
         "torque_constant": float(p.torque_constant),

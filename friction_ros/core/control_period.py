@@ -1,6 +1,6 @@
 """The control period: its default and allowed range, owned here for the plant presets
 (:class:`~friction_ros.core.presets.Preset` ``control_period``) and every node's ``control_period``
-parameter (drive_interface: ``control_rate_hz`` = 1 / period). A module of its own so a node that
+parameter (drive_interface's too). A module of its own so a node that
 needs only the parameter does not load the plant and its compiled kernels."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from friction_ros.core.config import Field
 from friction_ros.core.validation import check_real
 
 #: The control period [s] of a plant whose preset does not give one, and the default of every node's
-#: ``control_period`` parameter (drive_interface: ``control_rate_hz`` = 1 / it).
+#: ``control_period`` parameter.
 DEFAULT_CONTROL_PERIOD = 1e-3
 #: The range [s] a control period must lie in (the plant's preset and the nodes' parameters).
 CONTROL_PERIOD_RANGE = (1e-5, 0.1)

@@ -21,7 +21,7 @@ emulator, the plant_simulator node and the CLIs all go this way.
 
 The control period is owned by the plant's preset: ``Preset.control_period`` (the ``control_period``
 of the YAML file, validated by :func:`~friction_ros.core.control_period.check_control_period`), by default
-:data:`~friction_ros.core.control_period.DEFAULT_CONTROL_PERIOD`. The nodes' ``control_period`` parameters (``control_rate_hz`` =
+:data:`~friction_ros.core.control_period.DEFAULT_CONTROL_PERIOD`. The nodes' ``control_period`` parameters (
 1 / period in drive_interface) take their default and range from :data:`~friction_ros.core.control_period.DEFAULT_CONTROL_PERIOD` and
 :data:`CONTROL_PERIOD_RANGE`; plant_simulator hands its ``control_period`` to the preset it builds
 and steps the plant at ``Preset.control_period``.

@@ -104,13 +104,13 @@ NODE_FIELDS = [
     ),
     Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
     Field(
-        "control_rate_hz",
-        1.0 / DEFAULT_CONTROL_PERIOD,
-        "publication and command rate",
-        lo=1.0,
-        hi=5000.0,
+        "control_period",
+        DEFAULT_CONTROL_PERIOD,
+        "period of the joint_states publication and the torque commands (1 / the rate)",
+        lo=2e-4,
+        hi=1.0,
         read_only=True,
-        unit="Hz",
+        unit="s",
     ),
     Field(
         "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
@@ -198,7 +198,7 @@ class AxisPort:
     def __init__(self, values: dict):
         self.values = values
         self.joint = values["joint_name"]
-        self.axis = DriveAxis(axis_config(values, values["control_rate_hz"]))
+        self.axis = DriveAxis(axis_config(values, 1.0 / values["control_period"]))
         self.health = AxisHealth()
         self.flags = 0
         self.label = f"drive '{self.joint}' (id {values['node_id']})"
@@ -248,7 +248,7 @@ class DriveInterface(ParameterNode):
         if v["enable_on_start"]:
             for a in self.axes:
                 a.request_enable()
-        period = 1.0 / v["control_rate_hz"]
+        period = v["control_period"]
         if v["loop_spin"] > 0:  # busy-wait before each deadline: needs a thread of its own
             self.loop = FixedRateLoop(period, self._cycle, name="drive_interface_loop", spin=v["loop_spin"])
             self.loop.start()
@@ -257,7 +257,7 @@ class DriveInterface(ParameterNode):
         n = len(self.joints)
         drives = ", ".join(f"'{p.joint}' (id {p.axis.cfg.node_id})" for p in self.ports)
         self.get_logger().info(
-            f"{v['protocol']} on {v['interface']}:{v['channel']} at {v['control_rate_hz']:g} Hz, "
+            f"{v['protocol']} on {v['interface']}:{v['channel']} at {1.0 / v['control_period']:g} Hz, "
             f"joint{'s' if n > 1 else ''} {drives}, drive{'s' if n > 1 else ''} "
             f"{'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
         )
@@ -268,7 +268,7 @@ class DriveInterface(ParameterNode):
         values = [p.values for p in self.ports]
         new_values, shared = changed_values(self.joints, values, changes, AXIS_KEYS, bool(self.joints_param))
         configs = [
-            axis_config(vals, vals["control_rate_hz"]) for vals in new_values
+            axis_config(vals, 1.0 / vals["control_period"]) for vals in new_values
         ]  # raises ParameterError -> rejected
         for port, vals, cfg in zip(self.ports, new_values, configs):
             with port.axis._lock:

@@ -233,10 +233,15 @@ def check_unknown_parameters(node: ParameterNode, hint: str | None = None) -> No
         k for k in node.given_parameters if k not in declared and not k.startswith("qos_overrides")
     )
     if unknown:
+        renamed = "".join(f"; {k} is now {RENAMED[k]}" for k in unknown if k in RENAMED)
         raise ParameterError(
-            f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file; "
+            f"{node.get_name()}: unknown parameter(s) {', '.join(unknown)} in the parameter file{renamed}; "
             + (hint or f"declared parameters are: {', '.join(sorted(declared))}")
         )
+
+
+#: parameters that were renamed -> what to set instead (said when an old file sets them)
+RENAMED = {"control_rate_hz": "control_period [s] = 1 / the rate (one name across nodes)"}
 
 
 def _value(node: ParameterNode, name: str, spec: Field) -> Any:

@@ -36,7 +36,7 @@ def _drive_interface_parameters() -> str:
     lines = parameter_lines(drive_interface.parameter_schema())
     return (
         "drive_interface parameters after -- (interface, channel, protocol, node_id, gear_ratio,\n"
-        "torque_constant and control_rate_hz are set to match the emulated drive):\n" + "\n".join(lines)
+        "torque_constant and control_period are set to match the emulated drive):\n" + "\n".join(lines)
     )
 
 
@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
         "-p", f"node_id:={a.node_id}",
         "-p", f"gear_ratio:={conv.gear_ratio}",
         "-p", f"torque_constant:={conv.torque_constant}",
-        "-p", f"control_rate_hz:={a.rate}",
+        "-p", f"control_period:={1.0 / a.rate!r}",
     ]  # fmt: skip
     ros_args = ros[1:] if ros[:1] == ["--ros-args"] else ros
     try:

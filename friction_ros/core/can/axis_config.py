@@ -254,7 +254,7 @@ AXIS_SCHEMA = Schema(
         Field(
             "telemetry_rate_hz",
             0.0,
-            "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = control_rate_hz "
+            "rate of the drive's encoder and effort frames (ODrive cyclic messages); 0 = 1 / control_period "
             "(MIT replies and RTR requests come once per period)",
             lo=0.0,
             hi=10000.0,
