@@ -9,6 +9,7 @@ import math
 import shutil
 from pathlib import Path
 
+import dask
 import numpy as np
 import pyarrow as pa
 import pytest
@@ -17,7 +18,7 @@ from friction_ros.cli.fleet import main
 from friction_ros.core.fleet import table as ft
 from friction_ros.core.fleet.discovery import discover
 from friction_ros.core.fleet.driver import KILLED
-from friction_ros.core.fleet.run_fit import CRASH_MARK_ENV
+from friction_ros.core.fleet.run_fit import CRASH_MARK_ENV, run_rows
 from friction_ros.core.synthetic_logs import make_log
 
 FAST = ["--models", "coulomb", "stribeck", "--maxiter", "3", "--train-seconds", "1", "--quiet"]
@@ -129,6 +130,11 @@ def test_bag_metadata_and_temperature_topic(tmp_path):
         ("r9", j, dt.datetime(2026, 3, 1, 8, tzinfo=dt.UTC), str(bag)) for j in ("a1", "a2")
     ]
     assert bag_temperature(bag) == pytest.approx((np.mean(temps), 30.0, 35.0))
+    # one joint of the bag fitted in this process: its rows carry the topic's temperature
+    rows = run_rows(tasks[1], {"models": ("coulomb",), "maxiter": 3, "train_seconds": 1.0})
+    assert [r["model"] for r in rows] == ["baseline", "coulomb"] and all(r["error"] == "" for r in rows)
+    assert rows[0]["joint"] == "a2" and rows[0]["robot"] == "r9" and rows[0]["effort_unit"] == "N*m"
+    assert (rows[0]["temperature_mean"], rows[0]["temperature_max"]) == pytest.approx((np.mean(temps), 35.0))
 
 
 def test_rows_units_temperature_and_failed_run(one_worker, fleet):
@@ -179,7 +185,8 @@ def test_two_workers_same_table_after_a_killed_worker(one_worker, fleet, tmp_pat
     _, table1 = one_worker
     table2 = tmp_path / "fleet2.parquet"
     monkeypatch.setenv(CRASH_MARK_ENV, str(Path("r1") / "2026-03-01" / "j1.csv"))
-    assert _fit(fleet, table2, "--workers", "2") == 1
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}):  # not tried on a 2nd worker
+        assert _fit(fleet, table2, "--workers", "2") == 1
     rows = ft.read_table(table2).to_pylist()
     killed = [r for r in rows if r["error"] == KILLED]
     assert [(r["robot"], r["joint"]) for r in killed] == [("r1", "j1")]
