@@ -83,10 +83,9 @@ def _client(workers: int | None, scheduler: str | None):
         except (OSError, TimeoutError) as exc:
             raise ParameterError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     n = workers or os.cpu_count() or 1
-    # a dying worker's task is tried once more elsewhere; each worker holds one task at a time
-    dask.config.set(
-        {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0}
-    )
+    # a dying worker's task is tried once more elsewhere (at most)
+    retries = min(int(dask.config.get("distributed.scheduler.allowed-failures", 1)), 1)
+    dask.config.set({"distributed.scheduler.allowed-failures": retries})
     cluster = LocalCluster(
         n_workers=n,
         threads_per_worker=1,
@@ -130,11 +129,22 @@ def fit_fleet(
     client, cluster = _client(workers, scheduler)
     try:
         out.workers = len(client.scheduler_info().get("workers", {}))
-        futures = {}
-        for i, task in enumerate(todo):
+        # as many tasks in flight as worker threads: a worker holds one run, so one that dies
+        # takes no other run with it
+        slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+        queue, futures, running = list(enumerate(todo)), {}, as_completed()
+
+        def submit() -> None:
+            i, task = queue.pop(0)
             fut = client.submit(run_rows, task, options, pure=False, key=f"fleet-fit-{i}-{task.key[0][:16]}")
             futures[fut] = (task, time.perf_counter())
-        for fut in as_completed(list(futures)):
+            running.add(fut)
+
+        for _ in range(min(slots, len(queue))):
+            submit()
+        for fut in running:
+            if queue:
+                submit()
             task, started = futures[fut]
             try:
                 rows = fut.result()

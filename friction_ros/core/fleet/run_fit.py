@@ -20,7 +20,7 @@ import math
 import numpy as np
 
 from friction_ros.core.fleet.discovery import RunTask
-from friction_ros.core.fleet.temperature import NONE, run_temperature
+from friction_ros.core.fleet.temperature import run_temperature
 from friction_ros.core.joint_type import quantity_units
 
 #: fit options for short daily identification runs (friction-fit's defaults otherwise)
@@ -140,9 +140,7 @@ def _fit(task: RunTask, opts: dict) -> list[dict]:
     )
     jt, _ = log_joint_type(task.joint_type, [rec], [task.path], None if csv else task.joint)
     row = _base_row(task, jt)
-    temps = NONE
-    if not (csv and task.temperature_topic) and not (not csv and task.temperature_column):
-        temps = run_temperature(task.path, task.temperature_column, task.temperature_topic)
+    temps = run_temperature(task.path, task.temperature_column, task.temperature_topic)
     row.update(
         temperature_mean=temps[0],
         temperature_min=temps[1],
