@@ -41,6 +41,18 @@ class FleetResult:
     seconds: float = 0.0
     workers: int = 0
     messages: list[str] = field(default_factory=list)
+    #: per worker (address -> value): peak resident memory [MB] and CPU time [s] of its process
+    worker_peak_mb: dict[str, float] = field(default_factory=dict)
+    worker_cpu_s: dict[str, float] = field(default_factory=dict)
+
+
+def worker_usage() -> tuple[float, float]:
+    """(peak resident memory [MB], CPU time [s]) of the calling process (``getrusage``; Linux
+    reports ``ru_maxrss`` in KiB)."""
+    import resource
+
+    u = resource.getrusage(resource.RUSAGE_SELF)
+    return u.ru_maxrss / 1024.0, u.ru_utime + u.ru_stime
 
 
 def pending_tasks(tasks: list[RunTask], table_path, refit_failed: bool = False) -> tuple[list[RunTask], int]:
@@ -154,12 +166,25 @@ def fit_fleet(
                 name = type(exc).__name__
                 rows = error_rows(task, KILLED if name == "KilledWorker" else f"{name}: {exc}")
             _record(out, table_path, task, rows, time.perf_counter() - started, on_task)
+        _usage(client, out)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
     out.seconds = time.perf_counter() - t0
     return out
+
+
+def _usage(client, out: FleetResult) -> None:
+    """Each worker's peak memory and CPU time, asked before the cluster closes (a worker that
+    cannot answer is left out)."""
+    try:
+        usage = client.run(worker_usage)
+    except Exception:  # noqa: BLE001 - a report only: never fails the fit
+        return
+    for addr, (mb, cpu) in sorted(usage.items()):
+        out.worker_peak_mb[addr] = float(mb)
+        out.worker_cpu_s[addr] = float(cpu)
 
 
 def _record(

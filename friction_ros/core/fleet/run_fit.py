@@ -2,7 +2,8 @@
 
 The run is read by :func:`~friction_ros.core.identification.log_loading.load_log` and fitted by
 :func:`~friction_ros.core.identification.pipeline.fit_records` with the options of
-:data:`QUICK_OPTIONS` (a short daily run: no learned residual, fewer global-search generations);
+:data:`QUICK_OPTIONS` (a short daily run: the models the wear trend reads, no learned residual,
+fewer global-search generations);
 the joint type, units, recommendation and verdict are friction-fit's
 (:func:`~friction_ros.core.identification.recommendation.verdict_label`). One row per model
 (the inverse-dynamics baseline included); a run that cannot be read or fitted gives one row with
@@ -23,9 +24,13 @@ from friction_ros.core.fleet.discovery import RunTask
 from friction_ros.core.fleet.temperature import run_temperature
 from friction_ros.core.joint_type import quantity_units
 
-#: fit options for short daily identification runs (friction-fit's defaults otherwise)
+#: fit options for short daily identification runs (friction-fit's defaults otherwise). The models
+#: are the ones whose coefficients the wear trend follows (:data:`.trend.WEAR_COEFFICIENTS`: fc, fs,
+#: fv): ``coulomb_viscous`` is linear in its coefficients (solved by least squares, no search) and
+#: ``stribeck`` adds fs with a 3-coefficient search; the dynamic models (lugre, gms4: presliding,
+#: 6x the CPU time per run) add nothing the trend reads.
 QUICK_OPTIONS = {
-    "models": ("coulomb", "stribeck", "lugre", "gms4"),
+    "models": ("coulomb_viscous", "stribeck"),
     "train_seconds": 10.0,
     "maxiter": 30,
     "residual": "none",
