@@ -157,7 +157,7 @@ def fit_fleet(
         for fut in running:
             if queue:
                 submit()
-            task, started = futures[fut]
+            task, started = futures.pop(fut)  # released: the worker may drop the result
             try:
                 rows = fut.result()
             except FutureCancelledError:
