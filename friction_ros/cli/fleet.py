@@ -176,9 +176,14 @@ def main_fit(args) -> int:
         progress.stop()
     rate = res.fitted + res.failed
     per_min = f", {60.0 * rate / res.seconds:.1f} runs/min" if rate and res.seconds > 0 else ""
+    mem = (
+        f", peak memory per worker {', '.join(f'{mb:.0f}' for mb in res.worker_peak_mb.values())} MB"
+        if res.worker_peak_mb
+        else ""
+    )
     print(
         f"{PROG}: {res.fitted} fitted, {res.failed} failed, {res.skipped} already in the table "
-        f"({res.seconds:.1f} s, {res.workers} workers{per_min}): {table_path}"
+        f"({res.seconds:.1f} s, {res.workers} workers{per_min}{mem}): {table_path}"
     )
     return 1 if res.failed else 0
 

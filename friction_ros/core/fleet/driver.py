@@ -41,6 +41,18 @@ class FleetResult:
     seconds: float = 0.0
     workers: int = 0
     messages: list[str] = field(default_factory=list)
+    #: per worker (address -> value): peak resident memory [MB] and CPU time [s] of its process
+    worker_peak_mb: dict[str, float] = field(default_factory=dict)
+    worker_cpu_s: dict[str, float] = field(default_factory=dict)
+
+
+def worker_usage() -> tuple[float, float]:
+    """(peak resident memory [MB], CPU time [s]) of the calling process (``getrusage``; Linux
+    reports ``ru_maxrss`` in KiB)."""
+    import resource
+
+    u = resource.getrusage(resource.RUSAGE_SELF)
+    return u.ru_maxrss / 1024.0, u.ru_utime + u.ru_stime
 
 
 def pending_tasks(tasks: list[RunTask], table_path, refit_failed: bool = False) -> tuple[list[RunTask], int]:
@@ -83,10 +95,9 @@ def _client(workers: int | None, scheduler: str | None):
         except (OSError, TimeoutError) as exc:
             raise ParameterError(f"--scheduler {scheduler}: cannot connect ({exc})") from None
     n = workers or os.cpu_count() or 1
-    # a dying worker's task is tried once more elsewhere; each worker holds one task at a time
-    dask.config.set(
-        {"distributed.scheduler.allowed-failures": 1, "distributed.scheduler.worker-saturation": 1.0}
-    )
+    # a dying worker's task is tried once more elsewhere (at most)
+    retries = min(int(dask.config.get("distributed.scheduler.allowed-failures", 1)), 1)
+    dask.config.set({"distributed.scheduler.allowed-failures": retries})
     cluster = LocalCluster(
         n_workers=n,
         threads_per_worker=1,
@@ -130,12 +141,23 @@ def fit_fleet(
     client, cluster = _client(workers, scheduler)
     try:
         out.workers = len(client.scheduler_info().get("workers", {}))
-        futures = {}
-        for i, task in enumerate(todo):
+        # as many tasks in flight as worker threads: a worker holds one run, so one that dies
+        # takes no other run with it
+        slots = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+        queue, futures, running = list(enumerate(todo)), {}, as_completed()
+
+        def submit() -> None:
+            i, task = queue.pop(0)
             fut = client.submit(run_rows, task, options, pure=False, key=f"fleet-fit-{i}-{task.key[0][:16]}")
             futures[fut] = (task, time.perf_counter())
-        for fut in as_completed(list(futures)):
-            task, started = futures[fut]
+            running.add(fut)
+
+        for _ in range(min(slots, len(queue))):
+            submit()
+        for fut in running:
+            if queue:
+                submit()
+            task, started = futures.pop(fut)  # released: the worker may drop the result
             try:
                 rows = fut.result()
             except FutureCancelledError:
@@ -144,12 +166,25 @@ def fit_fleet(
                 name = type(exc).__name__
                 rows = error_rows(task, KILLED if name == "KilledWorker" else f"{name}: {exc}")
             _record(out, table_path, task, rows, time.perf_counter() - started, on_task)
+        _usage(client, out)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
     out.seconds = time.perf_counter() - t0
     return out
+
+
+def _usage(client, out: FleetResult) -> None:
+    """Each worker's peak memory and CPU time, asked before the cluster closes (a worker that
+    cannot answer is left out)."""
+    try:
+        usage = client.run(worker_usage)
+    except Exception:  # noqa: BLE001 - a report only: never fails the fit
+        return
+    for addr, (mb, cpu) in sorted(usage.items()):
+        out.worker_peak_mb[addr] = float(mb)
+        out.worker_cpu_s[addr] = float(cpu)
 
 
 def _record(

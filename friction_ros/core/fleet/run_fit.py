@@ -2,7 +2,8 @@
 
 The run is read by :func:`~friction_ros.core.identification.log_loading.load_log` and fitted by
 :func:`~friction_ros.core.identification.pipeline.fit_records` with the options of
-:data:`QUICK_OPTIONS` (a short daily run: no learned residual, fewer global-search generations);
+:data:`QUICK_OPTIONS` (a short daily run: the models the wear trend reads, no learned residual,
+fewer global-search generations);
 the joint type, units, recommendation and verdict are friction-fit's
 (:func:`~friction_ros.core.identification.recommendation.verdict_label`). One row per model
 (the inverse-dynamics baseline included); a run that cannot be read or fitted gives one row with
@@ -21,12 +22,16 @@ import os
 import numpy as np
 
 from friction_ros.core.fleet.discovery import RunTask
-from friction_ros.core.fleet.temperature import NONE, run_temperature
+from friction_ros.core.fleet.temperature import run_temperature
 from friction_ros.core.joint_type import quantity_units
 
-#: fit options for short daily identification runs (friction-fit's defaults otherwise)
+#: fit options for short daily identification runs (friction-fit's defaults otherwise). The models
+#: are the ones whose coefficients the wear trend follows (:data:`.trend.WEAR_COEFFICIENTS`: fc, fs,
+#: fv): ``coulomb_viscous`` is linear in its coefficients (solved by least squares, no search) and
+#: ``stribeck`` adds fs with a 3-coefficient search; the dynamic models (lugre, gms4: presliding,
+#: 6x the CPU time per run) add nothing the trend reads.
 QUICK_OPTIONS = {
-    "models": ("coulomb", "stribeck", "lugre", "gms4"),
+    "models": ("coulomb_viscous", "stribeck"),
     "train_seconds": 10.0,
     "maxiter": 30,
     "residual": "none",
@@ -139,9 +144,7 @@ def _fit(task: RunTask, opts: dict) -> list[dict]:
     )
     jt, _ = log_joint_type(task.joint_type, [rec], [task.path], None if csv else task.joint)
     row = _base_row(task, jt)
-    temps = NONE
-    if not (csv and task.temperature_topic) and not (not csv and task.temperature_column):
-        temps = run_temperature(task.path, task.temperature_column, task.temperature_topic)
+    temps = run_temperature(task.path, task.temperature_column, task.temperature_topic)
     row.update(
         temperature_mean=temps[0],
         temperature_min=temps[1],

@@ -149,3 +149,13 @@ def write_table(table: pa.Table, path) -> Path:
 def comparable(table: pa.Table) -> pa.Table:
     """``table`` sorted and without :data:`WALL_CLOCK_COLUMNS`: equal for equal inputs."""
     return sort_table(table).drop_columns([c for c in WALL_CLOCK_COLUMNS if c in table.column_names])
+
+
+def same_rows(a: pa.Table, b: pa.Table) -> bool:
+    """True when ``a`` and ``b`` hold the same rows but for :data:`WALL_CLOCK_COLUMNS` (NaN equal to NaN)."""
+    import json
+
+    def text(t: pa.Table) -> str:
+        return json.dumps(comparable(t).to_pylist(), default=str, sort_keys=True)
+
+    return text(a) == text(b)
