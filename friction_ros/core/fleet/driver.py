@@ -18,6 +18,7 @@ workers, as many workers as cores unless ``workers`` is given) or an existing sc
 from __future__ import annotations
 
 import os
+import resource
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -49,8 +50,6 @@ class FleetResult:
 def worker_usage() -> tuple[float, float]:
     """(peak resident memory [MB], CPU time [s]) of the calling process (``getrusage``; Linux
     reports ``ru_maxrss`` in KiB)."""
-    import resource
-
     u = resource.getrusage(resource.RUSAGE_SELF)
     return u.ru_maxrss / 1024.0, u.ru_utime + u.ru_stime
 

@@ -14,6 +14,7 @@ inputs give equal tables once it is dropped.
 
 from __future__ import annotations
 
+import json
 import os
 import tempfile
 from pathlib import Path
@@ -153,7 +154,6 @@ def comparable(table: pa.Table) -> pa.Table:
 
 def same_rows(a: pa.Table, b: pa.Table) -> bool:
     """True when ``a`` and ``b`` hold the same rows but for :data:`WALL_CLOCK_COLUMNS` (NaN equal to NaN)."""
-    import json
 
     def text(t: pa.Table) -> str:
         return json.dumps(comparable(t).to_pylist(), default=str, sort_keys=True)
