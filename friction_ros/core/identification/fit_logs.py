@@ -15,9 +15,9 @@ import numpy as np
 from friction_ros.core.identification.fit_results import FitResult
 from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.models import check_model_names
-from friction_ros.core.identification.pipeline import DEFAULT_MODELS, JOINT_TYPES, fit_records
+from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_records
 from friction_ros.core.identification.records import JointData
-from friction_ros.core.joint_type import detect_joint_type
+from friction_ros.core.joint_type import JOINT_TYPES, detect_joint_type
 from friction_ros.core.validation import ParameterError, check_choice
 
 
