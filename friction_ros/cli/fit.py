@@ -312,8 +312,38 @@ def gate_options(args) -> dict:
     return lags
 
 
-def fit_options(args, columns) -> dict:
-    """fit_bag's keyword arguments from the command line (but the output paths and progress)."""
+def fit_options(args):
+    """The fit's options (:class:`~friction_ros.core.identification.fit_options.FitOptions`) from
+    the command line; a bad value is refused naming its command-line option."""
+    from friction_ros.core.identification.fit_options import FitOptions
+    from friction_ros.core.validation import ParameterError
+
+    given = dict(
+        train_seconds=args.train_seconds,
+        train_window=args.train_window,
+        optimizer=args.optimizer,
+        maxiter=args.maxiter,
+        seed=args.seed,
+        eps=args.eps,
+        high_threshold=args.high_threshold,
+        load=args.load,
+        ripple_period=args.ripple_period,
+        residual=args.residual,
+        max_samples=args.max_samples or None,
+    )
+    try:
+        return FitOptions(**given)
+    except ParameterError as exc:  # "train_seconds = ..." -> "--train-seconds = ..."
+        text = str(exc)
+        name = next((n for n in given if text.startswith(f"{n} = ")), None)
+        if name is None:
+            raise
+        raise ParameterError("--" + name.replace("_", "-") + text[len(name) :]) from None
+
+
+def log_options(args, columns) -> dict:
+    """fit_bag's own keyword arguments from the command line (reading the logs, the gate, the
+    outputs): all but the fit's options, the output paths and progress."""
     return dict(
         events_topic=args.events_topic,
         current_topic=args.current_topic,
@@ -323,23 +353,12 @@ def fit_options(args, columns) -> dict:
         plots=not args.no_plots,
         torque_delay=args.torque_delay,
         plant_preset=args.plant_preset,
-        train_seconds=args.train_seconds,
-        train_window=args.train_window,
         gate=None if args.no_gate else gate_options(args),
-        optimizer=args.optimizer,
-        maxiter=args.maxiter,
-        seed=args.seed,
-        eps=args.eps,
-        high_threshold=args.high_threshold,
         columns=columns,
         time_scale=args.time_scale,
-        load=args.load,
-        ripple_period=args.ripple_period,
-        residual=args.residual,
         cross_validate=args.cross_validate,
         validate_on=args.validate_on,
         joint_type=args.joint_type,
-        max_samples=args.max_samples or None,
     )
 
 
@@ -377,7 +396,8 @@ def main_joints(args, columns) -> int:
             jobs=args.jobs,
             on_joint=on_joint,
             topic=args.topic,
-            **fit_options(args, columns),
+            options=fit_options(args),
+            **log_options(args, columns),
         )
     except ParameterError as exc:
         print(f"friction-fit: error: {exc}", file=sys.stderr)
@@ -463,7 +483,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.out,
                 params_file=args.params_out,
                 progress=on_progress,
-                **fit_options(args, columns),
+                options=fit_options(args),
+                **log_options(args, columns),
             )
         finally:
             if progress is not None:
