@@ -27,6 +27,8 @@ import argparse
 import math
 import sys
 
+from friction_ros.cli.fit_args import fit_options, gate_options, log_options  # noqa: F401 (gate_options: re-exported)
+
 
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(allow_abbrev=False, prog="friction-fit", description=__doc__.splitlines()[0])
@@ -290,59 +292,6 @@ def check_outputs(args) -> None:
             )
 
 
-def gate_options(args) -> dict:
-    """The safety gate's lags: given, else the plant preset's (as the demo uses), else 0 with a warning
-    (the gate's verdicts depend on them)."""
-    lags = {"current_lag": args.current_lag, "delay": args.delay}
-    if args.plant_preset:
-        from friction_ros.core.identification.gating import preset_lags
-        from friction_ros.core.presets import load_preset
-
-        known = preset_lags(load_preset(args.plant_preset))
-        lags = {k: known[k] if v is None else v for k, v in lags.items()}
-        if args.current_lag is None and args.delay is None:
-            lags["velocity_filter_hz"] = known["velocity_filter_hz"]
-    missing = [f"--{k.replace('_', '-')}" for k, v in lags.items() if v is None]
-    lags = {k: 0.0 if v is None else v for k, v in lags.items()}
-    if missing:
-        lags["assumed"] = (
-            f"the safety gate assumed {' and '.join(missing)} 0 (not given): its verdicts hold only for a drive "
-            "without current-loop lag or delay; give your drive's values"
-        )
-    return lags
-
-
-def fit_options(args, columns) -> dict:
-    """fit_bag's keyword arguments from the command line (but the output paths and progress)."""
-    return dict(
-        events_topic=args.events_topic,
-        current_topic=args.current_topic,
-        current_field=args.current_field,
-        torque_constant=args.torque_constant,
-        gear_ratio=args.gear_ratio,
-        plots=not args.no_plots,
-        torque_delay=args.torque_delay,
-        plant_preset=args.plant_preset,
-        train_seconds=args.train_seconds,
-        train_window=args.train_window,
-        gate=None if args.no_gate else gate_options(args),
-        optimizer=args.optimizer,
-        maxiter=args.maxiter,
-        seed=args.seed,
-        eps=args.eps,
-        high_threshold=args.high_threshold,
-        columns=columns,
-        time_scale=args.time_scale,
-        load=args.load,
-        ripple_period=args.ripple_period,
-        residual=args.residual,
-        cross_validate=args.cross_validate,
-        validate_on=args.validate_on,
-        joint_type=args.joint_type,
-        max_samples=args.max_samples or None,
-    )
-
-
 def main_joints(args, columns) -> int:
     """--joint all / j1,j3: every joint fitted as --joint <joint>, one multi-joint parameter file."""
     from pathlib import Path
@@ -377,7 +326,8 @@ def main_joints(args, columns) -> int:
             jobs=args.jobs,
             on_joint=on_joint,
             topic=args.topic,
-            **fit_options(args, columns),
+            options=fit_options(args),
+            **log_options(args, columns),
         )
     except ParameterError as exc:
         print(f"friction-fit: error: {exc}", file=sys.stderr)
@@ -463,7 +413,8 @@ def main(argv: list[str] | None = None) -> int:
                 args.out,
                 params_file=args.params_out,
                 progress=on_progress,
-                **fit_options(args, columns),
+                options=fit_options(args),
+                **log_options(args, columns),
             )
         finally:
             if progress is not None:

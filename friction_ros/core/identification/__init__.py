@@ -16,12 +16,14 @@ plugin base every fittable family implements, and its registry) with ``fit_famil
 built-in families).
 
 Entry points: :func:`fit_bag` (``fit_logs``: logs in, files out) and :func:`fit_records` (``pipeline``, which compares the models;
+its options: :class:`FitOptions`;
 ``model_fits`` turns each family's fit into a ``ModelResult`` of ``fit_results``).
 """
 
 from friction_ros.core.identification.bag_loading import load_bag
 from friction_ros.core.identification.fit_logs import cross_validate_runs, fit_bag
 from friction_ros.core.identification.fit_model import Coef, FitModel, register_fit_model
+from friction_ros.core.identification.fit_options import FitOptions
 from friction_ros.core.identification.fit_results import FitResult, ModelResult
 from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_records
 from friction_ros.core.identification.records import ExcitationError, JointData, prepare
@@ -31,6 +33,7 @@ __all__ = [
     "DEFAULT_MODELS",
     "ExcitationError",
     "FitModel",
+    "FitOptions",
     "FitResult",
     "JointData",
     "ModelResult",

@@ -1,6 +1,6 @@
 """Logs in, files out: read bags or CSV logs, fit, write the report, summary and parameter file.
 
-* :func:`fit_bag` ``(bag_paths, topic, joint, models, out_dir, **options) -> FitResult``;
+* :func:`fit_bag` ``(bag_paths, topic, joint, models, out_dir, options=None, **kw) -> FitResult``;
 * :func:`cross_validate_runs`: train on all runs but one, validate on it, for each run;
 * :func:`log_joint_type`: revolute or prismatic, as asked or from the log's metadata.
 """
@@ -12,12 +12,13 @@ from pathlib import Path
 
 import numpy as np
 
+from friction_ros.core.identification.fit_options import FitOptions
 from friction_ros.core.identification.fit_results import FitResult
 from friction_ros.core.identification.log_loading import load_log
 from friction_ros.core.identification.models import check_model_names
-from friction_ros.core.identification.pipeline import DEFAULT_MODELS, JOINT_TYPES, fit_records
+from friction_ros.core.identification.pipeline import DEFAULT_MODELS, fit_records
 from friction_ros.core.identification.records import JointData
-from friction_ros.core.joint_type import detect_joint_type
+from friction_ros.core.joint_type import JOINT_TYPES, detect_joint_type
 from friction_ros.core.validation import ParameterError, check_choice
 
 
@@ -43,7 +44,9 @@ def fit_bag(
     cross_validate: bool = False,
     validate_on=None,
     joint_type: str = "auto",
-    **options,
+    options: FitOptions | None = None,
+    progress=None,
+    **kw,
 ) -> FitResult:
     """Read bags, fit ``models`` and write into ``out_dir``:
 
@@ -57,12 +60,15 @@ def fit_bag(
     ``cross_validate``: with several logs, also :func:`cross_validate_runs` (``options["cross_validation"]``).
     ``validate_on``: logs read like ``bag_paths`` that only validate (the inputs then only train).
     ``joint_type``: ``revolute``, ``prismatic`` or ``auto`` (:func:`log_joint_type`).
+    ``options`` (:class:`~friction_ros.core.identification.fit_options.FitOptions`) and ``kw`` (single
+    options): :func:`~friction_ros.core.identification.pipeline.fit_records`'s; ``progress`` too.
     """
     from friction_ros.core.identification import report
 
     if isinstance(bag_paths, (str, Path)):
         bag_paths = [bag_paths]
     check_model_names(models)
+    opts = FitOptions.resolve(options, kw)  # a bad option is refused before any log is read
     read = dict(
         columns=columns,
         time_scale=time_scale,
@@ -79,10 +85,9 @@ def fit_bag(
     res = fit_records(
         recs,
         models,
-        label=", ".join(str(p) for p in bag_paths),
+        opts.replace(label=", ".join(str(p) for p in bag_paths), joint_type=jt),
         validation_records=val_recs or None,
-        joint_type=jt,
-        **options,
+        progress=progress,
     )
     res.options["joint_type_source"] = jt_source
     if val_recs:
@@ -91,8 +96,7 @@ def fit_bag(
         if len(recs) < 2:
             res.warnings.append("--cross-validate needs two or more runs: skipped")
         else:
-            cv_opts = {k: v for k, v in options.items() if k not in ("progress", "identifiability_check")}
-            res.options["cross_validation"] = cross_validate_runs(recs, models, **cv_opts)
+            res.options["cross_validation"] = cross_validate_runs(recs, models, opts)
     res.options["plant_preset"] = plant_preset
     if gate is not None:  # the safety gate before the parameter file enables a mode
         from friction_ros.core.identification.gating import gate_fit
@@ -140,22 +144,29 @@ def _csv_header(path: Path) -> list[str] | None:
     return [c.strip() for c in line.split(",")]
 
 
-def cross_validate_runs(records: list[JointData], models=DEFAULT_MODELS, **options) -> dict:
+def cross_validate_runs(
+    records: list[JointData],
+    models=DEFAULT_MODELS,
+    options: FitOptions | None = None,
+    *,
+    progress=None,
+    **kw,
+) -> dict:
     """Cross-validation over runs: for each record, train on all the others and validate on it.
 
     What a user deploying a model needs to know: how it does on a run it has not seen. Returns
     ``{"folds": [{"validation": source, "recommended": name, "nmse_percent": {model: NMSE}}, ...],
-    "mean_nmse_percent": {model: mean over folds}}``; needs at least two records. ``options`` are
-    :func:`fit_records`'s.
+    "mean_nmse_percent": {model: mean over folds}}``; needs at least two records. ``options``,
+    ``kw`` and ``progress`` are :func:`fit_records`'s (without the identifiability check).
     """
     records = [records] if isinstance(records, JointData) else list(records)
     if len(records) < 2:
         raise ParameterError(f"cross-validation over runs needs >= 2 runs: got {len(records)}")
-    options = {**options, "identifiability_check": False}
+    options = FitOptions.resolve(options, kw).replace(identifiability_check=False)
     folds = []
     for k, held in enumerate(records):
         rest = records[:k] + records[k + 1 :]
-        res = fit_records(rest, models, validation_records=[held], **options)
+        res = fit_records(rest, models, options, validation_records=[held], progress=progress)
         folds.append(
             {
                 "validation": held.meta.get("source", f"run {k}"),
