@@ -245,3 +245,19 @@ def test_cli_reads_a_prismatic_log_by_its_column_names(tmp_path):
     assert "position_m" in s["options"]["joint_type_source"] or "force" in s["options"]["joint_type_source"]
     params = (out / "friction_params.yaml").read_text()
     assert "joint_type: prismatic" in params
+
+
+def test_cross_validation_of_a_prismatic_axis_fits_its_folds_as_prismatic(tmp_path, capsys):
+    """Each fold of --cross-validate is fitted with the log's joint type (it was revolute)."""
+    logs = [tmp_path / f"run{k}.csv" for k in (1, 2)]
+    for k, path in enumerate(logs, start=1):
+        _csv(path, *axis_log(k, seconds=12.0))
+    out = tmp_path / "fit"
+    rc = fit_cli.main(
+        [*map(str, logs), "--cross-validate", "--joint-type", "prismatic", "--models", "coulomb_viscous"]
+        + ["--out", str(out), "--no-plots", "--quiet", "--no-gate", "--residual", "none"]
+    )
+    assert rc == 0, capsys.readouterr()
+    cv = json.loads((out / "summary.json").read_text())["options"]["cross_validation"]
+    assert cv["joint_type"] == "prismatic" and len(cv["folds"]) == 2
+    assert all(math.isfinite(f["nmse_percent"]["coulomb_viscous"]) for f in cv["folds"]), cv

@@ -82,10 +82,11 @@ def fit_bag(
     recs = [load_log(p, topic, joint, **read) for p in bag_paths]
     val_recs = [load_log(p, topic, joint, **read) for p in (validate_on or [])]
     jt, jt_source = log_joint_type(joint_type, recs, bag_paths, joint)
+    opts = opts.replace(label=", ".join(str(p) for p in bag_paths), joint_type=jt)  # the folds' too
     res = fit_records(
         recs,
         models,
-        opts.replace(label=", ".join(str(p) for p in bag_paths), joint_type=jt),
+        opts,
         validation_records=val_recs or None,
         progress=progress,
     )
@@ -155,7 +156,7 @@ def cross_validate_runs(
     """Cross-validation over runs: for each record, train on all the others and validate on it.
 
     What a user deploying a model needs to know: how it does on a run it has not seen. Returns
-    ``{"folds": [{"validation": source, "recommended": name, "nmse_percent": {model: NMSE}}, ...],
+    ``{"joint_type": ..., "folds": [{"validation": source, "recommended": name, "nmse_percent": {model: NMSE}}, ...],
     "mean_nmse_percent": {model: mean over folds}}``; needs at least two records. ``options``,
     ``kw`` and ``progress`` are :func:`fit_records`'s (without the identifiability check).
     """
@@ -178,4 +179,4 @@ def cross_validate_runs(
         )
     names = sorted({n for f in folds for n in f["nmse_percent"]})
     mean = {n: float(np.mean([f["nmse_percent"].get(n, math.nan) for f in folds])) for n in names}
-    return {"folds": folds, "mean_nmse_percent": mean}
+    return {"joint_type": options.joint_type, "folds": folds, "mean_nmse_percent": mean}
