@@ -37,7 +37,6 @@ that reached the disk: all but those of the open chunk) and exits with code 1.
 
 from __future__ import annotations
 
-import argparse
 import signal
 import sys
 import time
@@ -48,133 +47,22 @@ from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from friction_ros.core.bag import BagWriter, DiskFullError, run_metadata
-from friction_ros.core.bag.writer import COMPRESSIONS
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.bag.recording import (
+    RECORDING_METADATA_NAME,
+    RecordingStats,
+    subscription_qos,
+    wanted_topic,
+)
 from friction_ros.nodes.bag_common import (
     fail,
     message_class,
     qos_to_dict,
 )
-from friction_ros.nodes.diagnostics import OK, WARN, DiagnosticsPublisher
+from friction_ros.nodes.bag_recorder_options import SCHEMA, build_parser, parse_cli
+from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.parameters import ParameterNode, declare_config
-from friction_ros.nodes.runtime import start_process
+from friction_ros.nodes.runtime import log_events, start_process
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
-
-SCHEMA = Schema(
-    "bag_recorder",
-    [
-        Field(
-            "topics",
-            [],
-            "topics to record (absolute names); empty with all_topics=false records nothing",
-            kind=str,
-            read_only=True,
-        ),
-        Field(
-            "all_topics",
-            False,
-            "record every topic that appears (except /rosout and /parameter_events)",
-            read_only=True,
-        ),
-        Field(
-            "output",
-            "",
-            "bag directory to create; default run_<YYYYmmdd_HHMMSS> in the working directory",
-            read_only=True,
-        ),
-        Field(
-            "overwrite",
-            False,
-            "allow an existing non-empty output directory (its bag files are replaced)",
-            read_only=True,
-        ),
-        Field("compression", "zstd", "MCAP chunk compression", choices=tuple(COMPRESSIONS), read_only=True),
-        Field(
-            "chunk_size",
-            1048576,
-            "uncompressed bytes per chunk before it is written",
-            lo=1024,
-            hi=1 << 30,
-            unit="B",
-            read_only=True,
-        ),
-        Field(
-            "flush_interval",
-            1.0,
-            "longest time a message waits in the open chunk (SIGKILL loss bound)",
-            lo=0.0,
-            hi=3600.0,
-            unit="s",
-            read_only=True,
-        ),
-        Field(
-            "qos_depth",
-            0,
-            "depth of the recording subscriptions: 0 keeps all (a burst waits in the publisher, never "
-            "dropped here); > 0 keep-last of that depth",
-            lo=0,
-            hi=1000000,
-            read_only=True,
-        ),
-        Field(
-            "discovery_period",
-            0.2,
-            "period of the search for publishers of the wanted topics",
-            lo=0.01,
-            hi=60.0,
-            unit="s",
-            read_only=True,
-        ),
-        Field(
-            "max_duration",
-            0.0,
-            "stop after this time, 0 = until SIGINT/SIGTERM",
-            lo=0.0,
-            hi=1e9,
-            unit="s",
-            read_only=True,
-        ),
-        Field(
-            "diagnostics_period",
-            1.0,
-            "period of the diagnostics status (messages and drops per topic) and of drop log lines",
-            lo=0.05,
-            hi=3600.0,
-            unit="s",
-            read_only=True,
-        ),
-        Field("preset", "", "run metadata: plant/joint preset name", read_only=True),
-        Field("program", "", "run metadata: excitation program", read_only=True),
-        Field(
-            "parameter_files",
-            [],
-            "run metadata: parameter files embedded by content",
-            kind=str,
-            read_only=True,
-        ),
-    ],
-)
-_IGNORED = ("/rosout", "/parameter_events")
-RECORDING_METADATA_NAME = "friction_ros_recording"
-_SEQ_UNSUPPORTED = 1 << 63  # rmw reports RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED (UINT64_MAX)
-
-
-class TopicStats:
-    """Received and dropped messages of one recorded topic (see the module docstring)."""
-
-    __slots__ = ("received", "lost", "gaps", "last_seq", "several", "reported")
-
-    def __init__(self):
-        self.received = 0
-        self.lost = 0  # DDS message_lost total of the subscription
-        self.gaps = 0  # missing publisher sequence numbers
-        self.last_seq: int | None = None
-        self.several = False  # several publishers: sequence numbers interleave, gaps not counted
-        self.reported = 0  # dropped count of the last log line
-
-    @property
-    def dropped(self) -> int:
-        return max(self.lost, self.gaps)
 
 
 class BagRecorder(ParameterNode):
@@ -197,7 +85,8 @@ class BagRecorder(ParameterNode):
         )
         self.wanted = [t if t.startswith("/") else "/" + t for t in p["topics"]]
         self.subs: dict[str, object] = {}
-        self.stats: dict[str, TopicStats] = {}
+        self.recording = RecordingStats()
+        self.stats = self.recording.topics  # per topic: core.bag.recording.TopicStats
         self.closed = False
         self.failed = ""  # the disk-full line, once writing stopped
         self.create_timer(p["discovery_period"], self.discover)
@@ -218,17 +107,9 @@ class BagRecorder(ParameterNode):
         if self.closed:
             return
         for name, st in self.stats.items():
-            several = self.count_publishers(name) > 1
-            if st.several and not several:
-                st.last_seq = None  # one publisher again: its numbers are consecutive from here on
-            st.several = several
+            st.publishers(self.count_publishers(name))
         for name, types in self.get_topic_names_and_types():
-            if name in self.subs:
-                continue
-            if self.p["all_topics"]:
-                if name in _IGNORED:
-                    continue
-            elif name not in self.wanted:
+            if name in self.subs or not wanted_topic(name, self.wanted, self.p["all_topics"]):
                 continue
             if len(types) != 1:
                 self.get_logger().warning(f"topic {name} has several types {types}: not recorded")
@@ -244,19 +125,25 @@ class BagRecorder(ParameterNode):
                 self.get_logger().error(f"topic {name} not recorded: {exc}")
                 self.subs[name] = None
                 continue
-            reliable = all(i.qos_profile.reliability != ReliabilityPolicy.BEST_EFFORT for i in pubs)
-            latched = bool(pubs) and all(
-                i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for i in pubs
+            q = subscription_qos(
+                [
+                    (
+                        i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT,
+                        i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
+                    )
+                    for i in pubs
+                ],
+                self.p["qos_depth"],
             )
-            depth = self.p["qos_depth"]
             qos = QoSProfile(
-                history=HistoryPolicy.KEEP_LAST if depth > 0 else HistoryPolicy.KEEP_ALL,
-                depth=depth if depth > 0 else 1,
-                reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE,
+                history=HistoryPolicy.KEEP_ALL if q["keep_all"] else HistoryPolicy.KEEP_LAST,
+                depth=q["depth"],
+                reliability=ReliabilityPolicy.RELIABLE if q["reliable"] else ReliabilityPolicy.BEST_EFFORT,
+                durability=DurabilityPolicy.TRANSIENT_LOCAL
+                if q["transient_local"]
+                else DurabilityPolicy.VOLATILE,
             )
-            st = self.stats[name] = TopicStats()
-            st.several = len(pubs) > 1
+            st = self.recording.add(name, len(pubs))
 
             def lost(info, st=st) -> None:
                 st.lost = int(info.total_count)
@@ -282,19 +169,9 @@ class BagRecorder(ParameterNode):
         except DiskFullError as exc:
             self._disk_full(exc)
             return
-        st = self.stats[topic]
-        st.received += 1
-        seq = info.get("publication_sequence_number")
-        if seq is None or seq >= _SEQ_UNSUPPORTED or st.several:
-            return
-        last = st.last_seq
-        st.last_seq = seq
-        if last is not None and seq != last + 1:
-            if self.count_publishers(topic) > 1:  # a second publisher appeared since discover()
-                st.several = True
-            elif seq > last + 1:
-                st.gaps += seq - last - 1
-            # a lower number: the publisher was replaced, its numbers start again
+        self.stats[topic].receive(
+            info.get("publication_sequence_number"), lambda: self.count_publishers(topic) > 1
+        )
 
     def _poll(self) -> None:
         """Complete a chunk that waited ``flush_interval`` (timer)."""
@@ -313,11 +190,11 @@ class BagRecorder(ParameterNode):
 
     @property
     def message_count(self) -> int:
-        return sum(st.received for st in self.stats.values())
+        return self.recording.message_count
 
     @property
     def dropped(self) -> int:
-        return sum(st.dropped for st in self.stats.values())
+        return self.recording.dropped
 
     def expired(self) -> bool:
         d = self.p["max_duration"]
@@ -327,39 +204,18 @@ class BagRecorder(ParameterNode):
         """Log new drops (one line per topic) and publish the diagnostics status."""
         if self.closed:
             return
-        for name, st in self.stats.items():
-            if st.dropped > st.reported:
-                self.get_logger().warning(
-                    f"dropped {st.dropped - st.reported} message(s) on {name} "
-                    f"({st.dropped} dropped, {st.received} recorded so far)"
-                )
-                st.reported = st.dropped
-        values: dict = {"messages": self.message_count, "dropped": self.dropped, "topics": len(self.stats)}
-        for name, st in self.stats.items():
-            values[f"{name} received"] = st.received
-            values[f"{name} dropped"] = st.dropped
-        level = WARN if self.dropped else OK
-        text = f"{self.message_count} messages recorded, {self.dropped} dropped"
-        self.diag.publish(level, text, values)
+        log_events(self.get_logger(), self.recording.new_drops())
+        self.diag.publish(*self.recording.diagnostics())
 
     def summary(self) -> str:
         """The final line: messages, topics, drops (per topic when any)."""
-        text = f"wrote {self.message_count} messages on {len(self.stats)} topic(s) to {self.writer.path}"
-        drops = {n: st.dropped for n, st in self.stats.items() if st.dropped}
-        if drops:
-            per = ", ".join(f"{n}: {d}" for n, d in drops.items())
-            return f"{text}; DROPPED {sum(drops.values())} message(s) ({per})"
-        return f"{text}; 0 dropped"
+        return self.recording.summary(self.writer.path)
 
     def close(self) -> None:
         if not self.closed:
             self.closed = True
-            record = {"messages": self.message_count, "dropped": self.dropped}
-            for name, st in self.stats.items():
-                record[f"received:{name}"] = st.received
-                record[f"dropped:{name}"] = st.dropped
             try:
-                self.writer.add_metadata(RECORDING_METADATA_NAME, record)
+                self.writer.add_metadata(RECORDING_METADATA_NAME, self.recording.record())
                 self.writer.close()
             except DiskFullError as exc:
                 self._disk_full(exc)
@@ -368,45 +224,12 @@ class BagRecorder(ParameterNode):
             log(self.summary())
 
 
-def build_parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(
-        allow_abbrev=False,
-        prog="bag_recorder",
-        description="Record topics to a rosbag2 MCAP bag (ROS parameters via --ros-args).",
-    )
-    ap.add_argument("topics", nargs="*", help="topics to record")
-    ap.add_argument(
-        "-a", "--all", dest="all_topics", action="store_true", default=None, help="record all topics"
-    )
-    ap.add_argument("-o", "--output", help="bag directory")
-    ap.add_argument("--overwrite", action="store_true", default=None)
-    ap.add_argument("--compression", choices=list(COMPRESSIONS))
-    ap.add_argument("--chunk-size", dest="chunk_size", type=int, help="bytes")
-    ap.add_argument("--flush-interval", dest="flush_interval", type=float, help="s (SIGKILL loss bound)")
-    ap.add_argument("--qos-depth", dest="qos_depth", type=int)
-    ap.add_argument("--max-duration", dest="max_duration", type=float, help="s")
-    ap.add_argument("--preset")
-    ap.add_argument("--program")
-    ap.add_argument(
-        "--param-file", dest="parameter_files", action="append", help="embed this file (repeatable)"
-    )
-    return ap
-
-
-def _parse_cli(argv: list[str]) -> dict:
-    ns = build_parser().parse_args(argv)
-    out = {k: v for k, v in vars(ns).items() if v is not None}
-    if not out.get("topics"):
-        out.pop("topics", None)
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv if argv is None else argv)
     stop = start_process(argv, about=sys.modules[__name__], parser=build_parser())
     if stop is None:
         return 2
-    cli = _parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
+    cli = parse_cli(rclpy.utilities.remove_ros_args(argv)[1:])
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a file size limit: EFBIG, handled as disk full
     node = None
     try:

@@ -3,37 +3,38 @@ missed commands, state-to-command latency), as a mixin of :class:`~friction_ros.
 
 from __future__ import annotations
 
+import math
 import time
 
 from friction_ros.nodes.diagnostics import ERROR, OK, WARN
+from friction_ros.nodes.loops import LatencyHistogram, LoopStats
 
 
 class PlantHealth:
-    """Mixin: needs the plant node's counters, ``loop``, ``diag``, ``owner`` and parameters ``p``."""
+    """Mixin: needs the plant node's ``sim`` (core PlantStepper), ``loop``, ``diag``, ``owner`` and parameters ``p``."""
 
     def _publish_diagnostics(self) -> None:
+        sim = self.sim
         values = {
             "mode": self.p["mode"],
-            "steps": self._steps,
+            "steps": sim.steps,
             "sim_time": self.plant.time,
-            "commands_rejected": self._commands_rejected,
-            "commands_ignored": self._commands_ignored,
-            **self._rejections.values(),
+            "commands_rejected": sim.commands_rejected,
+            "commands_ignored": sim.commands_ignored,
+            **sim.rejections.values(),
         }
         if self.multi:
-            values["unknown_joint_names"] = self._unknown_names
+            values["unknown_joint_names"] = sim.unknown_names
         level, text = OK, "running"
         if self.loop is not None:
             s = self.loop.stats
             values.update(
                 cycles=s.cycles,
                 overruns=s.overruns,
-                missed_commands=self._missed,
+                missed_commands=sim.missed,
                 max_lateness_s=s.max_lateness,
             )
-            with self._lock:
-                now = time.monotonic()
-                fresh = [now - w <= self.p["command_timeout"] for w in self._command_wall]
+            fresh = sim.fresh(time.monotonic(), self.p["command_timeout"])
             if not all(fresh):
                 level = WARN
                 if self.multi:
@@ -48,19 +49,28 @@ class PlantHealth:
         if self.multi:
             for i, j in enumerate(self.joints):
                 values[f"{j}.preset"] = self.presets[i].name
-                values[f"{j}.commands_rejected"] = self._rejected_by_joint[i]
+                values[f"{j}.commands_rejected"] = sim.rejected_by_joint[i]
                 if self.loop is not None:
                     values[f"{j}.command_fresh"] = fresh[i]
-        new = self._rejections.total - self._diag_rejected
-        self._diag_rejected = self._rejections.total
+        new = sim.rejections.total - self._diag_rejected
+        self._diag_rejected = sim.rejections.total
         if new:
             level = max(level, WARN)
-            text = (
-                f"{new} joint_commands rejected since the last status (last: {self._rejections.last_reason})"
-            )
+            text = f"{new} joint_commands rejected since the last status (last: {sim.rejections.last_reason})"
         if self.owner.conflict:  # two command sources: the plant follows neither (zero torque)
             level, text = ERROR, self.owner.status() + ": following neither (zero torque)"
         self.diag.publish(level, text, values)
+
+    def _reset_statistics(self) -> None:
+        """Start the statistics window (once): missed commands, latency and loop timing from here."""
+        self._stats_reset_at = math.inf  # once
+        self.sim.missed = 0
+        self._latency = LatencyHistogram()
+        if self.loop is not None:
+            self.loop.stats = LoopStats()
+        self._stats_wall0 = time.monotonic()
+        self._stats_steps0 = self.sim.steps
+        self._stats_sim0 = self.plant.time
 
     def loop_statistics(self) -> dict:
         """Loop rate, overruns, missed commands and state-to-command latency percentiles.
@@ -73,21 +83,21 @@ class PlantHealth:
         wall = now - self._stats_wall0
         out = {
             "mode": self.p["mode"],
-            "steps": self._steps,
+            "steps": self.sim.steps,
             "sim_time": self.plant.time,
             "wall_time_total": total,
             "sim_seconds_per_wall_second_total": self.plant.time / total if total > 0 else 0.0,
             "window_wall_time": wall,
-            "window_steps": self._steps - self._stats_steps0,
+            "window_steps": self.sim.steps - self._stats_steps0,
             "sim_seconds_per_wall_second": (self.plant.time - self._stats_sim0) / wall if wall > 0 else 0.0,
-            "commands_rejected": self._commands_rejected,
+            "commands_rejected": self.sim.commands_rejected,
         }
         if self.loop is not None:
             s = self.loop.stats
             out.update(
                 cycles=s.cycles,
                 overruns=s.overruns,
-                missed_commands=self._missed,
+                missed_commands=self.sim.missed,
                 rate_hz=s.cycles / wall if wall > 0 else 0.0,
                 max_lateness_s=s.max_lateness,
                 mean_lateness_s=s.total_lateness / s.cycles if s.cycles else 0.0,

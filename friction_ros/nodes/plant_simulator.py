@@ -43,8 +43,6 @@ joints it also has ``<joint>.preset``, ``<joint>.commands_rejected`` and (realti
 
 from __future__ import annotations
 
-import math
-import threading
 import time
 
 from builtin_interfaces.msg import Time
@@ -52,137 +50,28 @@ from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 
-from friction_ros.core.config import Field, Schema
-from friction_ros.core.control_period import control_period_field
-from friction_ros.core.input_gate import PLAUSIBLE_EFFORT, RejectionLog, select_command, select_joint_commands
 from friction_ros.core.joint_config import JointLayout
-from friction_ros.core.joint_type import JOINT_TYPE_FIELD
 from friction_ros.core.plant.multi_joint import PRESET_SECTIONS, resolve_joint_presets
-from friction_ros.core.plant.servo import MAX_COMMAND
+from friction_ros.core.plant.stepping import PlantStepper
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import JointStateDecoder, JointStateEncoder
 from friction_ros.nodes.command_owner import CommandOwnerWatch
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints
-from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram, LoopStats
-from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
+from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram
+from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.plant_health import PlantHealth
+from friction_ros.nodes.plant_parameters import JOINTS_FIELD, parameter_schema
 from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
-from friction_ros.nodes.runtime import apply_scheduling, run_node
+from friction_ros.nodes.runtime import apply_scheduling, log_events, run_node
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
-NODE_FIELDS = [
-    Field(
-        "preset",
-        "abb_m19s",
-        "plant preset: a name in params/ (abb_m19s, seed002_x ...), a YAML path, or '' (the plant.* / friction_*.* parameters are the whole plant)",
-        read_only=True,
-    ),
-    Field(
-        "presets",
-        [],
-        "one plant preset per joint, in the order of joints (empty: every joint uses preset)",
-        kind=str,
-        read_only=True,
-    ),
-    Field("description", "", "free text describing the preset", read_only=True),
-    Field(
-        "joint_name",
-        "joint1",
-        "joint name used in joint_states and expected in joint_commands",
-        read_only=True,
-    ),
-    Field(
-        "mode",
-        "realtime",
-        "realtime: wall-clock loop; lockstep: one period per command + /clock",
-        choices=("realtime", "lockstep"),
-        read_only=True,
-    ),
-    JOINT_TYPE_FIELD,
-    control_period_field("control period (plant step per state)"),
-    Field("initial_position", 0.0, "joint position at start", lo=-1e6, hi=1e6, unit="rad", read_only=True),
-    Field(
-        "command_timeout",
-        0.1,
-        "realtime: zero torque when no command arrived for this long",
-        lo=0.0,
-        hi=60.0,
-        unit="s",
-    ),
-    Field(
-        "max_effort",
-        PLAUSIBLE_EFFORT,
-        "plausibility bound: a commanded |effort| above it is rejected like a NaN (zero torque, logged)",
-        lo=1e-9,
-        unit="N*m",
-    ),
-    Field(
-        "log_period",
-        1.0,
-        "at most one log line per command rejection reason per this period",
-        lo=0.0,
-        unit="s",
-        read_only=True,
-    ),
-    Field(
-        "resend_period",
-        0.2,
-        "lockstep: re-publish the pending state after this wall time",
-        lo=0.005,
-        hi=60.0,
-        unit="s",
-    ),
-    Field(
-        "clock_period",
-        0.01,
-        "lockstep: publish /clock every this much simulated time (0: every period)",
-        lo=0.0,
-        hi=1.0,
-        unit="s",
-        read_only=True,
-    ),
-    Field(
-        "stats_file",
-        "",
-        "write loop/latency statistics as JSON here on shutdown (benchmarks)",
-        read_only=True,
-    ),
-    Field("diagnostics_period", 1.0, "period of the diagnostics status", lo=0.05, hi=60.0, unit="s"),
-    Field(
-        "stats_delay",
-        0.0,
-        "loop/latency statistics start this long (wall) after the first command (benchmarks skip start-up)",
-        lo=0.0,
-        hi=3600.0,
-        unit="s",
-        read_only=True,
-    ),
-]
-
-
-JOINTS_FIELD = Field(
-    "joints",
-    [],
-    "the joints of this plant, in joint_states order; per-joint plant.<joint>.<key> / "
-    "friction_*.<joint>.<key> (empty: the one joint joint_name)",
-    kind=str,
-    read_only=True,
-)
-
-
-def parameter_schema(with_joints: bool = True) -> Schema:
-    """The node's parameters; the preset sections take the keys given in the parameter file (on top
-    of the preset; the plant's keys: :data:`friction_ros.core.plant.params.PLANT_SCHEMA`).
-    ``joints`` is declared by :func:`~friction_ros.nodes.joint_parameters.declare_joints` (the node
-    builds the schema without it)."""
-    sections = [Schema(s, doc=f"preset {s} parameter", open=True, read_only=True) for s in PRESET_SECTIONS]
-    joints = [JOINTS_FIELD] if with_joints else []
-    return Schema("plant_simulator", [*joints, *NODE_FIELDS, *sections, *SCHEDULING])
+__all__ = ["PlantSimulator", "main", "parameter_schema"]
 
 
 class PlantSimulator(PlantHealth, ParameterNode):
-    """Thin adapter: commands in, GearheadServoPlant.step (one plant per joint), joint states out."""
+    """Thin adapter: commands in, :class:`~friction_ros.core.plant.stepping.PlantStepper` (one
+    GearheadServoPlant per joint), joint states out."""
 
     def __init__(self, **kwargs):
         super().__init__("plant_simulator", **kwargs)
@@ -209,10 +98,8 @@ class PlantSimulator(PlantHealth, ParameterNode):
             self.joints[0],
         )
         self.dt = self.preset.control_period
-        self.dt_ns = int(round(self.dt * 1e9))
         self.lockstep = self.p["mode"] == "lockstep"
         n = self.n = len(self.joints)
-        self._index = {j: i for i, j in enumerate(self.joints)}
 
         # joint states and commands are (de)serialised by the wire module's JointState codec and sent as
         # bytes: same wire type, no message objects in the 1 kHz path
@@ -238,39 +125,18 @@ class PlantSimulator(PlantHealth, ParameterNode):
         hardware = self.preset.name if not self.multi else ",".join(pr.name for pr in self.presets)
         self.diag = DiagnosticsPublisher(self, "plant_simulator", hardware)
 
-        self._lock = threading.Lock()
-        self._command = [0.0] * n
-        self._command_wall = [-math.inf] * n
-        self._commands_rejected = 0  # implausible effort: zero torque applied instead
-        self._rejected_by_joint = [0] * n
-        self._commands_ignored = 0  # no joint of ours / malformed (logged) or a lockstep duplicate
-        self._unknown_names = 0  # names in joint_commands that are not joints of this node (ignored)
-        what = f"joint_commands for {self.joint}" if n == 1 else "joint_commands"
-        self._rejections = RejectionLog(what, self.p["log_period"])
+        self.sim = PlantStepper(
+            self.joints, self.plants, self.dt, self.p["initial_position"], self.p["log_period"]
+        )
         self._diag_rejected = 0
-        self._steps = 0
         self._latency = LatencyHistogram()
-        self._last_state_wall = 0.0
-        for plant in self.plants:
-            plant.reset(position=self.p["initial_position"])
-        self._t_ns = 0
         self._start_wall = time.monotonic()
-        self._answered_ns = [-1] * n
-        self._answers: list[float | None] = [None] * n  # lockstep: the pending state's commands
-        self._n_answers = 0
-        self._missed = 0
         # statistics window: from the first command (+ stats_delay); before it no controller answers
         self._stats_reset_at: float | None = None
         self._stats_wall0 = self._start_wall
         self._stats_steps0 = 0
         self._stats_sim0 = 0.0
-        self._next_clock_ns = 0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
-        self._pending = (
-            *([self.p["initial_position"]] * n),
-            *([0.0] * n),
-            *([0.0] * n),
-        )
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
         if self.lockstep:
             self._last_publish = 0.0
@@ -294,6 +160,11 @@ class PlantSimulator(PlantHealth, ParameterNode):
             )
             self.get_logger().info(f"{n} joints, {self.p['mode']} at {1 / self.dt:g} Hz: {each}")
 
+    @property
+    def _pending(self) -> tuple:
+        """The state to publish next (positions, velocities, efforts)."""
+        return self.sim.pending
+
     # -- parameters ---------------------------------------------------------------------------------
     def _apply(self, changes):
         for k in changes:
@@ -308,114 +179,34 @@ class PlantSimulator(PlantHealth, ParameterNode):
             return self.get_clock().now().nanoseconds
         return time.time_ns()  # = the ROS system clock
 
-    def _reset_statistics(self) -> None:
-        self._stats_reset_at = math.inf  # once
-        self._missed = 0
-        self._latency = LatencyHistogram()
-        if self.loop is not None:
-            self.loop.stats = LoopStats()
-        self._stats_wall0 = time.monotonic()
-        self._stats_steps0 = self._steps
-        self._stats_sim0 = self.plant.time
-
-    def _limit(self, scale: float) -> float:
-        # plausibility: the node's max_effort and the plant's own command range (MAX_COMMAND)
-        return min(self.p["max_effort"], MAX_COMMAND / abs(scale)) if scale else self.p["max_effort"]
-
-    def _select(self, msg) -> dict[int, float] | None:
-        """``{joint index: effort}`` of a command (rejected efforts: 0.0), None when it is ignored."""
-        now = time.monotonic()
-        if self.n == 1:
-            effort, reason, detail = select_command(msg, self.joint, self._limit(self.scale))
-            if effort is not None:
-                return {0: effort}
-            rejections = [(None if reason in ("wrong_joint", "wrong_length") else 0, reason, detail)]
-            efforts: dict[int, float] = {}
-        else:
-            efforts, rejections, unknown = select_joint_commands(
-                msg, self._index, [self._limit(k) for k in self.scales]
-            )
-            self._unknown_names += unknown
-        for i, reason, detail in rejections:
-            line = self._rejections.reject(reason, detail, now)
-            if i is None:
-                self._commands_ignored += 1  # not a command for our joints: ignored
-                if line:
-                    self.get_logger().warning(f"{line}; ignored")
-                return None
-            self._commands_rejected += 1
-            self._rejected_by_joint[i] += 1
-            if line:
-                self.get_logger().warning(f"{line}; applying zero torque instead")
-            efforts[i] = 0.0
-        return efforts
-
     def _on_command(self, data: bytes) -> None:
         msg = self._decoder.decode(data)
         if self._stats_reset_at is None:
             self._stats_reset_at = time.monotonic() + self.p["stats_delay"]
         if self._stats_reset_at <= time.monotonic():
             self._reset_statistics()
-        efforts = self._select(msg)
+        efforts, events = self.sim.select(msg, self.p["max_effort"], time.monotonic())
+        log_events(self.get_logger(), events)
         if efforts is None:
             return
         conflicted = self.owner.admit(msg.frame_id, msg.name)
         if conflicted:  # a joint with two command sources: follow neither (command_owner policy)
             efforts = {i: (0.0 if i in conflicted else e) for i, e in efforts.items()}
         if self.lockstep:
-            if msg.stamp_ns != self._t_ns:
-                self._commands_ignored += 1  # duplicate or stale answer
-                return
-            answers = self._answers
-            new = 0
-            for i, e in efforts.items():
-                if answers[i] is None:
-                    answers[i] = e
-                    new += 1
-            if not new:
-                self._commands_ignored += 1  # every joint it names was answered already: duplicate
-                return
-            self._n_answers += new
-            if self._n_answers < self.n:
-                return  # wait for the other joints' commands
-            self._advance(answers)
-            self._answers = [None] * self.n
-            self._n_answers = 0
-            self._publish_pending()
+            if self.sim.answer(msg.stamp_ns, efforts):
+                self._publish_pending()
             return
-        now = time.monotonic()
         sent = msg.stamp_ns
-        with self._lock:
-            for i, e in efforts.items():
-                self._command[i] = e
-                self._command_wall[i] = now
-                if sent:
-                    self._answered_ns[i] = sent
+        self.sim.hold(sent, efforts, time.monotonic())
         if sent:
             self._latency.add((self._now_ns() - sent) * 1e-9)
 
     # -- stepping -------------------------------------------------------------------------------------
-    def _advance(self, torques) -> None:
-        dt = self.dt
-        if self.n == 1:
-            m = self.plant.step(torques[0] * self.scale, dt)
-            self._pending = (m.position, m.velocity, m.effort)
-        else:
-            ms = [pl.step(t * k, dt) for pl, t, k in zip(self.plants, torques, self.scales, strict=True)]
-            self._pending = (
-                *(m.position for m in ms),
-                *(m.velocity for m in ms),
-                *(m.effort for m in ms),
-            )
-        self._steps += 1
-        self._t_ns += self.dt_ns
-
     def _publish_pending(self) -> None:
-        sec, nanosec = divmod(self._t_ns, 1_000_000_000)
-        if self.clock_pub is not None and self._t_ns >= self._next_clock_ns:
-            self._next_clock_ns = self._t_ns + self._clock_ns
+        sec, nanosec = divmod(self.sim.t_ns, 1_000_000_000)
+        if self.clock_pub is not None and self.sim.clock_due(self._clock_ns):
             self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
-        self.state_pub.publish(self._encoder.pack(sec, nanosec, *self._pending))
+        self.state_pub.publish(self._encoder.pack(sec, nanosec, *self.sim.pending))
         self._last_publish = time.monotonic()
 
     def _resend(self) -> None:
@@ -423,17 +214,7 @@ class PlantSimulator(PlantHealth, ParameterNode):
             self._publish_pending()
 
     def _tick(self) -> None:
-        with self._lock:
-            now = time.monotonic()
-            timeout = self.p["command_timeout"]
-            torques = [
-                c if now - w <= timeout else 0.0
-                for c, w in zip(self._command, self._command_wall, strict=True)
-            ]
-            if self._steps and any(a != self._t_ns for a in self._answered_ns):
-                self._missed += 1  # a command for the last published state did not arrive in time
-        self._advance(torques)
-        self._t_ns = self._now_ns()
+        self.sim.tick(time.monotonic(), self.p["command_timeout"], self._now_ns)
         self._publish_pending()
 
     def on_shutdown(self) -> None:
