@@ -1,5 +1,6 @@
 """Static import scan of friction_ros shared by the import tests (test_foundation, test_layers):
-every import statement, at module level and inside functions, relative imports resolved."""
+every import statement, at module level and inside functions, relative imports resolved. Imports
+under ``if TYPE_CHECKING:`` are left out: they name types for annotations and never run."""
 
 from __future__ import annotations
 
@@ -33,8 +34,17 @@ def imports(path: Path) -> list[Import]:
         if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
         for inner in ast.walk(node)
     }
+    typing_only = {
+        id(inner)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.If) and _is_type_checking(node.test)
+        for stmt in node.body
+        for inner in ast.walk(stmt)
+    }
     out = []
     for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
         lazy = id(node) in in_function
         if isinstance(node, ast.Import):
             out += [Import(node.lineno, a.name, None, lazy) for a in node.names]
@@ -46,6 +56,13 @@ def imports(path: Path) -> list[Import]:
                 )
             out += [Import(node.lineno, base, a.name, lazy) for a in node.names]
     return out
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    """``TYPE_CHECKING`` or ``typing.TYPE_CHECKING``."""
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
 
 
 def package_modules() -> dict[str, Path]:
