@@ -95,6 +95,9 @@ def codec_costs() -> list[list]:
 
 
 # ---- child: the node (+ the emulator, on the virtual bus) --------------------------------------------
+PROTOCOL = os.environ.get("FRICTION_BENCH_PROTOCOL", "odrive_cansimple")  # bench/can_protocols.py sets it
+
+
 def child(
     rate: float,
     duration: float,
@@ -134,7 +137,7 @@ def child(
         emu.start()
     else:
         emu_proc = subprocess.Popen(
-            (["taskset", "-c", "0"] if pin else []) + [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", bus, "--channel", channel,
+            (["taskset", "-c", "0"] if pin else []) + [sys.executable, "-m", "friction_ros.nodes.drive_emulator", "--interface", bus, "--channel", channel, "--protocol", PROTOCOL,
              "--node-id", *[str(i + 1) for i in range(axes)], "--preset", "abb_m19s", "--physics-rate", str(rate), "--encoder-rate", str(rate),
              "--iq-rate", str(rate), "--status-period", "60"],
             stdout=subprocess.DEVNULL,
@@ -214,7 +217,7 @@ def child(
     if axes > 1:
         joints = ["-p", f"joints:=[{', '.join(f'j{i + 1}' for i in range(axes))}]"]
         joints += [x for i in range(axes) for x in ("-p", f"j{i + 1}.node_id:={i + 1}")]
-    ros = ["-p", f"interface:={bus}", "-p", f"channel:={channel}", *joints,
+    ros = ["-p", f"interface:={bus}", "-p", f"channel:={channel}", "-p", f"protocol:={PROTOCOL}", *joints,
            "-p", "enable_on_start:=true", "-p", f"control_period:={1.0 / rate!r}", "-p", "torque_constant:=0.49",
            "-p", "telemetry_timeout:=0.05", "-p", "command_timeout:=0.2", "-p", f"loop_spin:={spin}",
            "-p", f"cpu_affinity:={1 if pin else -1}"]  # fmt: skip
