@@ -277,7 +277,7 @@ class Schema:
         for name, item in self.items.items():
             sub = f"{rel}.{name}" if rel else name
             v = valid[name]
-            values[name] = item._typed(v, names, sub) if isinstance(item, Schema) else _frozen(v)
+            values[_attr(name)] = item._typed(v, names, sub) if isinstance(item, Schema) else _frozen(v)
         extra = MappingProxyType({k: _frozen(v) for k, v in valid.items() if k not in self.items})
         return self.typed_class()(**values, _extra=extra, _names=names, _rel=rel)
 
@@ -285,10 +285,10 @@ class Schema:
         """The frozen dataclass of this section (generated once per schema)."""
         cls = self.__dict__.get("_typed_cls")
         if cls is None:
-            bad = [n for n in self.items if not n.isidentifier() or keyword.iskeyword(n)]
+            bad = [n for n in self.items if not _attr(n).isidentifier()]
             if bad:
                 raise TypeError(f"schema {self.name}: {bad} cannot be attribute names")
-            spec = [(n, Any) for n in self.items]
+            spec = [(_attr(n), Any) for n in self.items]
             for n, t in (("_extra", Mapping), ("_names", Any), ("_rel", str)):
                 spec.append((n, t, dataclasses.field(repr=False, compare=False)))
             title = "".join(p.capitalize() for p in (self.name or "config").split("_"))
@@ -297,8 +297,14 @@ class Schema:
         return cls
 
 
+def _attr(key: str) -> str:
+    """The attribute of a key: the key, with '_' appended to a Python keyword (``lambda_``)."""
+    return f"{key}_" if keyword.iskeyword(key) else key
+
+
 class TypedConfig:
-    """Base of the frozen config objects :meth:`Schema.typed` generates (attributes: the fields).
+    """Base of the frozen config objects :meth:`Schema.typed` generates (attributes: the fields;
+    a key that is a Python keyword gets a trailing '_', e.g. ``lambda_``).
 
     ``cfg["key"]`` and :meth:`as_dict` keep dict access for code not yet converted; an open
     section's extra keys are in :meth:`as_dict` (and ``cfg["key"]``) only.
@@ -319,7 +325,8 @@ class TypedConfig:
         for f in dataclasses.fields(self):
             if not f.name.startswith("_"):
                 v = getattr(self, f.name)
-                out[f.name] = v.as_dict() if isinstance(v, TypedConfig) else _thawed(v)
+                key = f.name[:-1] if f.name.endswith("_") and keyword.iskeyword(f.name[:-1]) else f.name
+                out[key] = v.as_dict() if isinstance(v, TypedConfig) else _thawed(v)
         return out
 
     def __getitem__(self, key: str) -> Any:
