@@ -85,6 +85,7 @@ from friction_ros.core.control.compensation import (
 from friction_ros.core.control.compensation_watch import CompensationWatch
 from friction_ros.core.control.controller_config import (
     CONTROLLER_FIELDS,
+    core_config,
     core_names,
     default_config,
     merge_config,
@@ -133,15 +134,10 @@ class CompensatingController:
         """Build from the typed ROS config (:func:`.controller_config.ros_controller_config`):
         messages name its parameters (``cfg.path``); the ROS ``compensation`` section is the core's
         ``friction`` and the ROS ``friction`` section its model."""
-        ros = cfg.as_dict()
-        model = ros.pop("friction")
-        ros["friction"] = {**ros.pop("compensation"), "model": model}
-        if model.get("model") in (None, "", "none"):
-            ros["friction"]["model"] = None
         self = cls.__new__(cls)
         ros_key = {"friction": "compensation", "model": "friction"}
         self._at = lambda key: cfg.path(ros_key.get(key, key))
-        self._build(merge_config(default_config(), ros))
+        self._build(merge_config(default_config(), core_config(cfg)))
         return self
 
     @classmethod

@@ -245,6 +245,26 @@ def ros_controller_config(
     return schema.typed(given, names=names)
 
 
+def core_config(cfg: TypedConfig) -> dict[str, Any]:
+    """A typed ROS config as the core's nested config: the ROS ``compensation`` section is the
+    core's ``friction`` section and the ROS ``friction`` section its ``model`` (None for none)."""
+    out = cfg.as_dict()
+    model = out.pop("friction")
+    out["friction"] = {
+        **out.pop("compensation"),
+        "model": None if model.get("model") in (None, "", "none") else model,
+    }
+    return out
+
+
+def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """compensating_controller ROS parameters (nested) -> (core controller config of the keys given,
+    reference config), validated as :func:`ros_controller_config`."""
+    core = core_config(ros_controller_config(values, joint_type=values.get("joint_type", "revolute")))
+    given = {k: v for k, v in core.items() if k in values or k == "friction"}
+    return given, dict(values.get("reference") or {"type": "constant"})
+
+
 _ROS_SCHEMAS: dict[tuple, Schema] = {}
 
 
