@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -64,6 +65,10 @@ def build_model(model: Any, name: str = "friction.model", path: str = ""):
     ``path`` as in :func:`model_from_config`."""
     if model is None:
         return None
+    if isinstance(model, FrictionModel):  # validated already: a copy from its initial state
+        fresh = copy.deepcopy(model)
+        fresh._state = fresh.initial_state()
+        return fresh
     if hasattr(model, "to_config"):
         return model_from_config(model.to_config())
     if not isinstance(model, Mapping):
