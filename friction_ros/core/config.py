@@ -18,12 +18,21 @@ writes ``docs/parameters.md`` from them.
 
 A config travels as a nested dict (``{"pid": {"p": 200.0}}``); ROS parameters are its dotted
 flat form (``pid.p``): :func:`flatten` and :func:`unflatten` convert between the two.
+
+Typed configs (the model of ros2_controllers' generate_parameter_library: the YAML layout is the
+struct): :meth:`Schema.typed` validates a nested config once and returns a frozen dataclass
+generated from the schema (a :class:`TypedConfig`): its attributes are the fields, nested sections
+are nested frozen objects, and every name in an error is the full ROS parameter name
+(``prefix`` + dotted path, or what ``names`` maps it to), so no message is renamed afterwards.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+import dataclasses
+import keyword
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import Any
 
 import numpy as np
@@ -39,6 +48,14 @@ from friction_ros.core.validation import (
 )
 
 _TYPE_NAMES = {bool: "bool", int: "int", float: "float", str: "str"}
+
+#: schema-relative dotted name (``friction.fc``) -> the parameter name a message shows
+Names = Callable[[str], str]
+
+
+def prefixed(prefix: str) -> Names:
+    """The :data:`Names` of a plain prefix: ``rel`` -> ``prefix.rel`` (``rel`` alone without prefix)."""
+    return lambda rel: f"{prefix}.{rel}" if prefix and rel else (prefix or rel)
 
 
 @dataclass(frozen=True)
@@ -228,18 +245,111 @@ class Schema:
         Returns a new nested dict with every field (defaults filled in, values normalised). Names in
         messages start with ``prefix`` (default: the schema's name; '' for none).
         """
+        return self._validate(config, prefixed(self.name if prefix is None else prefix), "")
+
+    def _validate(self, config: Mapping[str, Any] | None, names: Names, rel: str) -> dict[str, Any]:
         config = dict(config or {})
-        prefix = self.name if prefix is None else prefix
-        dot = f"{prefix}." if prefix else ""
         if not self.open:
-            check_keys(prefix or self.name, config, self.items)
+            check_keys(names(rel) or self.name, config, self.items)
         out: dict[str, Any] = {k: v for k, v in config.items() if k not in self.items}
         for name, item in self.items.items():
+            sub = f"{rel}.{name}" if rel else name
             if isinstance(item, Schema):
-                out[name] = item.validate(config.get(name), f"{dot}{name}")
+                out[name] = item._validate(config.get(name), names, sub)
             else:
-                out[name] = item.check(config.get(name, item.default), f"{dot}{name}")
+                out[name] = item.check(config.get(name, item.default), names(sub))
         return out
+
+    def typed(
+        self, config: Mapping[str, Any] | None, prefix: str = "", names: Names | None = None
+    ) -> TypedConfig:
+        """Validate ``config`` once (as :meth:`validate`) and return it as a frozen typed object.
+
+        Messages name ``prefix.<dotted key>`` (``gains.joint2.friction.fc = -1 is out of range``),
+        or ``names(<dotted key>)`` when given (a per-joint layout); the object's :meth:`TypedConfig.path`
+        gives the same names to the code that checks cross-field rules.
+        """
+        names = prefixed(prefix) if names is None else names
+        return self._typed(self._validate(config, names, ""), names, "")
+
+    def _typed(self, valid: Mapping[str, Any], names: Names, rel: str) -> TypedConfig:
+        values: dict[str, Any] = {}
+        for name, item in self.items.items():
+            sub = f"{rel}.{name}" if rel else name
+            v = valid[name]
+            values[_attr(name)] = item._typed(v, names, sub) if isinstance(item, Schema) else _frozen(v)
+        extra = MappingProxyType({k: _frozen(v) for k, v in valid.items() if k not in self.items})
+        return self.typed_class()(**values, _extra=extra, _names=names, _rel=rel)
+
+    def typed_class(self) -> type[TypedConfig]:
+        """The frozen dataclass of this section (generated once per schema)."""
+        cls = self.__dict__.get("_typed_cls")
+        if cls is None:
+            bad = [n for n in self.items if not _attr(n).isidentifier()]
+            if bad:
+                raise TypeError(f"schema {self.name}: {bad} cannot be attribute names")
+            spec = [(_attr(n), Any) for n in self.items]
+            for n, t in (("_extra", Mapping), ("_names", Any), ("_rel", str)):
+                spec.append((n, t, dataclasses.field(repr=False, compare=False)))
+            title = "".join(p.capitalize() for p in (self.name or "config").split("_"))
+            cls = dataclasses.make_dataclass(title + "Config", spec, bases=(TypedConfig,), frozen=True)
+            self._typed_cls = cls
+        return cls
+
+
+def _attr(key: str) -> str:
+    """The attribute of a key: the key, with '_' appended to a Python keyword (``lambda_``)."""
+    return f"{key}_" if keyword.iskeyword(key) else key
+
+
+class TypedConfig:
+    """Base of the frozen config objects :meth:`Schema.typed` generates (attributes: the fields;
+    a key that is a Python keyword gets a trailing '_', e.g. ``lambda_``).
+
+    ``cfg["key"]`` and :meth:`as_dict` keep dict access for code not yet converted; an open
+    section's extra keys are in :meth:`as_dict` (and ``cfg["key"]``) only.
+    """
+
+    _extra: Mapping[str, Any]
+    _names: Names
+    _rel: str
+
+    def path(self, key: str = "") -> str:
+        """The parameter name of ``key`` (a dotted key below this section; '' for the section)."""
+        rel = ".".join(p for p in (self._rel, key) if p)
+        return self._names(rel)
+
+    def as_dict(self) -> dict[str, Any]:
+        """A nested dict of the values (sections as dicts, lists as lists, extra keys included)."""
+        out = {k: _thawed(v) for k, v in self._extra.items()}
+        for f in dataclasses.fields(self):
+            if not f.name.startswith("_"):
+                v = getattr(self, f.name)
+                key = f.name[:-1] if f.name.endswith("_") and keyword.iskeyword(f.name[:-1]) else f.name
+                out[key] = v.as_dict() if isinstance(v, TypedConfig) else _thawed(v)
+        return out
+
+    def __getitem__(self, key: str) -> Any:
+        return self.as_dict()[key]
+
+    def get(self, key: str, default: Any = None) -> Any:
+        return self.as_dict().get(key, default)
+
+
+def _frozen(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return MappingProxyType({k: _frozen(v) for k, v in value.items()})
+    if isinstance(value, list):
+        return tuple(_frozen(v) for v in value)
+    return value
+
+
+def _thawed(value: Any) -> Any:
+    if isinstance(value, Mapping):
+        return {k: _thawed(v) for k, v in value.items()}
+    if isinstance(value, tuple):
+        return [_thawed(v) for v in value]
+    return value
 
 
 def flatten(config: Mapping[str, Any], prefix: str = "", *, keep_none: bool = False) -> dict[str, Any]:

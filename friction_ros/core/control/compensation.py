@@ -83,12 +83,12 @@ COMPENSATION_DEFAULTS: dict[str, Any] = {
 }
 
 
-def build_model(model: Any, name: str = "friction.model"):
+def build_model(model: Any, name: str = "friction.model", path: str = ""):
     """:func:`friction_ros.core.friction.registry.build_model`, imported on first use (the models
     load their compiled kernels)."""
     from friction_ros.core.friction.registry import build_model as build
 
-    return build(model, name)
+    return build(model, name, path)
 
 
 def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
@@ -130,13 +130,22 @@ def _presliding_bound(
 class FrictionCompensator:
     """Friction compensation term(s) from a library model; see the module docstring."""
 
-    def __init__(self, config: Mapping[str, Any] | None = None, *, prefix: str = "friction", **kwargs):
+    def __init__(
+        self,
+        config: Mapping[str, Any] | None = None,
+        *,
+        prefix: str = "friction",
+        model_path: str = "",
+        **kwargs,
+    ):
+        """``prefix``: how messages name this section; ``model_path``: the model's section
+        (``friction`` in the ROS layout; default: the model's name)."""
         cfg = dict(COMPENSATION_DEFAULTS)
         given = dict(config or {})
         given.update(kwargs)
         check_keys(prefix, given, COMPENSATION_DEFAULTS)
         cfg.update(given)
-        self.prefix = prefix
+        self.prefix, self.model_path = prefix, model_path
         self.source = check_choice(f"{prefix}.source", cfg["source"], SOURCES)
         self.gain = check_real(f"{prefix}.gain", cfg["gain"], 0.0, 2.0)
         self.blend = check_real(f"{prefix}.blend", cfg["blend"], 0.0, 1.0)
@@ -160,11 +169,14 @@ class FrictionCompensator:
             i = self.refused.index(self.source)
             why = self.refused_reasons[i] if i < len(self.refused_reasons) else "see the fit report"
             ok = [x for x in ("feedforward", "feedback", "blended") if x not in self.refused]
+            section = (
+                prefix if prefix.endswith("compensation") else f"{prefix.rsplit('.', 1)[0]}.compensation"
+            )
             raise ParameterError(
-                f"{prefix.rsplit('.', 1)[0]}.compensation.source = {self.source} was refused by the safety gate "
+                f"{section}.source = {self.source} was refused by the safety gate "
                 f"({why}): use {', '.join(ok + ['none'])}, or set compensation.allow_refused: true"
             )
-        self._install(build_model(cfg["model"], f"{prefix}.model"))
+        self._install(build_model(cfg["model"], f"{prefix}.model", model_path))
 
     # -- model management -------------------------------------------------------------------------
     def _install(self, model) -> None:
@@ -198,7 +210,7 @@ class FrictionCompensator:
 
         Dynamic states restart from the new model's initial state.
         """
-        self._install(build_model(model, f"{self.prefix}.model"))
+        self._install(build_model(model, f"{self.prefix}.model", self.model_path))
 
     def set_coefficients(self, **coefficients: Any) -> None:
         """Hot-swap some coefficients of the current model (validated; states are kept if compatible)."""

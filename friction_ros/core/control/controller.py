@@ -77,19 +77,19 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from friction_ros.core.config import unflatten
+from friction_ros.core.config import Names, TypedConfig, unflatten
 from friction_ros.core.control.command_safety import JointLimits, TermGuard, check_reference_sample
 from friction_ros.core.control.compensation import (
     FrictionCompensator,
 )
 from friction_ros.core.control.compensation_watch import CompensationWatch
 from friction_ros.core.control.controller_config import (
-    CONFIG_SECTIONS,
-    CONTROLLER_DEFAULTS,
     CONTROLLER_FIELDS,
-    config_from_ros_parameters,
+    core_config,
+    core_names,
     default_config,
-    ros_parameter_error,
+    merge_config,
+    ros_controller_config,
 )
 from friction_ros.core.control.controller_terms import ControllerTerms
 from friction_ros.core.control.load_compensation import (
@@ -102,72 +102,59 @@ from friction_ros.core.control.pid import Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode, loop_gains
 from friction_ros.core.control.velocity_estimate import VelocityEstimator
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
-from friction_ros.core.validation import (
-    ParameterError,
-    check_keys,
-    check_real,
-)
+from friction_ros.core.validation import ParameterError, check_real
 
 
 def controller_from_ros_parameters(
-    values: Mapping[str, Any],
+    values: Mapping[str, Any], names: Names | None = None
 ) -> tuple[CompensatingController, dict[str, Any]]:
     """compensating_controller ROS parameters -> (controller, reference config).
 
-    A refused parameter is named as the user wrote it in the ROS layout (``compensation.gain``,
-    ``friction.fc``), not by the core's section names (``controller.friction.gain``).
+    The values become the controller's typed config (:func:`.controller_config.ros_controller_config`)
+    once; every refused parameter is named as the user wrote it in the ROS layout
+    (``compensation.gain``, ``friction.fc``; ``names`` maps the dotted keys, e.g. to per-joint names).
     """
-    cfg, ref = config_from_ros_parameters(values)
-    try:
-        return CompensatingController(cfg), ref
-    except ParameterError as exc:
-        raise ParameterError(ros_parameter_error(str(exc), values)) from None
+    if any("." in str(k) for k in values):
+        values = unflatten(values)
+    cfg = ros_controller_config(values, names, values.get("joint_type", "revolute"))
+    return CompensatingController.from_typed(cfg), dict(values.get("reference") or {"type": "constant"})
 
 
 class CompensatingController:
-    """Controller façade; see the module docstring and :data:`CONTROLLER_DEFAULTS`."""
+    """Controller façade; see the module docstring and :data:`.controller_config.CONTROLLER_DEFAULTS`."""
 
     _dt_checked: float | None = None  # the last period length compute() validated
 
     def __init__(self, config: Mapping[str, Any] | None = None):
-        self._build(self._merge(default_config(), config or {}))
+        self._at = core_names
+        self._build(merge_config(default_config(), config or {}))
+
+    @classmethod
+    def from_typed(cls, cfg: TypedConfig) -> CompensatingController:
+        """Build from the typed ROS config (:func:`.controller_config.ros_controller_config`):
+        messages name its parameters (``cfg.path``); the ROS ``compensation`` section is the core's
+        ``friction`` and the ROS ``friction`` section its model."""
+        self = cls.__new__(cls)
+        ros_key = {"friction": "compensation", "model": "friction"}
+        self._at = lambda key: cfg.path(ros_key.get(key, key))
+        self._build(merge_config(default_config(), core_config(cfg)))
+        return self
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> CompensatingController:
         """Build from flat ROS parameters with dotted names (``pid.p``, ``friction.source`` ...)."""
         return cls(unflatten(params))
 
-    # -- configuration ---------------------------------------------------------------------------
-    @staticmethod
-    def _merge(base: dict[str, Any], given: Mapping[str, Any]) -> dict[str, Any]:
-        if any("." in str(k) for k in given):
-            given = unflatten(given)
-        check_keys("controller", given, CONTROLLER_DEFAULTS)
-        out = copy.deepcopy(base)
-        for k, v in given.items():
-            if k in CONFIG_SECTIONS:
-                if v is None:
-                    continue
-                if not isinstance(v, Mapping):
-                    raise ParameterError(f"controller.{k} = {v!r} must be a mapping (a parameter section)")
-                if k == "friction" and "model" in v:
-                    out[k]["model"] = None  # a model replaces the previous one as a whole
-                sec = out[k]
-                for kk, vv in v.items():
-                    sec[kk] = copy.deepcopy(vv)
-            else:
-                out[k] = v
-        return out
-
     def _build(self, cfg: dict[str, Any]) -> None:
-        top = {f.name: f.check(cfg[f.name], f"controller.{f.name}") for f in CONTROLLER_FIELDS}
+        at = self._at  # core key -> the name messages give it
+        top = {f.name: f.check(cfg[f.name], at(f.name)) for f in CONTROLLER_FIELDS}
         mode, ffg, inertia = top["mode"], top["feedforward_gain"], top["inertia"]
         self.load_feedforward = top["load_feedforward"]
         self.compensation_scale = top["compensation_scale"]
         umax = top["u_clamp_max"]
-        umin = check_real("controller.u_clamp_min", top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
+        umin = check_real(at("u_clamp_min"), top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
         if umin >= umax:
-            raise ParameterError(f"controller.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
+            raise ParameterError(f"{at('u_clamp_min')} = {umin:g} is out of range: must be < u_clamp_max")
         try:
             limits = JointLimits(
                 top["effort_limit"],
@@ -176,12 +163,12 @@ class CompensatingController:
                 top["velocity_limit"],
                 top["acceleration_limit"],
             )
-        except ParameterError as exc:
-            raise ParameterError(f"controller.{exc}") from None
+        except ParameterError as exc:  # JointLimits names its keys without the section
+            raise ParameterError(f"{at('')}.{exc}" if at("") else str(exc)) from None
         umin, umax = limits.command_bounds(umin, umax)
         if umax <= 0.0 or umin >= 0.0:
             raise ParameterError(
-                f"controller.u_clamp_min/u_clamp_max = {umin:g}/{umax:g} must hold zero torque "
+                f"{at('u_clamp_min')}/u_clamp_max = {umin:g}/{umax:g} must hold zero torque "
                 "inside (u_clamp_min < 0 < u_clamp_max)"
             )
         # a running node needs a finite limit (see limits_given); the pure core keeps a plausibility bound
@@ -193,14 +180,14 @@ class CompensatingController:
         lc_w, lc_h = top["limit_cycle_window"], top["limit_cycle_hold"]
         if lc_w + lc_h > 0.1:
             raise ParameterError(
-                f"controller.limit_cycle_window + limit_cycle_hold = {lc_w + lc_h:g} is out of range: "
+                f"{at('limit_cycle_window')} + limit_cycle_hold = {lc_w + lc_h:g} is out of range: "
                 "must be <= 0.1 [s] (the fallback must come within 0.1 s of an established limit cycle)"
             )
-        pid = Pid(cfg["pid"], prefix="controller.pid")
-        friction = FrictionCompensator(cfg["friction"], prefix="controller.friction")
-        load = joint_load(cfg["load"], "controller.load")
+        pid = Pid(cfg["pid"], prefix=at("pid"))
+        friction = FrictionCompensator(cfg["friction"], prefix=at("friction"), model_path=at("model"))
+        load = joint_load(cfg["load"], at("load"))
         cfg["load"] = load.to_config()
-        residual = learned_residual(cfg["residual"], "controller.residual")
+        residual = learned_residual(cfg["residual"], at("residual"))
         scheme = None
         if mode == "dnpf":
             scheme = DNPF(cfg["dnpf"])
@@ -309,7 +296,7 @@ class CompensatingController:
 
     def reconfigure(self, changes: Mapping[str, Any]) -> None:
         """Apply parameter changes (nested or dotted keys); all-or-nothing, resets the states."""
-        self._build(self._merge(self.config(), changes))
+        self._build(merge_config(self.config(), changes))
 
     def set_coefficients(self, coefficients: Mapping[str, Any]) -> None:
         """Hot-swap the friction model without a restart.

@@ -1,7 +1,6 @@
 """The compensating controller's configuration: its fields (:data:`CONTROLLER_FIELDS`, defaults,
 units and meaning), the ROS parameter layout of the compensating_controller node
-(:func:`controller_parameter_schema`) and its mapping to the core config
-(:func:`config_from_ros_parameters`). :class:`~friction_ros.core.control.controller.CompensatingController`
+(:func:`controller_parameter_schema`) and its typed config (:func:`ros_controller_config`). :class:`~friction_ros.core.control.controller.CompensatingController`
 validates a config against these once.
 """
 
@@ -12,7 +11,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
-from friction_ros.core.config import Field, Schema, unflatten
+from friction_ros.core.config import Field, Names, Schema, TypedConfig, unflatten
 from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
 from friction_ros.core.control.compensation import COMPENSATION_DEFAULTS, COMPENSATION_SCHEMA
 from friction_ros.core.control.limit_cycle import LIMIT_CYCLE_DEFAULTS
@@ -20,6 +19,8 @@ from friction_ros.core.control.pid import PID_DEFAULTS, PID_SCHEMA
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode
 from friction_ros.core.friction.joint_load import JOINT_LOAD_SCHEMA
 from friction_ros.core.friction.learned_residual import LEARNED_RESIDUAL_SCHEMA
+from friction_ros.core.joint_type import joint_schema
+from friction_ros.core.validation import ParameterError, check_keys
 
 CONTROLLER_MODES = ("pid", "cascade", "dnpf", "gain_scheduling", "sliding_mode", "compensation_only")
 VELOCITY_SOURCES = ("measured", "differentiated")
@@ -186,7 +187,7 @@ SCHEME_SECTIONS = ("pid", "dnpf", "gain_scheduling", "cascade", "sliding_mode")
 
 
 def controller_parameter_schema(friction_model: bool = True, reference: bool = True) -> list[Field | Schema]:
-    """The compensating_controller's ROS layout of the controller (see :func:`config_from_ros_parameters`).
+    """The compensating_controller's ROS layout of the controller (see :func:`ros_controller_config`).
 
     Plain keys, one open section per scheme, ``compensation`` (how the model is applied),
     ``friction`` (the library model config: ``model`` + its coefficients), ``load`` (identified
@@ -213,44 +214,100 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
     return items
 
 
-def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """compensating_controller ROS parameters (nested) -> (core controller config, reference config).
+def friction_schema(model: Any) -> Schema:
+    """The ROS ``friction`` section of a model (``model`` + its coefficients, closed); an open
+    section for ``none`` and for models without a flat coefficient list (``asymmetric``)."""
+    from friction_ros.core.friction.registry import MODEL_CLASSES  # loads the compiled kernels
+
+    names = ("none", *MODEL_CLASSES)
+    cls = MODEL_CLASSES.get(model) if isinstance(model, str) else None
+    coefs = cls.COEFS if cls is not None else ()
+    return Schema(
+        "friction", [Field("model", "none", "friction model", choices=names), *coefs], open=not coefs
+    )
+
+
+def ros_controller_config(
+    values: Mapping[str, Any], names: Names | None = None, joint_type: str = "revolute"
+) -> TypedConfig:
+    """compensating_controller ROS parameters (nested) -> the controller's typed config.
 
     The ROS layout (README "Key parameters", written by ``friction-fit``) keeps the friction model and
-    the way it is applied apart: ``friction`` is a library model config (``{model: gms, fc: ...}``)
-    and ``compensation`` holds source, gain, blend, smoothing; the core keeps the model inside its
-    ``friction`` section. ``reference`` configures the built-in reference generator. Dotted keys
-    are accepted too. Keys of the node itself (joint_name, control_period ...) are ignored here.
+    the way it is applied apart: ``friction`` is a library model config (``{model: gms, fc: ...}``,
+    validated against the model's coefficients) and ``compensation`` holds source, gain, blend,
+    smoothing. Keys of the node itself (joint_name, control_period, reference ...) are left out.
+    Validated once; messages name the ROS parameters (``names``, default: the dotted key itself)
+    in the joint's units.
     """
-    if any("." in str(k) for k in values):
-        values = unflatten(values)
-    cfg: dict[str, Any] = {
-        k: copy.deepcopy(values[k]) for k in CONTROLLER_DEFAULTS if k in values and k != "friction"
+    model = (values.get("friction") or {}).get("model", "none")
+    schema = _ros_schema(model if isinstance(model, str) else "", joint_type)
+    given = {k: values[k] for k in schema.items if k in values}
+    return schema.typed(given, names=names)
+
+
+def core_config(cfg: TypedConfig) -> dict[str, Any]:
+    """A typed ROS config as the core's nested config: the ROS ``compensation`` section is the
+    core's ``friction`` section and the ROS ``friction`` section its ``model`` (None for none)."""
+    out = cfg.as_dict()
+    model = out.pop("friction")
+    out["friction"] = {
+        **out.pop("compensation"),
+        "model": None if model.get("model") in (None, "", "none") else model,
     }
-    comp = dict(values.get("compensation") or {})
-    model = dict(values.get("friction") or {})
-    comp["model"] = model if model.get("model", "none") not in ("none", "", None) else None
-    cfg["friction"] = comp
-    return cfg, dict(values.get("reference") or {"type": "constant"})
+    return out
+
+
+def config_from_ros_parameters(values: Mapping[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """compensating_controller ROS parameters (nested) -> (core controller config of the keys given,
+    reference config), validated as :func:`ros_controller_config`."""
+    core = core_config(ros_controller_config(values, joint_type=values.get("joint_type", "revolute")))
+    given = {k: v for k, v in core.items() if k in values or k == "friction"}
+    return given, dict(values.get("reference") or {"type": "constant"})
+
+
+_ROS_SCHEMAS: dict[tuple, Schema] = {}
+
+
+def _ros_schema(model: str, joint_type: str) -> Schema:
+    """The controller's ROS schema with ``model``'s friction section (built once per model, joint
+    type and model class, so each typed class is generated once)."""
+    friction = friction_schema(model)
+    fields = list(friction.items.values())
+    key = (model, joint_type, fields[0].choices, tuple(id(f) for f in fields[1:]))
+    if key not in _ROS_SCHEMAS:
+        schema = Schema("", [*controller_parameter_schema()[:-2], friction])
+        _ROS_SCHEMAS[key] = joint_schema(schema, joint_type)
+    return _ROS_SCHEMAS[key]
+
+
+def core_names(key: str) -> str:
+    """Message names of the core config: ``controller.<key>``; a model by its own name."""
+    return "" if key == "model" else f"controller.{key}" if key else "controller"
+
+
+def merge_config(base: dict[str, Any], given: Mapping[str, Any]) -> dict[str, Any]:
+    """``given`` (nested or dotted) laid over a full config ``base``: sections key by key, a
+    friction ``model`` replaces the previous one as a whole."""
+    if any("." in str(k) for k in given):
+        given = unflatten(given)
+    check_keys("controller", given, CONTROLLER_DEFAULTS)
+    out = copy.deepcopy(base)
+    for k, v in given.items():
+        if k in CONFIG_SECTIONS:
+            if v is None:
+                continue
+            if not isinstance(v, Mapping):
+                raise ParameterError(f"controller.{k} = {v!r} must be a mapping (a parameter section)")
+            if k == "friction" and "model" in v:
+                out[k]["model"] = None  # a model replaces the previous one as a whole
+            sec = out[k]
+            for kk, vv in v.items():
+                sec[kk] = copy.deepcopy(vv)
+        else:
+            out[k] = v
+    return out
 
 
 def default_config() -> dict[str, Any]:
     """A deep copy of :data:`CONTROLLER_DEFAULTS`."""
     return copy.deepcopy(CONTROLLER_DEFAULTS)
-
-
-def ros_parameter_error(text: str, values: Mapping[str, Any]) -> str:
-    """A core controller error renamed to the ROS layout the user wrote (``compensation.gain``,
-    ``friction.fc``), not the core's section names (``controller.friction.gain``)."""
-    for core, ros in (
-        ("controller.friction.model.", "friction."),
-        ("controller.friction.model", "friction.model"),
-        ("controller.friction.", "compensation."),
-        ("controller.friction:", "compensation:"),
-        ("controller.", ""),
-    ):
-        text = text.replace(core, ros)
-    model = str((values.get("friction") or {}).get("model", "") or "") if isinstance(values, Mapping) else ""
-    if model and text.startswith(f"{model}."):  # a coefficient, named by the model's library
-        text = "friction." + text[len(model) + 1 :]
-    return text

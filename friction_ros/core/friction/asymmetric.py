@@ -32,25 +32,31 @@ class Asymmetric(FrictionModel):
         base: str = "",
         positive: Mapping[str, Any] | None = None,
         negative: Mapping[str, Any] | None = None,
+        _path: str = "",
     ) -> None:
+        self.path = p = _path or self.name
         if base not in BASE_MODEL_CLASSES:
             allowed = ", ".join(BASE_MODEL_CLASSES)
-            raise ParameterError(f"asymmetric.base = {base!r} is not allowed: must be one of {allowed}")
+            raise ParameterError(f"{p}.base = {base!r} is not allowed: must be one of {allowed}")
         for key, val in (("positive", positive), ("negative", negative)):
             if not isinstance(val, Mapping):
-                raise ParameterError(f"asymmetric.{key} = {val!r} must be a mapping of {base} coefficients")
+                raise ParameterError(f"{p}.{key} = {val!r} must be a mapping of {base} coefficients")
             check_keys(
-                f"asymmetric.{key}",
+                f"{p}.{key}",
                 {k: v for k, v in val.items() if k != "model"},
                 [c.name for c in BASE_MODEL_CLASSES[base].COEFS],
             )
         self.base = base
         cls = BASE_MODEL_CLASSES[base]
-        self.positive = cls(**{k: v for k, v in positive.items() if k != "model"})
-        self.negative = cls(**{k: v for k, v in negative.items() if k != "model"})
+        self.positive = cls(
+            **{k: v for k, v in positive.items() if k != "model"}, _path=_path and f"{p}.positive"
+        )
+        self.negative = cls(
+            **{k: v for k, v in negative.items() if k != "model"}, _path=_path and f"{p}.negative"
+        )
         if len(self.positive.kernel_params) != len(self.negative.kernel_params):
             raise ParameterError(
-                "asymmetric.negative has a different element count from asymmetric.positive: "
+                f"{p}.negative has a different element count from {p}.positive: "
                 "list coefficients must have the same length in both directions"
             )
         self.is_dynamic = self.positive.is_dynamic  # type: ignore[misc]

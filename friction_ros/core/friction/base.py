@@ -37,11 +37,14 @@ class FrictionModel:
     #: controller's feedback bound scales down (Dahl ``sigma``, LuGre ``sigma0``, GMS ``k``); None: none
     STIFFNESS: ClassVar[str | None] = None
 
-    def __init__(self, **coefficients: Any) -> None:
-        check_keys(self.name, coefficients, [c.name for c in self.COEFS])
+    def __init__(self, *, _path: str = "", **coefficients: Any) -> None:
+        #: the parameter name of the model's section in messages (``friction`` in a ROS parameter
+        #: file; the model's name by default)
+        self.path = _path or self.name
+        check_keys(self.path, coefficients, [c.name for c in self.COEFS])
         vals: OrderedDict[str, Any] = OrderedDict()
         for c in self.COEFS:
-            vals[c.name] = c.check(coefficients.get(c.name, c.default), f"{self.name}.{c.name}")
+            vals[c.name] = c.check(coefficients.get(c.name, c.default), f"{self.path}.{c.name}")
         self._c = vals
         self._validate()
         self._p = np.ascontiguousarray(self._kernel_params(), dtype=np.float64)
@@ -54,7 +57,7 @@ class FrictionModel:
     def _require_fs_ge_fc(self, fs: str = "fs", fc: str = "fc") -> None:
         if self._c[fs] < self._c[fc]:
             raise ParameterError(
-                f"{self.name}.{fs} = {self._c[fs]:g} is out of range: must be >= {self.name}.{fc} "
+                f"{self.path}.{fs} = {self._c[fs]:g} is out of range: must be >= {self.path}.{fc} "
                 f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]"
             )
 
@@ -81,7 +84,7 @@ class FrictionModel:
         """Return a new model of the same kind with some coefficients replaced (validated)."""
         c = dict(self.coefficients)
         c.update(changes)
-        return type(self)(**c)
+        return type(self)(**c, _path="" if self.path == self.name else self.path)
 
     @property
     def param_names(self) -> list[str]:
@@ -118,7 +121,7 @@ class FrictionModel:
             else:
                 c[k] = vec[i]
                 i += 1
-        return type(self)(**c)
+        return type(self)(**c, _path="" if self.path == self.name else self.path)
 
     def _steady(self, v: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError

@@ -109,11 +109,13 @@ class GMS(DynamicModel):
         k, a = self._c["k"], self._c["alpha"]
         if len(k) != len(a):
             raise ParameterError(
-                f"gms.alpha has {len(a)} elements but gms.k has {len(k)}: must have the same element count"
+                f"{self.path}.alpha has {len(a)} elements but {self.path}.k has {len(k)}: "
+                "must have the same element count"
             )
         if abs(sum(a) - 1.0) > ALPHA_SUM_TOL:
             raise ParameterError(
-                f"gms.alpha sums to {sum(a):.9g}: the element weights must sum to 1 (+-{ALPHA_SUM_TOL:g})"
+                f"{self.path}.alpha sums to {sum(a):.9g}: the element weights must sum to 1 "
+                f"(+-{ALPHA_SUM_TOL:g})"
             )
 
     @property

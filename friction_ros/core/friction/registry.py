@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 from typing import Any
 
@@ -33,16 +34,18 @@ def register_model(cls: type[FrictionModel]) -> type[FrictionModel]:
     return cls
 
 
-def make_model(name: str, **coefficients: Any) -> FrictionModel:
-    """Build a validated friction model by name (see ``MODEL_NAMES`` and :func:`register_model`)."""
-    check_choice("friction.model", name, list(MODEL_CLASSES))
-    return MODEL_CLASSES[name](**coefficients)
+def make_model(name: str, _path: str = "", **coefficients: Any) -> FrictionModel:
+    """Build a validated friction model by name (see ``MODEL_NAMES`` and :func:`register_model`);
+    messages name its coefficients ``<_path>.<coefficient>`` (default: the model's name)."""
+    check_choice(f"{_path or 'friction'}.model", name, list(MODEL_CLASSES))
+    return MODEL_CLASSES[name](**coefficients, **({"_path": _path} if _path else {}))
 
 
-def model_from_config(config: Mapping[str, Any] | FrictionModel | None) -> FrictionModel:
+def model_from_config(config: Mapping[str, Any] | FrictionModel | None, path: str = "") -> FrictionModel:
     """Build a model from ``{"model": name, <coefficient>: value, ...}`` (inverse of ``to_config``).
 
     ``None`` or an empty mapping gives the ``none`` model; a model instance is returned unchanged.
+    ``path``: the parameter name of the model's section in messages (default: the model's name).
     """
     if isinstance(config, FrictionModel):
         return config
@@ -54,17 +57,22 @@ def model_from_config(config: Mapping[str, Any] | FrictionModel | None) -> Frict
         raise ParameterError(f"friction config is missing 'model': must be one of {', '.join(MODEL_CLASSES)}")
     cfg = dict(config)
     name = cfg.pop("model")
-    return make_model(name, **cfg)
+    return make_model(name, path, **cfg)
 
 
-def build_model(model: Any, name: str = "friction.model"):
-    """Return a fresh library model from a model config dict or a model instance (None -> None)."""
+def build_model(model: Any, name: str = "friction.model", path: str = ""):
+    """Return a fresh library model from a model config dict or a model instance (None -> None);
+    ``path`` as in :func:`model_from_config`."""
     if model is None:
         return None
+    if isinstance(model, FrictionModel):  # validated already: a copy from its initial state
+        fresh = copy.deepcopy(model)
+        fresh._state = fresh.initial_state()
+        return fresh
     if hasattr(model, "to_config"):
         return model_from_config(model.to_config())
     if not isinstance(model, Mapping):
         raise ParameterError(f"{name} = {model!r} must be a model config dict with a 'model' key")
     if not model or model.get("model") in (None, "", "none"):
         return None
-    return model_from_config(dict(model))
+    return model_from_config(dict(model), path)
