@@ -60,6 +60,7 @@ PRISMATIC = {
     "rad": "m",
     "rad or m": "m",
     "rad/s": "m/s",
+    "rad/s or m/s": "m/s",
     "rad/s^2": "m/s^2",
     "s": "s",
     "s (0 = automatic)": "s (0 = automatic)",
