@@ -4,7 +4,7 @@ Run: .venv/bin/python bench/fleet.py --fleet 20x7x30     (robots x joints x days
      .venv/bin/python bench/fleet.py --quick              (about a minute)
 
 ``--fleet RxJxD`` (default 20x7x30, ``--runs-per-day`` 1): writes the synthetic fleet of
-bench/fleet_synth.py (CSV logs, 1 %/day Coulomb wear injected in one joint per 4 robots, truth.json)
+bench/_fleet_synth.py (CSV logs, 1 %/day Coulomb wear injected in one joint per 4 robots, truth.json)
 into a temporary folder, fits it with ``friction-fleet fit``'s driver with 2 workers (all runs) and
 with 1 worker (``--subset`` robots), runs ``friction-fleet trend``'s analysis and compares the
 alarms with the truth: runs per minute (wall clock, and steady: first to last finished run), the
@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from _common import print_table, write_results  # noqa: E402
-from fleet_synth import PATTERN, write_fleet  # noqa: E402
+from _fleet_synth import PATTERN, write_fleet  # noqa: E402
 
 from friction_ros.core.fleet.synthetic import ARM, fleet_plan, table_rows  # noqa: E402
 from friction_ros.core.fleet.table import read_table, rows_to_table, same_rows  # noqa: E402

@@ -13,7 +13,7 @@ from friction_ros.cli.fleet import main
 from friction_ros.core.fleet.synthetic import ARM, fleet_plan
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
-from fleet_synth import PATTERN, write_fleet  # noqa: E402
+from _fleet_synth import PATTERN, write_fleet  # noqa: E402
 
 BASELINE_DAYS = 3
 WEAR_START = 2  # wear grows by RATE per whole day after this one: runs of day 3 on are worn

@@ -13,7 +13,7 @@ cell's day, T_j ~ N(0, 2) the joint's own heating, e ~ N(0, 0.7) degC: about 15-
 
 :func:`table_rows` draws fleet-table rows directly (coefficients = truth x (1 + noise), relative
 run-to-run noise :data:`NOISE` as friction-fit's scatter on a 10 s run), so trends and alarms can be
-tested and benchmarked over months without running fits; ``bench/fleet_synth.py`` writes the same
+tested and benchmarked over months without running fits; ``bench/_fleet_synth.py`` writes the same
 plan as CSV logs for ``friction-fleet fit``. Everything is seeded.
 """
 

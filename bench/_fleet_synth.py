@@ -1,8 +1,8 @@
 """Synthetic fleet as files: the identification runs of :func:`~friction_ros.core.fleet.synthetic.fleet_plan`
 written as CSV logs for ``friction-fleet fit``, plus the truth file; and the table-level fleet.
 
-    .venv/bin/python bench/fleet_synth.py ROOT --robots 20 --days 30 --runs-per-day 1 [--seconds 12]
-    .venv/bin/python bench/fleet_synth.py ROOT --table fleet.parquet   (rows directly, no fits)
+    .venv/bin/python bench/_fleet_synth.py ROOT --robots 20 --days 30 --runs-per-day 1 [--seconds 12]
+    .venv/bin/python bench/_fleet_synth.py ROOT --table fleet.parquet   (rows directly, no fits)
 
 Layout (what ``friction-fleet fit`` discovers): ``ROOT/{robot}/{date}/{joint}-{HHMM}.csv`` with a
 sidecar ``{joint}-{HHMM}.yaml`` (robot, joint, time in ISO 8601 UTC, joint_type), and
