@@ -319,17 +319,4 @@ def track_realtime(cj: CanJoint, params_file, duration: float, label: str, perio
     print(
         f"[demo]   {label:<12} {duration:g} s real time ({wall:.1f} s wall with the drive start)", flush=True
     )
-    return TrackingRun(
-        label=label,
-        t=t_all[keep],
-        reference=col("reference_position"),
-        reference_velocity=col("reference_velocity"),
-        position=col("position"),
-        velocity=col("velocity"),
-        error=col("error"),
-        command=col("command"),
-        friction=col("friction_feedforward") + col("friction_feedback"),
-        fallback=col("compensation_fallback"),
-        wall_seconds=wall,
-        missing_periods=max(0, n_periods + 1 - keep.size),
-    )
+    return TrackingRun.from_terms(label, t_all[keep], col, wall, max(0, n_periods + 1 - keep.size))

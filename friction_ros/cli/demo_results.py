@@ -43,6 +43,24 @@ class TrackingRun:
     #: why the run's figures are not a measurement (real time: too many periods missed), else ""
     invalid: str = ""
 
+    @classmethod
+    def from_terms(cls, label: str, t: np.ndarray, col, wall: float, missing_periods: int = 0) -> TrackingRun:
+        """A run from the controller's terms file: ``col(name)`` gives a column over the run's rows."""
+        return cls(
+            label=label,
+            t=t,
+            reference=col("reference_position"),
+            reference_velocity=col("reference_velocity"),
+            position=col("position"),
+            velocity=col("velocity"),
+            error=col("error"),
+            command=col("command"),
+            friction=col("friction_feedforward") + col("friction_feedback"),
+            fallback=col("compensation_fallback"),
+            wall_seconds=wall,
+            missing_periods=missing_periods,
+        )
+
     @property
     def rms(self) -> float:
         return float(np.sqrt(np.mean(self.error**2)))

@@ -234,16 +234,4 @@ def _track_once(
         )
     index = [by_k[k] for k in range(n_periods + 1)]
     col = lambda name: np.array([rows[name][i] for i in index])  # noqa: E731
-    return TrackingRun(
-        label=label,
-        t=np.arange(n_periods + 1) * period,
-        reference=col("reference_position"),
-        reference_velocity=col("reference_velocity"),
-        position=col("position"),
-        velocity=col("velocity"),
-        error=col("error"),
-        command=col("command"),
-        friction=col("friction_feedforward") + col("friction_feedback"),
-        fallback=col("compensation_fallback"),
-        wall_seconds=wall,
-    )
+    return TrackingRun.from_terms(label, np.arange(n_periods + 1) * period, col, wall)
