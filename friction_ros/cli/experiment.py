@@ -336,7 +336,9 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
         if time.monotonic() - t0 > timeout:
             status = "timeout"
             break
-        if not watch.poll(0.05) and time.monotonic() - t_started > state_timeout:
+        if watch.seen:  # poll returns at once from now on: wait here, not in a busy loop
+            stop.wait(0.05)
+        elif not watch.poll(0.05) and time.monotonic() - t_started > state_timeout:
             status = "no_states"
             break
     watch.close()
