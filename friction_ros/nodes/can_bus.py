@@ -108,6 +108,17 @@ class CanBusLink:
                     self.dead(f"{self._consecutive_send_errors} consecutive send failures: {exc}")
         return ok
 
+    def send_final(self, frames: list[Frame], attempts: int = 3) -> bool:
+        """Send the frames that leave the drives safe before closing: up to ``attempts`` tries 10 ms
+        apart, then 5 ms for them to leave the socket. False if every try failed."""
+        for attempt in range(attempts):
+            if self.send(frames):
+                time.sleep(0.005)
+                return True
+            if attempt + 1 < attempts:
+                time.sleep(0.01)
+        return False
+
     def dead(self, reason: str) -> None:
         """Latch a bus fault on every drive (logged by each axis' fault log) and reopen the bus."""
         if self.dead_since is None:
@@ -176,6 +187,15 @@ class CanBusLink:
         except Exception as exc:  # can.CanOperationError, OSError, closed bus ...
             self._rx_ok = False
             self.dead(f"CAN reader failed: {type(exc).__name__}: {exc}")
+
+    def counts(self) -> dict:
+        """Diagnostics values of the bus: failed sends, error frames, reopens and its state."""
+        return {
+            "send_errors": self.send_errors,
+            "error_frames": self.error_frames,
+            "bus_reopens": self.reopens,
+            "bus_state": self.state(),
+        }
 
     def state(self) -> str:
         """The bus state for diagnostics (python-can's, or ``dead (reopening)``)."""

@@ -42,6 +42,10 @@ class CommandIntake:
         )
         self.subscription = self.guard.subscription
 
+    def counts(self) -> dict[str, int]:
+        """Diagnostics values: the messages ignored since start, by kind."""
+        return {"commands_foreign": self.foreign, "commands_malformed": self.malformed}
+
     def on_bytes(self, data: bytes) -> None:
         """Subscription callback: keep the newest message for the period.
 

@@ -48,178 +48,32 @@ accuracy) runs the period on its own thread instead (:class:`~friction_ros.nodes
 
 from __future__ import annotations
 
-import dataclasses
 import time
 
-import can
-import rclpy
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from std_srvs.srv import SetBool
 
-from friction_ros.core.can.axis import DriveAxis
-from friction_ros.core.can.axis_config import AXIS_SCHEMA, axis_config
-from friction_ros.core.can.axis_health import AxisHealth
-from friction_ros.core.can.drive_set import (
-    axis_values,
-    changed_values,
-    check_distinct_ids,
-    check_joint_names,
-    frame_router,
-)
-from friction_ros.core.can.faults import FAULT_BUS
-from friction_ros.core.can.frame import Frame
-from friction_ros.core.config import Field, Schema, flatten
-from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD
-from friction_ros.core.joint_type import JOINT_TYPES, check_joint_type, joint_schema
-from friction_ros.core.validation import ParameterError
+from friction_ros.core.can.drive_set import DriveSet, frame_router
 from friction_ros.nodes.can_bus import CanBusLink
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.drive_commands import CommandIntake
-from friction_ros.nodes.drive_state_publishers import DriveStatePublishers, drive_values
+from friction_ros.nodes.drive_parameters import declare_drive_parameters, parameter_schema
+from friction_ros.nodes.drive_state_publishers import DriveStatePublishers
 from friction_ros.nodes.loops import DeadlineLoop, FixedRateLoop
-from friction_ros.nodes.parameters import SCHEDULING, ParameterNode, declare_config
+from friction_ros.nodes.parameters import ParameterNode
 from friction_ros.nodes.runtime import apply_scheduling, run_node
 
-INTERFACES = tuple(sorted(can.VALID_INTERFACES))
-
-NODE_FIELDS = [
-    Field(
-        "interface",
-        "socketcan",
-        "python-can interface (socketcan on robots; virtual in tests)",
-        choices=INTERFACES,
-        read_only=True,
-    ),
-    Field("channel", "can0", "CAN channel (socketcan: network interface name)", read_only=True),
-    Field(
-        "bitrate",
-        1000000,
-        "bitrate for interfaces that set it (socketcan: set with ip link)",
-        lo=10000,
-        hi=1000000,
-        read_only=True,
-        unit="bit/s",
-    ),
-    Field("joint_name", "joint1", "joint name in joint_states / joint_commands", read_only=True),
-    Field(
-        "control_period",
-        DEFAULT_CONTROL_PERIOD,
-        "period of the joint_states publication and the torque commands (1 / the rate)",
-        lo=2e-4,
-        hi=1.0,
-        read_only=True,
-        unit="s",
-    ),
-    Field(
-        "enable_on_start", False, "enable the drive (closed loop, zero torque) as soon as telemetry arrives"
-    ),
-    Field(
-        "loop_spin",
-        0.0,
-        "busy-wait before each period for timing accuracy (costs spin/period of a core)",
-        lo=0.0,
-        hi=0.001,
-        read_only=True,
-        unit="s",
-    ),
-    Field("diagnostics_period", 1.0, "diagnostics publication period", lo=0.05, hi=60.0, unit="s"),
-    Field("bus_error_limit", 20, "consecutive failed sends before the bus counts as dead", lo=1, hi=100000),
-    Field("bus_recovery_period", 1.0, "wait before reopening a dead bus", lo=0.01, hi=60.0, unit="s"),
-]
-
-
-def parameter_schema(joint_type: str = "revolute") -> Schema:
-    """The node's parameters: the bus and loop, one drive (:data:`~friction_ros.core.can.axis.AXIS_SCHEMA`;
-    with ``joints``, :data:`AXIS_KEYS` also per joint) and the scheduling, in the units of
-    ``joint_type``."""
-    return joint_schema(Schema("drive_interface", [*NODE_FIELDS, *AXIS_SCHEMA, *SCHEDULING]), joint_type)
-
-
-# per-drive parameters when a node runs several drives (``joints``): <joint>.<key>
-AXIS_KEYS = (
-    "node_id",
-    "mit.master_id",
-    "joint_type",
-    "lead",
-    "gear_ratio",
-    "torque_constant",
-    "direction",
-    "zero_offset",
-    "torque_limit",
-    "current_limit",
-    "velocity_limit",
-)
-
-
-def declare_joints(node: Node) -> list[str]:
-    """Declare and validate ``joints`` (several axes on one bus); [] = one axis (``joint_name``)."""
-    desc = ParameterDescriptor(
-        name="joints",
-        type=ParameterType.PARAMETER_STRING_ARRAY,
-        description=(
-            "several drives on this bus: their joint names, each with its own <joint>.node_id (and "
-            "optionally <joint>.gear_ratio, torque_constant, direction, zero_offset, limits); "
-            "unset = one drive (joint_name, node_id)"
-        ),
-        read_only=True,
-    )
-    try:
-        joints = node.declare_parameter("joints", Parameter.Type.STRING_ARRAY, desc).value
-    except (
-        rclpy.exceptions.InvalidParameterTypeException,
-        rclpy.exceptions.InvalidParameterValueException,
-    ):
-        raise ParameterError(
-            "joints must be a list of joint names, e.g. joints: [shoulder, elbow] (leave it out for one drive)"
-        ) from None
-    joints = list(joints or [])
-    check_joint_names(joints, {name.split(".")[0] for name, _ in parameter_schema().fields()})
-    return joints
-
-
-def axis_param_specs(joints: list[str], v: dict, joint_types: dict[str, str] | None = None) -> list[Field]:
-    """Per-joint parameters ``<joint>.<key>`` for :data:`AXIS_KEYS`, defaulting to the top-level values,
-    in the units of each joint's type (``joint_types``; default: the node's ``joint_type``)."""
-    by = {t: dict(parameter_schema(t).fields()) for t in JOINT_TYPES}
-    types = {j: (joint_types or {}).get(j, v.get("joint_type", "revolute")) for j in joints}
-    return [
-        dataclasses.replace(by[types[j]][k], name=f"{j}.{k}", default=v[k], doc=f"{j}: {by[types[j]][k].doc}")
-        for j in joints
-        for k in AXIS_KEYS
-    ]
-
-
-class AxisPort:
-    """One drive of the node: its joint, the core :class:`DriveAxis`, its parameter values and its
-    health report."""
-
-    def __init__(self, values: dict):
-        self.values = values
-        self.joint = values["joint_name"]
-        self.axis = DriveAxis(axis_config(values, 1.0 / values["control_period"]))
-        self.health = AxisHealth()
-        self.flags = 0
-        self.label = f"drive '{self.joint}' (id {values['node_id']})"
+__all__ = ["DriveInterface", "main", "parameter_schema"]
 
 
 class DriveInterface(ParameterNode):
     def __init__(self, **kwargs):
         super().__init__("drive_interface", **kwargs)
-        self.joints_param = joints = declare_joints(self)
-        self.v = v = flatten(declare_config(self, parameter_schema(), check_unknown=not joints))
-        given = {j: self.given_parameters.get(f"{j}.joint_type") for j in joints}
-        types = {j: check_joint_type(p.value, f"{j}.joint_type") for j, p in given.items() if p is not None}
-        self.axis_specs = axis_param_specs(joints, v, types)
-        per_joint = flatten(declare_config(self, Schema("axes", self.axis_specs), self._apply))
+        joints, self.v, values = declare_drive_parameters(self, self._apply)
+        v = self.v
         apply_scheduling(self, v)
-        self.ports = [AxisPort(a) for a in axis_values(joints, v, per_joint, AXIS_KEYS)]
-        self.axes = [p.axis for p in self.ports]
-        self.axis = self.axes[0]  # the (first) drive: single-axis code and tools read this one
-        self.joints = [p.joint for p in self.ports]
-        self.joint = self.joints[0]
-        check_distinct_ids(self.joints, [a.cfg for a in self.axes])
+        self.drives = DriveSet(values, multi=bool(joints))
+        self.axes, self.joints = self.drives.axes, self.drives.joints
+        self.axis, self.joint = self.axes[0], self.joints[0]  # the (first) drive: single-axis tools read it
         self._shutdown_done = False
         self.link = CanBusLink(
             v["interface"],
@@ -246,49 +100,35 @@ class DriveInterface(ParameterNode):
             )
         self._loop_error = ""
         if v["enable_on_start"]:
-            for a in self.axes:
-                a.request_enable()
+            self.drives.request_enable()
         period = v["control_period"]
         if v["loop_spin"] > 0:  # busy-wait before each deadline: needs a thread of its own
             self.loop = FixedRateLoop(period, self._cycle, name="drive_interface_loop", spin=v["loop_spin"])
             self.loop.start()
         else:  # run_node drives it in the executor thread (see the module docstring)
             self.loop = DeadlineLoop(period, self._cycle)
-        n = len(self.joints)
-        drives = ", ".join(f"'{p.joint}' (id {p.axis.cfg.node_id})" for p in self.ports)
+        s = "s" if len(self.joints) > 1 else ""
         self.get_logger().info(
-            f"{v['protocol']} on {v['interface']}:{v['channel']} at {1.0 / v['control_period']:g} Hz, "
-            f"joint{'s' if n > 1 else ''} {drives}, drive{'s' if n > 1 else ''} "
+            f"{v['protocol']} on {v['interface']}:{v['channel']} at {1.0 / period:g} Hz, "
+            f"joint{s} {self.drives.describe()}, drive{s} "
             f"{'enabling' if v['enable_on_start'] else 'disabled until ~/enable'}"
         )
 
-    # ---- parameters / service / commands ------------------------------------------------------------
+    # ---- parameters / service -------------------------------------------------------------------------
     def _apply(self, changes: dict) -> None:
-        """Run-time change: rebuild every affected axis config first (all or nothing), then swap."""
-        values = [p.values for p in self.ports]
-        new_values, shared = changed_values(self.joints, values, changes, AXIS_KEYS, bool(self.joints_param))
-        configs = [
-            axis_config(vals, 1.0 / vals["control_period"]) for vals in new_values
-        ]  # raises ParameterError -> rejected
-        for port, vals, cfg in zip(self.ports, new_values, configs):
-            with port.axis._lock:
-                port.axis.cfg = cfg
-            port.values = vals
-        self.v = {**self.v, **shared}
+        """Run-time change: every affected drive (all or nothing), then the node's own values."""
+        self.v = {**self.v, **self.drives.reconfigure(changes)}  # ParameterError -> rejected
         self.link.error_limit = self.v["bus_error_limit"]
         self.link.recovery_period = self.v["bus_recovery_period"]
 
     def _on_enable(self, req, resp):
         if req.data:
-            for a in self.axes:
-                a.request_enable()
-            resp.success, resp.message = (
-                True,
-                "enable requested: the drive enables as soon as telemetry is fresh",
-            )
+            self.drives.request_enable()
+            resp.message = "enable requested: the drive enables as soon as telemetry is fresh"
         else:
-            self.link.send([f for a in self.axes for f in a.request_disable()])
-            resp.success, resp.message = True, "drive disabled (zero torque, idle)"
+            self.link.send(self.drives.disable_frames())
+            resp.message = "drive disabled (zero torque, idle)"
+        resp.success = True
         self.get_logger().info(resp.message)
         return resp
 
@@ -302,10 +142,9 @@ class DriveInterface(ParameterNode):
                 self.get_logger().error(
                     f"drive_interface cycle failed: {self._loop_error}; disabling the drive"
                 )
-            for a in self.axes:
-                a.report_bus_fault(f"internal error: {self._loop_error}")
+            frames = self.drives.fail(f"internal error: {self._loop_error}")
             try:
-                self.link.send([f for a in self.axes for f in a.shutdown_frames()])
+                self.link.send(frames)
             except Exception:
                 pass
 
@@ -313,19 +152,12 @@ class DriveInterface(ParameterNode):
         now = time.monotonic()
         lo = self.link.receive(now)
         self.commands.take(now, lo)
-        ports = self.ports
-        frames: list[Frame] = []
-        samples = []
-        for port in ports:
-            res = port.axis.cycle(now)
-            port.flags = res.flags
-            frames += res.frames
-            samples.append(res.sample)
-            if res.events:
-                self._log_faults(port, res.events)
+        drives = self.drives
+        frames, samples, lines = drives.cycle(now)
+        if lines:
+            self._log_faults(lines)
         if frames and not self.link.send(frames):
-            for port in ports:
-                port.flags |= FAULT_BUS
+            drives.send_failed()
         clock = self._ros_clock
         sec, nsec = divmod(
             clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns(), 1_000_000_000
@@ -333,41 +165,29 @@ class DriveInterface(ParameterNode):
         states = self.states
         states.publish_joints(sec, nsec, samples)
         if states.drive_state_wanted():  # nobody listening: nothing to send
-            for k, (port, sample) in enumerate(zip(ports, samples)):
-                states.publish_drive(k, sec, nsec, drive_values(port.axis, sample, port.flags))
+            states.publish_drives(sec, nsec, drives.ports, samples)
         if now >= self._diag_next:
             self._diag_next = now + self.v["diagnostics_period"]
             self._publish_diagnostics(now)
 
-    def _log_faults(self, port: AxisPort, events) -> None:
-        """Fault start / clear lines of the core (see friction_ros.core.can.faults)."""
+    def _log_faults(self, lines: list[tuple[str, str]]) -> None:
+        """Fault start / clear lines of the drives (see friction_ros.core.can.faults)."""
         log = self.get_logger()
-        for ev in events:  # one call site per severity (rclpy refuses a changing one)
-            text = f"{port.label}: {ev.text}"
-            if ev.level == "error":
+        for level, text in lines:  # one call site per severity (rclpy refuses a changing one)
+            if level == "error":
                 log.error(text)
-            elif ev.level == "warning":
+            elif level == "warning":
                 log.warning(text)
             else:
                 log.info(text)
 
     def _publish_diagnostics(self, now: float) -> None:
-        statuses = [p.health.report(p.axis, p.flags, now) for p in self.ports]
-        if len(statuses) == 1:
-            level, message, values = statuses[0]
-        else:
-            level = max(s[0] for s in statuses)
-            message = "; ".join(f"{p.joint}: {s[1]}" for p, s in zip(self.ports, statuses))
-            values = {f"{p.joint}.{k}": v for p, s in zip(self.ports, statuses) for k, v in s[2].items()}
-        stats, link = self.loop.stats, self.link
+        level, message, values = self.drives.health(now)
+        stats = self.loop.stats
         values.update(
             {
-                "commands_foreign": self.commands.foreign,
-                "commands_malformed": self.commands.malformed,
-                "send_errors": link.send_errors,
-                "error_frames": link.error_frames,
-                "bus_reopens": link.reopens,
-                "bus_state": link.state(),
+                **self.commands.counts(),
+                **self.link.counts(),
                 "loop_overruns": stats.overruns,
                 "loop_max_lateness_ms": stats.max_lateness * 1e3,
                 "loop_exec_ms": stats.last_exec * 1e3,
@@ -383,14 +203,8 @@ class DriveInterface(ParameterNode):
         self._shutdown_done = True
         self.loop.stop()
         self.destroy_subscription(self.commands.subscription)
-        frames = [f for a in self.axes for f in a.shutdown_frames()]
-        for _attempt in range(3):
-            if self.link.send(frames):
-                break
-            time.sleep(0.01)
-        else:
+        if not self.link.send_final(self.drives.shutdown_frames()):
             self.get_logger().error("could not send the idle request: check the drive (its own watchdog)")
-        time.sleep(0.005)  # let the frames leave the socket before closing it
         self.get_logger().info(f"drive{'s' if len(self.axes) > 1 else ''} left safe: zero torque, idle")
         self.link.close()
 

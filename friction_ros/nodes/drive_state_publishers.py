@@ -17,6 +17,7 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 
 from friction_ros.core.can.axis import DriveAxis, JointSample
+from friction_ros.core.can.drive_set import AxisPort
 from friction_ros.core.wire import DriveStateEncoder, JointStateEncoder
 from friction_ros.nodes.qos import RECORDED_QOS, SENSOR_QOS
 
@@ -128,6 +129,13 @@ class DriveStatePublishers:
     def drive_state_wanted(self) -> bool:
         """Someone listens on drive_state (else nothing is sent)."""
         return self.pub_drive.get_subscription_count() > 0
+
+    def publish_drives(
+        self, sec: int, nsec: int, ports: list[AxisPort], samples: list[JointSample | None]
+    ) -> None:
+        """drive_state of every drive after a period (``samples``: their joint samples)."""
+        for k, (port, sample) in enumerate(zip(ports, samples)):
+            self.publish_drive(k, sec, nsec, drive_values(port.axis, sample, port.flags))
 
     def publish_drive(self, k: int, sec: int, nsec: int, drive: tuple) -> None:
         """drive_state of drive ``k`` with the fields :func:`drive_values` returns."""
