@@ -64,7 +64,6 @@ from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.runtime import log_events, start_process
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
-
 #: messages taken from one topic's queue after the one the executor delivered (a bound: the timers
 #: and the other topics get their turn)
 DRAIN_MAX = 1000
