@@ -5,6 +5,7 @@ under ``if TYPE_CHECKING:`` are left out: they name types for annotations and ne
 from __future__ import annotations
 
 import ast
+import functools
 from pathlib import Path
 from typing import NamedTuple
 
@@ -24,7 +25,13 @@ def module_name(path: Path) -> str:
 
 
 def imports(path: Path) -> list[Import]:
-    """Every import statement of a module, also inside functions and classes."""
+    """Every import statement of a module, also inside functions and classes (parsed once per
+    test process: the import tests scan the same files several times)."""
+    return list(_imports(path, path.stat().st_mtime_ns))
+
+
+@functools.cache
+def _imports(path: Path, _mtime_ns: int) -> tuple[Import, ...]:
     tree = ast.parse(path.read_text(), str(path))
     name = module_name(path)
     package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
@@ -55,7 +62,7 @@ def imports(path: Path) -> list[Import]:
                     package[: len(package) - node.level + 1] + ([node.module] if node.module else [])
                 )
             out += [Import(node.lineno, base, a.name, lazy) for a in node.names]
-    return out
+    return tuple(out)
 
 
 def _is_type_checking(test: ast.expr) -> bool:

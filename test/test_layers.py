@@ -123,16 +123,18 @@ def test_function_level_imports_hide_no_cycle():
     static = import_graph(module_level_only=True)
     modules = package_modules()
 
+    closure: dict[str, set[str]] = {}
+
     def reaches(start: str, goal: str) -> bool:
-        seen, todo = set(), [start]
-        while todo:
-            node = todo.pop()
-            if node == goal:
-                return True
-            if node not in seen:
-                seen.add(node)
-                todo += static.get(node, ())
-        return False
+        if start not in closure:  # every module reachable from start (computed once per start)
+            seen, todo = set(), [start]
+            while todo:
+                node = todo.pop()
+                if node not in seen:
+                    seen.add(node)
+                    todo += static.get(node, ())
+            closure[start] = seen
+        return goal in closure[start]
 
     hidden = []
     for mod, path in _core_modules().items():
