@@ -64,7 +64,7 @@ def warm_kernels(record, names=("dahl", "lugre", "gms4", "gms4d")) -> None:
     ``record``, so that the timings that follow are fit times, not compile times."""
     import numpy as np
 
-    from friction_ros.core.identification.models import spec_for
+    from friction_ros.core.identification.fit.models import spec_for
 
     tr = record.slice(0, 200)
     for name in names:

@@ -10,7 +10,7 @@ sidecar ``{joint}-{HHMM}.yaml`` (robot, joint, time in ISO 8601 UTC, joint_type)
 rate). Path pattern for the fit: ``{robot}/{date:%Y-%m-%d}/{joint}-{time:%H%M}.csv``.
 
 One run: ``seconds`` at 200 Hz of a multisine (0.1-2 Hz, the joint's stroke and peak speed;
-:func:`~friction_ros.core.synthetic_logs.tables.scaled_sines`) followed exactly (a stiff position
+:func:`~friction_ros.core.synthetic.logs.tables.scaled_sines`) followed exactly (a stiff position
 loop, as the gauntlet's ball-screw axis), effort = J a + the project's ``coulomb_viscous`` friction
 at the run's true fc, fv (:meth:`FleetPlan.truth`) + noise (3 % of fc), position on a 2^17-count
 encoder (1 um scale on the track), velocity +- 0.5 % of the peak speed, a temperature column
@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from friction_ros.core.fleet.synthetic import FleetPlan, Run, fleet_plan, table_rows  # noqa: E402
 from friction_ros.core.friction import make_model  # noqa: E402
-from friction_ros.core.synthetic_logs.tables import quantize, scaled_sines  # noqa: E402
+from friction_ros.core.synthetic.logs.tables import quantize, scaled_sines  # noqa: E402
 
 RATE_HZ = 200.0
 PATTERN = "{robot}/{date:%Y-%m-%d}/{joint}-{time:%H%M}.csv"

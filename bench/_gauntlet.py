@@ -1,6 +1,6 @@
 """Gauntlet section of bench/real_data.py: the fitter on every class of log users bring.
 
-Each seeded log of :mod:`friction_ros.core.synthetic_logs` (default length, seed 0) is written to a
+Each seeded log of :mod:`friction_ros.core.synthetic.logs` (default length, seed 0) is written to a
 CSV and read back with ``load_csv`` and the options a user would pass, then fitted by
 ``fit_records`` with friction-fit's defaults (models coulomb, stribeck, lugre, gms4; learned
 residual auto); the real DFKI double pendulum (both joints of the full runs when
@@ -24,9 +24,9 @@ from pathlib import Path
 
 from _common import print_table
 
-from friction_ros.core.identification.csv_loading import load_csv
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.synthetic_logs import GENERATORS, make_log
+from friction_ros.core.identification.data.csv_loading import load_csv
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.synthetic.logs import GENERATORS, make_log
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED_DOUBLE = Path("/work/shared/data/dfki_double_pendulum")

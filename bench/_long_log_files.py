@@ -1,6 +1,6 @@
 """Long joint logs with known truth for the long-log benchmark: MCAP bags and CSV files in /tmp.
 
-The joint follows the realistic joint's truth (:mod:`friction_ros.core.identification.realistic_joint`:
+The joint follows the realistic joint's truth (:mod:`friction_ros.core.synthetic.realistic_joint`:
 gravity, spring, Stribeck friction, load-dependent friction, ripple, noise) at 1 kHz. The
 trajectory is that module's band-limited multisine with its amplitude modulated by a slow sinusoid (period
 ``envelope_period``), so the speed varies over the log as in a real session (slow and fast stretches),
@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from friction_ros.core.identification.realistic_joint import START_TIME, JointTruth, Trajectory, trajectory
+from friction_ros.core.synthetic.realistic_joint import START_TIME, JointTruth, Trajectory, trajectory
 
 RATE_PERIOD = 0.001  # 1 kHz
 #: arm joints: (truth overrides, max speed) - the same truth family, different sizes

@@ -16,9 +16,9 @@ sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must n
 from _common import print_table  # noqa: E402
 from _real_synthetic import _f, _nmse  # noqa: E402
 
-from friction_ros.core.identification.csv_loading import load_csv  # noqa: E402
-from friction_ros.core.identification.pipeline import fit_records  # noqa: E402
-from friction_ros.core.identification.records import concat_records  # noqa: E402
+from friction_ros.core.identification.data.csv_loading import load_csv  # noqa: E402
+from friction_ros.core.identification.data.records import concat_records  # noqa: E402
+from friction_ros.core.identification.fit.pipeline import fit_records  # noqa: E402
 
 SHARED = Path("/work/shared/data/dfki_pendulum")
 IN_REPO = ROOT / "test" / "data" / "dfki_pendulum"

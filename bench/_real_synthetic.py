@@ -17,15 +17,15 @@ sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must n
 from _common import print_table, warm_kernels  # noqa: E402
 
 from friction_ros.core.friction.learned_residual import LearnedResidual  # noqa: E402
-from friction_ros.core.identification.fit_logs import cross_validate_runs  # noqa: E402
-from friction_ros.core.identification.pipeline import fit_records  # noqa: E402
-from friction_ros.core.identification.realistic_joint import (  # noqa: E402
+from friction_ros.core.identification.data.records import concat_records, prepare  # noqa: E402
+from friction_ros.core.identification.fit.pipeline import fit_records  # noqa: E402
+from friction_ros.core.identification.report.fit_logs import cross_validate_runs  # noqa: E402
+from friction_ros.core.synthetic.realistic_joint import (  # noqa: E402
     JointTruth,
     pooled_measured_input_nmse_percent,
     pooled_noise_floor_nmse_percent,
     realistic_runs,
 )
-from friction_ros.core.identification.records import concat_records, prepare  # noqa: E402
 
 RIPPLE_PERIOD = 2.0 * math.pi / 100.0  # the truth's ripple: motor angle of the 100:1 harmonic drive
 MAP_SPEEDS = np.geomspace(0.005, 0.4, 200)  # |v| [rad/s] of the friction-map comparison

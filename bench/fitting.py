@@ -30,12 +30,13 @@ from _common import print_table, warm_kernels, write_results  # noqa: E402
 from compensation import J003, PD003, SENSING, TRUTH003  # noqa: E402
 
 from friction_ros.core.harness import run_closed_loop  # noqa: E402
-from friction_ros.core.identification import fit_records, prepare, synthetic  # noqa: E402
-from friction_ros.core.identification.dynamic_fit import fit_time_domain  # noqa: E402
-from friction_ros.core.identification.models import spec_for  # noqa: E402
-from friction_ros.core.identification.plateau_detection import find_plateaus  # noqa: E402
-from friction_ros.core.identification.static_fit import fit_plateaus  # noqa: E402
+from friction_ros.core.identification import fit_records, prepare  # noqa: E402
+from friction_ros.core.identification.data.plateau_detection import find_plateaus  # noqa: E402
+from friction_ros.core.identification.fit.dynamic_fit import fit_time_domain  # noqa: E402
+from friction_ros.core.identification.fit.models import spec_for  # noqa: E402
+from friction_ros.core.identification.fit.static_fit import fit_plateaus  # noqa: E402
 from friction_ros.core.presets import make_plant  # noqa: E402
+from friction_ros.core.synthetic import plant_runs  # noqa: E402
 
 PAPER = {  # ABB M19-S paper Table 1: high / low velocity NMSE [%] (max err)
     "coulomb": (4.00, 0.6757, 17.92, 1.2993),
@@ -56,13 +57,13 @@ def _table23_rms(friction: dict, inertia: float, amplitude: float, duration: flo
 
 def round_trip_damped() -> dict:
     """Fit gms4 and gms4d to a 16 s record of TRUTH003 and compare their feed-forward on Tables 2/3."""
-    rec = synthetic.seed003_experiment(
+    rec = plant_runs.seed003_experiment(
         16.0, low=0.05, high=5.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
     )
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(d, ["gms4", "gms4d"], identifiability_check=False)
     # two-stage: a plateau run of the same truth added, the Stribeck curve taken from its plateaus
-    rp = synthetic.plateau_experiment(
+    rp = plant_runs.plateau_experiment(
         np.geomspace(0.005, 2.0, 24), hold=1.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
     )
     dp = prepare(rp.t, rp.position, rp.velocity, rp.effort, events=rp.events)
@@ -96,7 +97,7 @@ def main() -> None:
     figures: dict = {"duration_s": duration, "rate_hz": 1000}
 
     t0 = time.perf_counter()
-    rec = synthetic.seed003_experiment(duration, low=0.05, overrides={"current_noise_std": 0.005})
+    rec = plant_runs.seed003_experiment(duration, low=0.05, overrides={"current_noise_std": 0.005})
     figures["simulate_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
@@ -157,7 +158,7 @@ def main() -> None:
     fit_time_domain(spec_for("stribeck"), tr)
     timings["stribeck (time domain)"] = {"seconds": time.perf_counter() - t0}
     # plateau experiment as in test_static_recovery_on_plateaus (descending speeds, PD position loop)
-    prec = synthetic.plateau_experiment(
+    prec = plant_runs.plateau_experiment(
         np.geomspace(0.005, 2.0, 24), hold=1.0, overrides={"current_noise_std": 0.005}
     )
     pd = prepare(prec.t, prec.position, prec.velocity, prec.effort, events=prec.events)

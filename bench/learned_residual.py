@@ -13,7 +13,7 @@ Data sets:
   (the logs' own steps are 3.3, 5 and 1 ms); backbone tau = J a + m cx g sin q + Fv v + Fc tanh(v /
   0.01) + offset, one model for the joint (all runs pooled), a = d/dt of the velocity smoothed by a
   zero-phase 20 Hz Butterworth. Data checks (the authors' model and per-run fits) are printed too;
-* ``realistic``: :func:`friction_ros.core.identification.realistic_joint.realistic_runs` (known truth:
+* ``realistic``: :func:`friction_ros.core.synthetic.realistic_joint.realistic_runs` (known truth:
   gravity, spring, Stribeck, load-dependent and rippling friction, noise; 3 runs x 40 s at 2 ms),
   backbone J a + gravity (sin, cos) + spring + Coulomb-viscous + offset;
 * ``hysteresis``: a joint with presliding hysteresis (Dahl) and frictional lag that the
@@ -40,7 +40,7 @@ sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must n
 
 from _common import print_table, write_results  # noqa: E402
 
-from friction_ros.core.identification.residual_learning import fit_residual  # noqa: E402
+from friction_ros.core.identification.fit.residual_learning import fit_residual  # noqa: E402
 
 PENDULUM = Path("/work/shared/data/dfki_pendulum")
 PENDULUM_RUNS = ("pd_system_identification", "energy_shaping", "gravity_compensation")
@@ -114,7 +114,7 @@ def pendulum_data() -> tuple[list[dict], float, dict]:
 
 
 def realistic_data(duration: float) -> tuple[list[dict], float, dict]:
-    from friction_ros.core.identification import realistic_joint
+    from friction_ros.core.synthetic import realistic_joint
 
     logs = realistic_joint.realistic_runs(duration=duration, seed=0)
     dt = float(np.median(np.diff(logs[0].t)))

@@ -1,6 +1,6 @@
 """Benchmark: identification on realistic and real joint data (issue 17).
 
-1. Realistic synthetic joint (:mod:`friction_ros.core.identification.realistic_joint`, known truth:
+1. Realistic synthetic joint (:mod:`friction_ros.core.synthetic.realistic_joint`, known truth:
    gravity 12 N*m, spring, offset + sensor offset, Stribeck map, load-dependent friction k_L = 0.03 and
    a Coulomb ripple at the motor angle of the 100:1 harmonic drive; 3 runs x 40 s at 2 ms, seed 0).
    ``fit_records`` with load="auto", residual="auto" and ``ripple_period = 2 pi / 100`` (the truth's
@@ -22,7 +22,7 @@
 3. Learned residual inference time: per residual candidate the report's step() time, and for every
    exported residual the median of 10,000 single ``LearnedResidual.step`` calls (goal < 20 us).
 4. Gauntlet (bench/_gauntlet.py): the fitter with friction-fit's defaults on every class of log users
-   bring (friction_ros.core.synthetic_logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
+   bring (friction_ros.core.synthetic.logs: ball-screw axis in m/N, hobby servo, coupled arm, LuGre
    creep, coarse encoder, jittered/missing samples, saturation, one direction only) and both joints
    of the real DFKI double pendulum: recommended model, validation NMSE, verdict and warnings per log.
 5. Long logs (``bench/_long_logs.py``): friction-fit on a 60 s, 10 min and 1 h log (bag, and the 1 h
@@ -52,8 +52,8 @@ from _gauntlet import gauntlet  # noqa: E402
 from _real_pendulum import pendulum  # noqa: E402
 from _real_synthetic import _f, _residual_entries, _time_step, synthetic  # noqa: E402
 
-from friction_ros.core.identification.records import concat_records  # noqa: E402
-from friction_ros.core.identification.residual_learning import fit_residual  # noqa: E402
+from friction_ros.core.identification.data.records import concat_records  # noqa: E402
+from friction_ros.core.identification.fit.residual_learning import fit_residual  # noqa: E402
 
 GOAL = {"map_percent": 5.0, "gravity_percent": 2.0, "load_friction_percent": 10.0, "floor_ratio": 1.5}
 STEP_GOAL_US = 20.0

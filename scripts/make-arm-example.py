@@ -21,7 +21,7 @@ from pathlib import Path
 import yaml
 
 from friction_ros.core.experiment.arm_example import arm_parameter_document
-from friction_ros.core.identification.export import dump_yaml
+from friction_ros.core.identification.report.export import dump_yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANT = ROOT / "params" / "arm7_plant.yaml"

@@ -17,12 +17,12 @@ from friction_ros.cli.fit import main
 from friction_ros.core.bag import bag_files, bag_info, iter_messages, read_bag
 from friction_ros.core.bag.msgdef import load_installed, parse_schema
 from friction_ros.core.bag.rosbags_reader import typestore
-from friction_ros.core.identification import synthetic
-from friction_ros.core.identification.bag_loading import load_bag
-from friction_ros.core.identification.csv_loading import load_csv
-from friction_ros.core.identification.log_loading import load_log
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.identification.records import ExcitationError
+from friction_ros.core.identification.data.bag_loading import load_bag
+from friction_ros.core.identification.data.csv_loading import load_csv
+from friction_ros.core.identification.data.log_loading import load_log
+from friction_ros.core.identification.data.records import ExcitationError
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.synthetic import plant_runs
 
 PENDULUM = Path(__file__).parent / "data" / "dfki_pendulum" / "control_method_pd_system_identification.csv"
 EPOCH_NS = 1_700_000_000_000_000_000
@@ -117,7 +117,7 @@ def _expect_error(argv, capsys, *words) -> str:
 @pytest.fixture(scope="module")
 def run():
     """20 s of ABB M19-S paper's excitation on the simulated ABB joint (deterministic)."""
-    return synthetic.seed003_experiment(20.0, low=0.05)
+    return plant_runs.seed003_experiment(20.0, low=0.05)
 
 
 @pytest.fixture(scope="module")

@@ -26,10 +26,10 @@ def _digest(paths: list[Path]) -> dict[str, str]:
 @pytest.fixture(scope="module")
 def small_bag(tmp_path_factory) -> Path:
     """A short recorded-style bag (written by the package's writer from a simulated joint)."""
-    from friction_ros.core.identification import synthetic
+    from friction_ros.core.synthetic import plant_runs
 
-    rec = synthetic.seed003_experiment(12.0, low=0.05)
-    return synthetic.write_bag(tmp_path_factory.mktemp("bags") / "small", rec)
+    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    return plant_runs.write_bag(tmp_path_factory.mktemp("bags") / "small", rec)
 
 
 def _files(tmp: Path, bag: Path) -> dict[str, Path]:

@@ -22,7 +22,7 @@ from mcap.reader import make_reader
 from friction_ros.cli import bag as bag_cli
 from friction_ros.cli import fit as fit_cli
 from friction_ros.core.bag import BagWriter, encode, load_installed, read_bag
-from friction_ros.core.identification.log_loading import load_log
+from friction_ros.core.identification.data.log_loading import load_log
 
 PENDULUM = Path(__file__).parent / "data" / "dfki_pendulum" / "control_method_pd_system_identification.csv"
 JS = "sensor_msgs/msg/JointState"

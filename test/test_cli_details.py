@@ -17,7 +17,7 @@ from friction_ros.cli.demo_results import DemoResult, TrackingRun, refusal_warni
 from friction_ros.cli.fit_summary import print_summary
 from friction_ros.cli.reasons import footnotes, format_values, grouped
 from friction_ros.core.compensation_gate import Verdict
-from friction_ros.core.identification.fit_results import FitResult, ModelResult
+from friction_ros.core.identification.fit.fit_results import FitResult, ModelResult
 
 LONG = (
     "refused: limit cycle (37 Hz, not in the reference) with plant friction +20 % coefficients "

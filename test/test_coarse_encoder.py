@@ -14,10 +14,10 @@ from friction_ros.core.experiment.excitation import make_program
 from friction_ros.core.experiment.experiment_sizing import experiment_config, plateau_loop_softening
 from friction_ros.core.experiment.joint_scale import JointScale
 from friction_ros.core.experiment.tracking_design import tracking_gains
-from friction_ros.core.identification import metrics
-from friction_ros.core.identification.breakaway_detection import Breakaway
-from friction_ros.core.identification.model_fits import breakaway_levels, imprecise_breakaways
-from friction_ros.core.identification.plateau_detection import Plateau
+from friction_ros.core.identification.data.breakaway_detection import Breakaway
+from friction_ros.core.identification.data.plateau_detection import Plateau
+from friction_ros.core.identification.fit import metrics
+from friction_ros.core.identification.fit.model_fits import breakaway_levels, imprecise_breakaways
 from friction_ros.core.presets import PRESET_NAMES, load_preset
 
 

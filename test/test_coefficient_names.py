@@ -6,8 +6,9 @@ import pytest
 from friction_ros.core.coefficient_exchange import to_fields
 from friction_ros.core.estimation.estimator import ESTIMATOR_MODELS, OnlineFrictionEstimator
 from friction_ros.core.friction import MODEL_CLASSES, model_from_config
-from friction_ros.core.identification.export import estimator_section, library_config
-from friction_ros.core.identification.models import spec_for
+from friction_ros.core.identification.fit.fit_registry import library_config
+from friction_ros.core.identification.fit.models import spec_for
+from friction_ros.core.identification.report.export import estimator_section
 
 
 @pytest.mark.parametrize("model", [m for m in ESTIMATOR_MODELS if m != "lugre"])

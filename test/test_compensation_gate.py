@@ -10,7 +10,7 @@ from friction_ros.core.control.controller import CompensatingController
 from friction_ros.core.experiment.joint_scale import JointScale
 from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
 from friction_ros.core.harness import run_closed_loop
-from friction_ros.core.identification.export import compensation_section, parameter_document
+from friction_ros.core.identification.report.export import compensation_section, parameter_document
 from friction_ros.core.presets import load_preset
 from friction_ros.core.validation import ParameterError
 
@@ -216,7 +216,7 @@ def test_the_node_refuses_a_refused_source_from_the_fitted_file(tmp_path, abb):
     import subprocess
     import sys
 
-    from friction_ros.core.identification.export import dump_yaml
+    from friction_ros.core.identification.report.export import dump_yaml
 
     _, scale = abb
     bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)

@@ -309,7 +309,7 @@ def test_fitted_parameter_document_feeds_the_controller():
     builds the node's controller with both terms: the interface between fitter and controller."""
     import yaml
 
-    from friction_ros.core.identification.export import parameter_document
+    from friction_ros.core.identification.report.export import parameter_document
 
     load = JointLoad(**LOAD).to_config()
     residual = LearnedResidual.from_config(tiny_residual()).to_config()

@@ -204,7 +204,7 @@ def test_fitted_file_with_load_terms_and_no_ripple_starts_the_node(tmp_path):
     import rclpy
 
     from friction_ros.core.friction.joint_load import JointLoad
-    from friction_ros.core.identification.export import dump_yaml, parameter_document
+    from friction_ros.core.identification.report.export import dump_yaml, parameter_document
     from friction_ros.nodes.compensating_controller import CompensatingControllerNode
 
     load = JointLoad(gravity=2.0, gravity_phase=0.1).to_config()

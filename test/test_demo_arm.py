@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from friction_ros.core.identification.multi_joint import JointFit, controller_values
+from friction_ros.core.identification.report.multi_joint import JointFit, controller_values
 
 ROOT = Path(__file__).resolve().parents[1]
 JOINTS = [f"joint{i}" for i in range(1, 8)]

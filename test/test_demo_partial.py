@@ -28,7 +28,7 @@ def test_the_map_error_covers_the_whole_excited_speed_range():
     import numpy as np
 
     from friction_ros.cli.demo_results import excited_speeds, map_error_vs_truth
-    from friction_ros.core.identification.plateau_detection import Plateau
+    from friction_ros.core.identification.data.plateau_detection import Plateau
 
     def truth(v):
         return np.sign(v) * (0.2 + 0.1 * np.exp(-((np.abs(v) / 0.05) ** 2)))

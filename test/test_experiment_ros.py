@@ -88,7 +88,7 @@ def test_rosbags_reads_the_bag_with_segment_markers(quick_bag):
 
 
 def test_static_friction_map_read_directly_matches_preset(quick_bag):
-    from friction_ros.core.identification.plateau_map import breakaway_torques, plateau_map
+    from friction_ros.core.identification.data.plateau_map import breakaway_torques, plateau_map
 
     out, r = quick_bag
     assert r.returncode == 0, r.stderr[-3000:]
@@ -181,7 +181,7 @@ def test_a_joint_that_cannot_move_ends_with_abort_the_reason_and_exit_1(tmp_path
     """--no-sim on a faulted drive (every command rejected: zero torque, position stays put): the
     program stops after three plateaus without motion instead of running its 5.6 s, with an ABORT
     event naming the reason, and the CLI exits 1 with that reason as its one error line."""
-    from friction_ros.core.identification.plateau_map import experiment_events
+    from friction_ros.core.identification.data.plateau_map import experiment_events
 
     out = tmp_path / "stuck"
     with _Joint(max_effort=0.001):  # rejects every command above 1 mN*m: a drive that does not move
@@ -239,7 +239,7 @@ def test_user_limits_constrain_the_program_instead_of_aborting_it(tmp_path):
     """README's real-joint call with --set limits.max_travel=3.0: the profile's 5 rad/s plateaus
     (3.5 rad each) are re-derived to fit (2.143 rad/s, 1.5 rad), so the run completes inside 3 rad."""
     from friction_ros.core.bag import read_bag
-    from friction_ros.core.identification.plateau_map import experiment_events
+    from friction_ros.core.identification.data.plateau_map import experiment_events
 
     out = tmp_path / "limited"
     with _Joint():

@@ -17,8 +17,8 @@ from friction_ros.core.config import flatten, unflatten
 from friction_ros.core.control.controller import controller_from_ros_parameters
 from friction_ros.core.control.controller_config import CONTROLLER_FIELDS
 from friction_ros.core.control.pid import PID_SCHEMA
-from friction_ros.core.identification.realistic_joint import JointTruth, make_run
 from friction_ros.core.joint_config import JointLayout, joint_values
+from friction_ros.core.synthetic.realistic_joint import JointTruth, make_run
 
 #: three moving joints with different truths (short runs: the test stays fast)
 TRUTHS = {
@@ -153,7 +153,7 @@ def test_each_joint_equals_its_single_joint_fit(arm):
     """The values each joint reads from the file are its single-joint file's, number for number."""
     cc = per_joint(arm["doc"]["compensating_controller"]["ros__parameters"], controller_layout(ALL))
     est_section = arm["doc"]["friction_estimator"]["ros__parameters"]
-    from friction_ros.core.identification.multi_joint import estimator_layout
+    from friction_ros.core.identification.report.multi_joint import estimator_layout
 
     est = per_joint(est_section, estimator_layout(ALL))
     index = json.loads(arm["files"]["index.json"])

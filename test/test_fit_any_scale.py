@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 
 from friction_ros.cli import fit as fit_cli
-from friction_ros.core.identification import model_status
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.identification.records import prepare
+from friction_ros.core.identification.data.records import prepare
+from friction_ros.core.identification.fit import model_status
+from friction_ros.core.identification.fit.pipeline import fit_records
 
 TRUTH = {"M": 12.0, "fv": 180.0, "fc": 22.0, "fs": 40.0, "vs": 0.02, "offset": 6.0}
 
@@ -105,7 +105,7 @@ def test_baseline_row_and_relative_error(reference):
 
 
 def test_a_model_that_fails_is_listed_and_the_others_proceed(monkeypatch):
-    from friction_ros.core.identification import pipeline
+    from friction_ros.core.identification.fit import pipeline
 
     real = pipeline.fit_time_domain
 
@@ -220,7 +220,7 @@ def test_cli_refuses_gravity_on_a_prismatic_joint(tmp_path, capsys):
 def test_scaled_record_keeps_units_metadata():
     r = record(1, 1)
     r2 = dataclasses.replace(r, meta={**r.meta, "joint_type": "prismatic"})
-    from friction_ros.core.identification.fit_logs import log_joint_type
+    from friction_ros.core.identification.report.fit_logs import log_joint_type
 
     assert log_joint_type("auto", [r2])[0] == "prismatic"
     assert log_joint_type("revolute", [r2])[0] == "revolute"

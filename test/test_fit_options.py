@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from friction_ros.core.identification.csv_loading import load_csv
-from friction_ros.core.identification.fit_logs import cross_validate_runs
-from friction_ros.core.identification.fit_options import FitOptions
-from friction_ros.core.identification.load_terms import LoadTerms
-from friction_ros.core.identification.pipeline import fit_records
+from friction_ros.core.identification.data.csv_loading import load_csv
+from friction_ros.core.identification.fit.fit_options import FitOptions
+from friction_ros.core.identification.fit.load_terms import LoadTerms
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.identification.report.fit_logs import cross_validate_runs
 from friction_ros.core.validation import ParameterError
 
 PD_LOG = Path(__file__).parent / "data" / "dfki_pendulum" / "control_method_pd_system_identification.csv"

@@ -19,7 +19,7 @@ from friction_ros.core.fleet import table as ft
 from friction_ros.core.fleet.discovery import discover
 from friction_ros.core.fleet.driver import KILLED
 from friction_ros.core.fleet.run_fit import CRASH_MARK_ENV, run_rows
-from friction_ros.core.synthetic_logs import make_log
+from friction_ros.core.synthetic.logs import make_log
 
 FAST = ["--models", "coulomb", "stribeck", "--maxiter", "3", "--train-seconds", "1", "--quiet"]
 PATTERN = "{robot}/{date:%Y-%m-%d}/{joint}.csv"

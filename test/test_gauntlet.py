@@ -1,5 +1,5 @@
 """The gauntlet: friction-fit on every class of log users bring (seeded synthetic logs of
-:mod:`friction_ros.core.synthetic_logs` and real excerpts in test/data), through the CLI entry.
+:mod:`friction_ros.core.synthetic.logs` and real excerpts in test/data), through the CLI entry.
 
 Every log must fit (exit 0) with finite figures for every model in summary.json; a figure that
 shows a diverged model (validation NMSE above 1000 %, ten times worse than a constant) must not be
@@ -17,8 +17,8 @@ import pytest
 from scipy.signal import savgol_filter
 
 from friction_ros.cli.fit import main
-from friction_ros.core.identification.csv_loading import load_csv
-from friction_ros.core.synthetic_logs import GENERATORS, make_log
+from friction_ros.core.identification.data.csv_loading import load_csv
+from friction_ros.core.synthetic.logs import GENERATORS, make_log
 
 DATA = Path(__file__).parent / "data"
 DOUBLE = DATA / "dfki_double_pendulum" / "design_A0_sysid_trajectory_00_first3s.csv"
@@ -188,7 +188,7 @@ def test_saturation_clips_part_of_the_run():
 
 
 def test_coupled_arm_joint_carries_the_other_link():
-    from friction_ros.core.synthetic_logs.machines import arm_inverse_dynamics
+    from friction_ros.core.synthetic.logs.machines import arm_inverse_dynamics
 
     log = make_log("coupled_arm", seconds=10.0)
     assert 5.0 < log.truth["friction_share_percent"] < 30.0

@@ -13,12 +13,13 @@ import pytest
 
 from friction_ros.cli.fit import main
 from friction_ros.core.experiment.events import END, START, Event
-from friction_ros.core.identification import learned, metrics, synthetic
-from friction_ros.core.identification.breakaway_detection import find_breakaways
-from friction_ros.core.identification.plateau_detection import find_plateaus
-from friction_ros.core.identification.records import ExcitationError, prepare
-from friction_ros.core.identification.synthetic import Record
-from friction_ros.core.identification.training_split import split
+from friction_ros.core.identification.data.breakaway_detection import find_breakaways
+from friction_ros.core.identification.data.plateau_detection import find_plateaus
+from friction_ros.core.identification.data.records import ExcitationError, prepare
+from friction_ros.core.identification.data.training_split import split
+from friction_ros.core.identification.fit import learned, metrics
+from friction_ros.core.synthetic import plant_runs
+from friction_ros.core.synthetic.plant_runs import Record
 
 
 def _record(t, pos, eff, events=None):
@@ -28,8 +29,8 @@ def _record(t, pos, eff, events=None):
 
 @pytest.fixture(scope="module")
 def small_bag(tmp_path_factory):
-    rec = synthetic.seed003_experiment(12.0, low=0.05)
-    return synthetic.write_bag(tmp_path_factory.mktemp("cli") / "run", rec)
+    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    return plant_runs.write_bag(tmp_path_factory.mktemp("cli") / "run", rec)
 
 
 def test_cli_end_to_end(small_bag, tmp_path, capsys):
@@ -86,7 +87,7 @@ def test_missing_joint_and_bad_model(small_bag, capsys):
 
 def test_bag_without_motion(tmp_path, capsys):
     t = np.arange(3000) * 1e-3
-    bag = synthetic.write_bag(tmp_path / "still", _record(t, np.zeros_like(t), 0.01 * np.ones_like(t)))
+    bag = plant_runs.write_bag(tmp_path / "still", _record(t, np.zeros_like(t), 0.01 * np.ones_like(t)))
     _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "no motion", "plateaus")
 
 
@@ -96,7 +97,7 @@ def test_too_little_excitation(tmp_path, capsys):
     dynamic models, listed as not fitted with the reason and no figure."""
     t = np.arange(15000) * 1e-3
     pos = 0.2 * t
-    bag = synthetic.write_bag(tmp_path / "ramp", _record(t, pos, 0.8 * np.ones_like(t)))
+    bag = plant_runs.write_bag(tmp_path / "ramp", _record(t, pos, 0.8 * np.ones_like(t)))
     out = tmp_path / "f"
     rc = main([str(bag), "--joint", "joint1", "--quiet", "--no-plots", "--out", str(out)])
     text = capsys.readouterr().out
@@ -109,8 +110,8 @@ def test_too_little_excitation(tmp_path, capsys):
 
 
 def test_bag_without_effort_needs_current(tmp_path, capsys):
-    rec = synthetic.seed003_experiment(3.0)
-    bag = synthetic.write_bag(tmp_path / "noeff", rec, with_effort=False)
+    rec = plant_runs.seed003_experiment(3.0)
+    bag = plant_runs.write_bag(tmp_path / "noeff", rec, with_effort=False)
     _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "no effort", "--torque-constant")
 
 
@@ -175,7 +176,7 @@ def test_split_and_breakaway_detection():
 
 
 def test_automatic_plateaus_without_events():
-    rec = synthetic.plateau_experiment([0.05, 0.5], hold=1.5)
+    rec = plant_runs.plateau_experiment([0.05, 0.5], hold=1.5)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)  # no events
     pl = find_plateaus(d)
     got = sorted(round(p.velocity, 2) for p in pl)
@@ -214,7 +215,7 @@ def test_anfis_and_nusvr_per_direction():
 def test_fit_kernels_match_the_friction_library():
     """The normalised VarPro kernels reproduce the library's GMS and LuGre for the same coefficients."""
     from friction_ros.core.friction import make_model
-    from friction_ros.core.identification import kernels
+    from friction_ros.core.identification.fit import kernels
 
     rng = np.random.default_rng(0)
     v = np.repeat(rng.normal(0, 0.05, 400), 5) + 0.02 * np.sin(np.arange(2000) * 0.01)
@@ -237,9 +238,9 @@ def test_damped_gms_fit_kernel_matches_the_library_and_exports_sigma1():
     presliding damping sigma1; the Gram kernel agrees with the features; the exported config
     carries sigma1 = s sum k; gms<N> (undamped) is unchanged."""
     from friction_ros.core.friction import make_model
-    from friction_ros.core.identification import kernels
-    from friction_ros.core.identification.export import library_config
-    from friction_ros.core.identification.models import spec_for
+    from friction_ros.core.identification.fit import kernels
+    from friction_ros.core.identification.fit.fit_registry import library_config
+    from friction_ros.core.identification.fit.models import spec_for
 
     rng = np.random.default_rng(0)
     v = np.repeat(rng.normal(0, 0.05, 400), 5) + 0.02 * np.sin(np.arange(2000) * 0.01)
@@ -296,9 +297,9 @@ def test_a_truncated_bag_is_fitted_with_a_warning(small_bag, tmp_path, capsys):
 
 def test_positions_all_nan_are_fitted_from_the_velocity_field_and_said_so(tmp_path, capsys):
     """The report names the velocity source it used and knows no encoder resolution (item 10)."""
-    rec = synthetic.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.seed003_experiment(12.0, low=0.05)
     rec = dataclasses.replace(rec, position=np.full_like(rec.position, np.nan))
-    bag = synthetic.write_bag(tmp_path / "nanpos", rec, extra_joint=None)
+    bag = plant_runs.write_bag(tmp_path / "nanpos", rec, extra_joint=None)
     rc = main([str(bag), "--models", "coulomb", "--out", str(tmp_path / "f"), "--no-plots", "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0, text
@@ -310,11 +311,11 @@ def test_positions_all_nan_are_fitted_from_the_velocity_field_and_said_so(tmp_pa
 
 def test_a_model_that_explains_little_is_not_recommended_silently(tmp_path, capsys):
     """Torque that is pure noise: whatever wins says it explains little (validation NMSE > 30 %)."""
-    rec = synthetic.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.seed003_experiment(12.0, low=0.05)
     rng = np.random.default_rng(0)
     noise = rng.normal(0.0, 1.0, rec.effort.shape)
     rec = dataclasses.replace(rec, effort=noise)
-    bag = synthetic.write_bag(tmp_path / "noise", rec, extra_joint=None)
+    bag = plant_runs.write_bag(tmp_path / "noise", rec, extra_joint=None)
     rc = main([str(bag), "--models", "coulomb", "--out", str(tmp_path / "f"), "--no-plots", "--quiet"])
     text = capsys.readouterr().out
     assert rc == 0, text
@@ -349,7 +350,7 @@ def test_the_safety_gate_uses_the_same_lags_as_the_demo_or_says_what_it_assumed(
     """The demo refused feedback on a bag whose README recipe (no --delay) enabled it: the gate's
     lags now come from --plant-preset when not given, and an assumed 0 is a warning."""
     from friction_ros.cli.fit import build_parser, gate_options
-    from friction_ros.core.identification.gating import preset_lags
+    from friction_ros.core.identification.fit.gating import preset_lags
     from friction_ros.core.presets import load_preset
 
     parse = build_parser().parse_args

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 import yaml
 
-from friction_ros.core.identification import fit_bag, fit_records, prepare, synthetic
-from friction_ros.core.identification.plateau_detection import find_plateaus
+from friction_ros.core.identification import fit_bag, fit_records, prepare
+from friction_ros.core.identification.data.plateau_detection import find_plateaus
+from friction_ros.core.synthetic import plant_runs
 
 NOISY = {"current_noise_std": 0.005}  # 2.5 mN*m torque noise on top of the 1.05e-4 rad encoder
 
@@ -25,8 +26,8 @@ def gms_fit(tmp_path_factory):
     With the default 1 rad/s (peaks 2.6 rad/s) the viscous coefficient was extrapolated ~6x and
     alone cost the large-stroke round trip a factor 2-4."""
     d = tmp_path_factory.mktemp("gms")
-    rec = synthetic.seed003_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
-    bag = synthetic.write_bag(d / "bag", rec)
+    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
+    bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
         "/joint_states",
@@ -212,8 +213,8 @@ def damped_fit(tmp_path_factory):
     with the damped GMS-4 (``gms4d``); the parameter file carries sigma1."""
     d = tmp_path_factory.mktemp("gms_damped")
     truth = _benchmark_truth003()
-    rec = synthetic.seed003_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
-    bag = synthetic.write_bag(d / "bag", rec)
+    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
+    bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
         "/joint_states",
@@ -274,7 +275,7 @@ def test_static_recovery_on_plateaus():
     delta 2, fv 0.01), fitted per direction. Experiment: descending speeds (each slow plateau entered
     from steady sliding, not through a break-away) under a PD position loop on the ramp with
     stiffness 150 N*m/rad (stable sliding on the Stribeck slope through the friction lag), see
-    ``synthetic.plateau_experiment``; 24 speeds 0.005-2 rad/s, 1 s each.
+    ``plant_runs.plateau_experiment``; 24 speeds 0.005-2 rad/s, 1 s each.
 
     fc, fs, vs, fv within 3 % in both directions, delta within 20 %. At and below ~0.024 rad/s the
     joint still stick-slips on the 1.05e-4 rad encoder: the slowest plateaus fail the velocity
@@ -289,7 +290,7 @@ def test_static_recovery_on_plateaus():
     simulated record is bit-identical from 233f5b3 on). Without encoder quantisation all five come
     out within 0.6 % (see the report of issue 8)."""
     truth = {"fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0, "fv": 0.01}
-    rec = synthetic.plateau_experiment(np.geomspace(0.005, 2.0, 24), hold=1.0, overrides=NOISY)
+    rec = plant_runs.plateau_experiment(np.geomspace(0.005, 2.0, 24), hold=1.0, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort, events=rec.events)
     pl = find_plateaus(d)
     assert 30 <= len(pl) <= 48 and all(p.source == "events" for p in pl)
@@ -316,7 +317,7 @@ def test_lugre_sigma_recovery_within_15_percent():
         "vs": 0.05,
         "delta": 2.0,
     }
-    rec = synthetic.seed003_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
+    rec = plant_runs.seed003_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(
         d, ["lugre"], identifiability_check=False, train_window="first"

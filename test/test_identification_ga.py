@@ -7,7 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from friction_ros.core.identification import ga, seed001
+from friction_ros.core.identification.fit import ga
+
+# ------------------------------------------------------------------------------ item 6: mechanics
+from friction_ros.core.synthetic import seed001
 
 
 # ------------------------------------------------------------------------------ item 6: mechanics

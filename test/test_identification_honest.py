@@ -12,14 +12,18 @@ from friction_ros.core.experiment.events import END, START, Event
 from friction_ros.core.experiment.excitation import make_program
 from friction_ros.core.experiment.experiment_sizing import experiment_config
 from friction_ros.core.experiment.joint_scale import JointScale
-from friction_ros.core.identification import metrics
-from friction_ros.core.identification.breakaway_detection import find_breakaways
-from friction_ros.core.identification.fit_logs import fit_bag
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.identification.plateau_detection import Plateau, chattering_plateaus, find_plateaus
-from friction_ros.core.identification.records import prepare, quantization_velocity_noise
-from friction_ros.core.identification.training_split import training_segments
-from friction_ros.core.identification.velocity_regimes import moving_mask, standstill_mask
+from friction_ros.core.identification.data.breakaway_detection import find_breakaways
+from friction_ros.core.identification.data.plateau_detection import (
+    Plateau,
+    chattering_plateaus,
+    find_plateaus,
+)
+from friction_ros.core.identification.data.records import prepare, quantization_velocity_noise
+from friction_ros.core.identification.data.training_split import training_segments
+from friction_ros.core.identification.data.velocity_regimes import moving_mask, standstill_mask
+from friction_ros.core.identification.fit import metrics
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.identification.report.fit_logs import fit_bag
 from friction_ros.core.presets import load_preset
 
 # ---------------------------------------------------------------------------------- an independent joint
@@ -241,9 +245,9 @@ def test_breakaway_on_a_compliant_joint_is_within_5_percent(with_events):
 
 
 def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
-    from friction_ros.core.identification import synthetic
+    from friction_ros.core.synthetic import plant_runs
 
-    rec = synthetic.seed003_experiment(40.0)
+    rec = plant_runs.seed003_experiment(40.0)
     d = prepare(rec.t, rec.position, None, rec.effort)
     segs = training_segments(d, 10.0)
     train = np.zeros(d.n, bool)

@@ -208,9 +208,9 @@ def test_detect_joint_type_from_bag_metadata(tmp_path):
 # -------------------------------------------------------------------------------- fitter outputs
 @pytest.fixture(scope="module")
 def prismatic_fit(tmp_path_factory):
-    from friction_ros.core.identification.csv_loading import load_csv
-    from friction_ros.core.identification.pipeline import fit_records
-    from friction_ros.core.identification.report import write_outputs
+    from friction_ros.core.identification.data.csv_loading import load_csv
+    from friction_ros.core.identification.fit.pipeline import fit_records
+    from friction_ros.core.identification.report.report import write_outputs
 
     rec = load_csv(ROOT / "test" / "data" / "dfki_pendulum" / "control_method_pd_system_identification.csv")
     res = fit_records([rec], ["coulomb_viscous"], identifiability_check=False, train_seconds=1.5, load="none")
@@ -247,7 +247,8 @@ def test_report_summary_and_parameter_file_of_a_prismatic_fit(prismatic_fit):
 
 
 def test_a_fit_without_joint_type_stays_revolute(prismatic_fit):
-    from friction_ros.core.identification.report import summary
+    from friction_ros.core.identification.report.export import fit_parameter_document
+    from friction_ros.core.identification.report.report import summary
 
     res, _ = prismatic_fit
     rev = dict(res.options)
@@ -255,7 +256,7 @@ def test_a_fit_without_joint_type_stays_revolute(prismatic_fit):
     res.options, saved = rev, res.options
     try:
         js = summary(res)
-        doc = res.parameter_document()
+        doc = fit_parameter_document(res)
     finally:
         res.options = saved
     assert js["joint_type"] == "revolute" and js["units"]["friction"] == "N*m"
@@ -265,7 +266,7 @@ def test_a_fit_without_joint_type_stays_revolute(prismatic_fit):
 def test_prismatic_parameter_file_loads_into_the_nodes_config_objects(prismatic_fit):
     """What the nodes build from the exported file: the controller, the estimator, the plant."""
     from friction_ros.core.control.controller import controller_from_ros_parameters
-    from friction_ros.core.identification.export import parameter_document
+    from friction_ros.core.identification.report.export import parameter_document
     from friction_ros.core.presets import preset_from_config
     from friction_ros.nodes import compensating_controller, friction_estimator, plant_simulator
 
@@ -297,10 +298,10 @@ def test_prismatic_parameter_file_loads_into_the_nodes_config_objects(prismatic_
 
 
 def test_multi_joint_document_keeps_each_joints_type():
-    from friction_ros.core.identification.multi_joint import JointFit, joint_parameter_document
+    from friction_ros.core.identification.report.multi_joint import JointFit, joint_parameter_document
 
     def doc(jt):
-        from friction_ros.core.identification.export import parameter_document
+        from friction_ros.core.identification.report.export import parameter_document
 
         return parameter_document({"model": "coulomb_viscous", "fc": 1.0, "fv": 0.1}, 0.5, joint_type=jt)
 
@@ -334,7 +335,7 @@ def test_detect_joint_type_from_embedded_parameter_files_and_urdf():
 def test_a_prismatic_csv_log_loads_and_tells_its_joint_type(tmp_path):
     import numpy as np
 
-    from friction_ros.core.identification.csv_loading import load_csv
+    from friction_ros.core.identification.data.csv_loading import load_csv
 
     t = np.arange(0.0, 2.0, 0.001)
     v = 0.05 * np.sin(2 * np.pi * t)

@@ -37,14 +37,22 @@ LAYERS: list[tuple[str, tuple[str, ...]]] = [
     ("control", ("control",)),  # controllers, compensation, safety
     ("experiment", ("experiment",)),  # what a run does: excitation, references, sizing
     ("can", ("can",)),  # drive codecs, drive logic, drive emulator of a preset
-    ("synthetic_logs", ("synthetic_logs",)),  # synthetic machines and their logs
     (
         "simulation",
         ("harness", "compensation_gate", "joint_group", "joint_group_inputs"),
     ),  # closed loop without ROS (N joints: joint_group), the fitter's gate
-    ("identification", ("identification",)),  # offline fitting, report, export
+    # offline identification in three layers: data <- fit <- report (the package re-exports the
+    # entry points of all three, so it sits with report)
+    ("identification.data", ("identification.data",)),  # logs, records, segments, scales, selection
+    ("identification.fit", ("identification.fit",)),  # models, fits, comparison, recommendation
+    ("identification.report", ("identification.report", "identification")),  # report, plots, files
     ("fleet", ("fleet",)),  # many runs of many robots: table, trends, wear alarms
+    ("synthetic", ("synthetic",)),  # synthetic truths for tests and benchmarks: nothing imports them
 ]
+
+#: the fitter, which never imports the synthetic truths (it would fit what it simulated itself)
+FITTER = CORE + ".identification"
+SYNTHETIC = CORE + ".synthetic"
 
 #: third-party packages a core function may import on first use (heavy and optional)
 LAZY_THIRD_PARTY = {
@@ -98,6 +106,56 @@ def test_no_import_points_up_a_layer():
                     f"{mod}:{imp.line} ({LAYERS[layer_of(mod)][0]}) -> {t} ({LAYERS[layer_of(t)][0]}), {where} level"
                 )
     assert not up, "imports that point up a layer:\n" + "\n".join(sorted(up))
+
+
+def synthetic_imports(modules: dict) -> list[str]:
+    """Every import (module level or in a function) of a fitter module that loads the synthetic truths."""
+    out = []
+    for mod, path in modules.items():
+        if mod == FITTER or mod.startswith(FITTER + "."):
+            for imp in imports(path):
+                t = target(imp, modules)
+                if t == SYNTHETIC or t.startswith(SYNTHETIC + "."):
+                    out.append(f"{mod}:{imp.line} -> {t}")
+    return out
+
+
+def test_identification_is_data_fit_report():
+    """Every identification module is in data, fit or report, and the three are ordered
+    data < fit < report (report may import fit and data, fit may import data, data neither)."""
+    loose = [
+        m
+        for m in _core_modules()
+        if m.startswith(FITTER + ".") and m.split(".")[3] not in ("data", "fit", "report")
+    ]
+    assert not loose, f"identification modules outside data/fit/report: {loose}"
+    order = [layer_of(f"{FITTER}.{sub}.x") for sub in ("data", "fit", "report")]
+    assert order == sorted(order) and len(set(order)) == 3
+    assert layer_of(FITTER) == order[2]
+
+
+def test_the_fitter_never_imports_the_synthetic_truths():
+    modules = package_modules()
+    assert any(m.startswith(SYNTHETIC + ".") for m in modules)
+    bad = synthetic_imports(modules)
+    assert not bad, "the fitter imports the synthetic truths:\n" + "\n".join(sorted(bad))
+
+
+def test_synthetic_check_sees_a_function_level_import(tmp_path):
+    """The check flags a fitter function that imports a synthetic truth."""
+    import import_scan
+
+    pkg = tmp_path / "friction_ros" / "core" / "identification" / "fit"
+    pkg.mkdir(parents=True)
+    probe = pkg / "probe.py"
+    probe.write_text("def f():\n    from friction_ros.core.synthetic import plant_runs\n")
+    old = import_scan.ROOT
+    import_scan.ROOT = tmp_path
+    try:
+        found = synthetic_imports({FITTER + ".fit.probe": probe})
+    finally:
+        import_scan.ROOT = old
+    assert found == [f"{FITTER}.fit.probe:2 -> {SYNTHETIC}"]
 
 
 def test_layer_check_sees_an_upward_import(tmp_path):

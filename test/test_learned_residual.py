@@ -14,7 +14,7 @@ from friction_ros.core.friction.learned_residual import (
     feature_names,
     feature_settings,
 )
-from friction_ros.core.identification.residual_learning import fit_residual, residual_features
+from friction_ros.core.identification.fit.residual_learning import fit_residual, residual_features
 from friction_ros.core.validation import ParameterError
 
 DT = 1e-3

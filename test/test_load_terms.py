@@ -12,17 +12,18 @@ import yaml
 from scipy.optimize import lsq_linear
 
 from friction_ros.core.friction.joint_load import JointLoad
-from friction_ros.core.identification.csv_loading import load_csv
-from friction_ros.core.identification.fit_logs import cross_validate_runs
-from friction_ros.core.identification.linsolve import solve_grams
-from friction_ros.core.identification.load_terms import LoadTerms, parse_terms
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.identification.realistic_joint import (
+from friction_ros.core.identification.data.csv_loading import load_csv
+from friction_ros.core.identification.data.records import prepare
+from friction_ros.core.identification.fit.linsolve import solve_grams
+from friction_ros.core.identification.fit.load_terms import LoadTerms, parse_terms
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.identification.report.export import fit_parameter_document
+from friction_ros.core.identification.report.fit_logs import cross_validate_runs
+from friction_ros.core.synthetic.realistic_joint import (
     JointTruth,
     pooled_measured_input_nmse_percent,
     realistic_runs,
 )
-from friction_ros.core.identification.records import prepare
 from friction_ros.core.validation import ParameterError
 
 DATA = Path(__file__).parent / "data" / "dfki_pendulum"
@@ -154,7 +155,7 @@ def test_realistic_joint_without_load_terms_is_flagged(realistic_fit):
 
 def test_parameter_file_carries_the_load_section(realistic_fit, tmp_path):
     _, _, res = realistic_fit
-    doc = res.parameter_document()
+    doc = fit_parameter_document(res)
     sec = doc["compensating_controller"]["ros__parameters"]["load"]
     jl = JointLoad.from_config(sec)
     assert jl.gravity == pytest.approx(res.models["stribeck"].extra["load"]["gravity"])
@@ -219,7 +220,7 @@ def test_cli_load_option(tmp_path, capsys):
 def test_csv_load_column_is_the_transmitted_torque(tmp_path):
     """A CSV ``load`` column (the torque the gear transmits, known to the user) is what the
     load-dependent friction uses: the record keeps it through the selection."""
-    from friction_ros.core.identification.load_terms import with_transmitted
+    from friction_ros.core.identification.fit.load_terms import with_transmitted
 
     run = realistic_runs(duration=8.0, speeds=(0.3,), seed=2)[0]
     path = tmp_path / "log.csv"

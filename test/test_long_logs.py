@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 
 from friction_ros.core.experiment.events import END, START, Event
-from friction_ros.core.identification.decimation import bound_records, decimate, piece_edges
-from friction_ros.core.identification.pipeline import fit_records
-from friction_ros.core.identification.records import prepare
-from friction_ros.core.identification.report import summary
+from friction_ros.core.identification.data.decimation import bound_records, decimate, piece_edges
+from friction_ros.core.identification.data.records import prepare
+from friction_ros.core.identification.fit.pipeline import fit_records
+from friction_ros.core.identification.report.report import summary
 
 FC, FV, J = 0.8, 0.5, 0.02  # truth of the synthetic joint: tau = J a + FC sgn(v) + FV v + noise
 
@@ -62,7 +62,7 @@ def test_decimation_keeps_content_and_says_what_it_used():
 
 
 def test_derivatives_do_not_reach_across_joins():
-    from friction_ros.core.identification.dynamic_fit import DEFAULT_SIGNALS, fit_signals
+    from friction_ros.core.identification.fit.dynamic_fit import DEFAULT_SIGNALS, fit_signals
 
     rec = _record(400.0)
     d = decimate(rec, 20_000)
@@ -85,7 +85,7 @@ def _with_plateaus(hold: float):
 
 
 def test_plateaus_kept_only_when_they_make_a_plateau_experiment():
-    from friction_ros.core.identification.decimation import _must_keep
+    from friction_ros.core.identification.data.decimation import _must_keep
 
     # a few constant-speed moments in ordinary motion: not kept first (the fit must not turn into a
     # plateau fit on a handful of them); a plateau experiment's plateaus are
@@ -177,7 +177,7 @@ def _write_bag(path, n: int = 3000, chunk_size: int = 4096, sim_clock: bool = Fa
 
 
 def test_streamed_bag_reading_equals_reading_it_whole(tmp_path):
-    from friction_ros.core.identification import bag_loading as bl
+    from friction_ros.core.identification.data import bag_loading as bl
 
     path = _write_bag(tmp_path / "bag")
     args = (path, "/joint_states", "b", "/experiment_events", None, None)
@@ -197,7 +197,7 @@ def test_streamed_bag_reading_equals_reading_it_whole(tmp_path):
 
 def test_damaged_bag_is_read_whole(tmp_path):
     from friction_ros.core.bag.mcap_stream import NotStreamable, stream_topics
-    from friction_ros.core.identification.bag_loading import load_bag
+    from friction_ros.core.identification.data.bag_loading import load_bag
 
     path = _write_bag(tmp_path / "bag")
     mcap = next(path.glob("*.mcap"))

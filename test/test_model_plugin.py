@@ -5,7 +5,7 @@ The toy model is a smooth Coulomb + viscous map (tanh instead of sgn, a common c
     F(v) = fc tanh(v / vt) + fv v
 
 It is written here, in the test module, as two small classes: the friction library model (what the
-plant and the controller evaluate) and its :class:`~friction_ros.core.identification.fit_model.FitModel`
+plant and the controller evaluate) and its :class:`~friction_ros.core.identification.fit.fit_model.FitModel`
 (what the fitter searches and exports), and registered with one call. Then:
 
 * friction-fit (the CLI entry) fits it to a synthetic log of a joint whose friction *is* that map
@@ -28,9 +28,9 @@ import yaml
 
 from friction_ros.core.config import Field
 from friction_ros.core.friction import StaticModel, make_model
-from friction_ros.core.identification.fit_model import Coef, FitModel, register_fit_model
-from friction_ros.core.identification.fit_registry import fit_model
-from friction_ros.core.synthetic_logs.tables import GauntletLog, scaled_sines
+from friction_ros.core.identification.fit.fit_model import Coef, FitModel, register_fit_model
+from friction_ros.core.identification.fit.fit_registry import fit_model
+from friction_ros.core.synthetic.logs.tables import GauntletLog, scaled_sines
 
 TRUTH = {"fc": 0.5, "vt": 0.05, "fv": 0.1}  # [N*m], [rad/s], [N*m*s/rad]
 J = 0.01  # [kg*m^2]
@@ -84,7 +84,7 @@ def _registered():
     """Register the toy for this module's tests (one call, as a user's plugin module does at import)
     and take it out again: the other test modules see the built-in models only."""
     from friction_ros.core.friction import catalog, registry
-    from friction_ros.core.identification import fit_model as fit_model_module
+    from friction_ros.core.identification.fit import fit_model as fit_model_module
 
     register_fit_model(TanhCoulombFit, library_class=TanhCoulomb)
     yield
@@ -128,7 +128,7 @@ def fitted(tmp_path_factory):
 
 
 def test_the_registry_finds_the_outside_model_by_name():
-    from friction_ros.core.identification.models import check_model_names, spec_for
+    from friction_ros.core.identification.fit.models import check_model_names, spec_for
 
     assert check_model_names(["TANH_COULOMB", "gms4"]) == ["tanh_coulomb", "gms4"]
     spec = spec_for("tanh_coulomb", velocity_scale=10.0)  # a log 10x faster: vt searched 10x higher

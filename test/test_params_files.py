@@ -57,7 +57,7 @@ def test_pin_latency_chain_puts_plant_and_controller_on_one_cpu():
 
 def test_a_fitted_parameter_file_without_a_plant_preset_is_a_whole_plant():
     """friction-fit without --plant-preset: the plant_simulator section runs as it is (issue 15)."""
-    from friction_ros.core.identification.export import parameter_document
+    from friction_ros.core.identification.report.export import parameter_document
     from friction_ros.core.presets import resolve_preset
 
     cfg = {"model": "coulomb_viscous", "fc": 0.3, "fv": 0.01}

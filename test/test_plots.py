@@ -83,8 +83,8 @@ def test_demo_tracking_plot(tmp_path):
 @pytest.fixture(scope="module")
 def pendulum_fit():
     """A real fit of the DFKI pendulum log: training and validation windows with a gap between."""
-    from friction_ros.core.identification.csv_loading import load_csv
-    from friction_ros.core.identification.pipeline import fit_records
+    from friction_ros.core.identification.data.csv_loading import load_csv
+    from friction_ros.core.identification.fit.pipeline import fit_records
 
     rec = load_csv(PENDULUM)
     return fit_records(
@@ -93,9 +93,9 @@ def pendulum_fit():
 
 
 def test_report_plots(pendulum_fit, tmp_path):
-    from friction_ros.core.identification.fit_units import units
-    from friction_ros.core.identification.records import concat_records
-    from friction_ros.core.identification.report_plots import make_plots, residuals_figure
+    from friction_ros.core.identification.data.records import concat_records
+    from friction_ros.core.identification.fit.fit_units import units
+    from friction_ros.core.identification.report.report_plots import make_plots, residuals_figure
 
     res = pendulum_fit
     va = concat_records(res.validation)

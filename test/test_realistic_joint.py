@@ -1,4 +1,4 @@
-"""Realistic synthetic joint logs (friction_ros.core.identification.realistic_joint): truth, sampling, bags."""
+"""Realistic synthetic joint logs (friction_ros.core.synthetic.realistic_joint): truth, sampling, bags."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import yaml
 from friction_ros.core.bag import read_bag
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.friction.static import StribeckEps
-from friction_ros.core.identification.metrics import nmse_percent
-from friction_ros.core.identification.realistic_joint import (
+from friction_ros.core.identification.fit.metrics import nmse_percent
+from friction_ros.core.synthetic.realistic_joint import (
     JointTruth,
     main,
     make_run,

@@ -57,7 +57,7 @@ from friction_ros.cli.demo_results import (
 )
 from friction_ros.cli.demo_steps import controller_document, fit, run_experiment, say, track
 from friction_ros.cli.reasons import grouped
-from friction_ros.core.identification.gating import preset_lags
+from friction_ros.core.identification.fit.gating import preset_lags
 from friction_ros.core.validation import ParameterError
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -81,7 +81,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     """Steps 1-4 for one preset; raises RuntimeError/ParameterError naming what failed."""
     from friction_ros.core.experiment.joint_scale import JointScale
     from friction_ros.core.experiment.tracking_design import tracking_gains, tracking_reference
-    from friction_ros.core.identification.export import dump_yaml
+    from friction_ros.core.identification.report.export import dump_yaml
     from friction_ros.core.presets import load_preset
 
     preset = load_preset(preset_name)  # validates the name early

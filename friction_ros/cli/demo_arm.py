@@ -115,7 +115,7 @@ def run(args) -> ArmDemoResult:
     """Steps 1-4 (module docstring); RuntimeError/ParameterError naming what failed."""
     from friction_ros.cli import experiment, fit
     from friction_ros.core.experiment.arm_example import arm_parameter_document, joint_presets
-    from friction_ros.core.identification.export import dump_yaml
+    from friction_ros.core.identification.report.export import dump_yaml
 
     plant_file = arm_plant_file(args.preset)
     values = plant_values(plant_file)

@@ -9,8 +9,8 @@ def summarize(bag: Path, joint: str, preset, events_topic: str, states_topic: st
     """The text printed after a run: segments, aborts, breakaways, plateau map. ``preset``: the
     simulated joint's preset (name or Preset; None on a real joint) for the true friction column;
     a joint with a pendulum gravity load has none (its load changes along the plateaus)."""
-    from friction_ros.core.identification.bag_loading import load_bag
-    from friction_ros.core.identification.plateau_map import plateau_map
+    from friction_ros.core.identification.data.bag_loading import load_bag
+    from friction_ros.core.identification.data.plateau_map import plateau_map
 
     data = load_bag(bag, topic=states_topic, joint=joint, events_topic=events_topic)
     ev = data.events

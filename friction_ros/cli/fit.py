@@ -8,14 +8,14 @@ Example::
 
 Inputs: rosbag2 directories (MCAP or SQLite3), ``.mcap``/``.db3`` files, or ``.csv`` logs with a
 header line (time, position/velocity, effort or current columns: see
-:mod:`friction_ros.core.identification.csv_loading` for the names found automatically).
+:mod:`friction_ros.core.identification.data.csv_loading` for the names found automatically).
 
 Writes ``<out>/report.md``, ``<out>/summary.json``, ``<out>/plots/*.png`` and the parameter file
 (``<out>/friction_params.yaml`` or ``--params-out``) for compensating_controller,
 friction_estimator and plant_simulator. ``--joint all`` (or ``--joint j1,j3``) fits every joint as
 ``--joint <joint>`` would into ``<out>/<joint>/``, writes ``<out>/index.md`` (model, validation NMSE,
 verdict per joint) and one parameter file in the per-joint layout of the multi-joint nodes
-(:mod:`friction_ros.core.identification.multi_joint`). Inputs are never changed: an output that is one of the
+(:mod:`friction_ros.core.identification.report.multi_joint`). Inputs are never changed: an output that is one of the
 bags, or a parameter file this command did not write, is refused (``--force`` replaces a file that
 exists). Exit codes: 0 ok, 2 bad input (missing topic/joint, no motion, too little excitation, bad
 option, output collision), 1 unexpected error.
@@ -296,8 +296,8 @@ def main_joints(args, columns) -> int:
     """--joint all / j1,j3: every joint fitted as --joint <joint>, one multi-joint parameter file."""
     from pathlib import Path
 
-    from friction_ros.core.identification import multi_joint
-    from friction_ros.core.identification.models import check_model_names
+    from friction_ros.core.identification.fit.models import check_model_names
+    from friction_ros.core.identification.report import multi_joint
     from friction_ros.core.validation import ParameterError
 
     try:
@@ -365,7 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     except ParameterError as exc:
         print(f"friction-fit: error: {exc}", file=sys.stderr)
         return 2
-    from friction_ros.core.identification.multi_joint import is_joint_list
+    from friction_ros.core.identification.report.multi_joint import is_joint_list
 
     if is_joint_list(args.joint):
         return main_joints(args, columns)
@@ -379,7 +379,7 @@ def main(argv: list[str] | None = None) -> int:
         Progress = None
         console = None
     from friction_ros.core.identification import fit_bag
-    from friction_ros.core.identification.models import check_model_names
+    from friction_ros.core.identification.fit.models import check_model_names
 
     try:
         models = check_model_names(args.models)

@@ -1,5 +1,5 @@
 """friction-fit's command line -> the fit's arguments: the fit's options
-(:class:`~friction_ros.core.identification.fit_options.FitOptions`), fit_bag's own keyword
+(:class:`~friction_ros.core.identification.fit.fit_options.FitOptions`), fit_bag's own keyword
 arguments (reading the logs, the outputs) and the safety gate's lags."""
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ def gate_options(args) -> dict:
     (the gate's verdicts depend on them)."""
     lags = {"current_lag": args.current_lag, "delay": args.delay}
     if args.plant_preset:
-        from friction_ros.core.identification.gating import preset_lags
+        from friction_ros.core.identification.fit.gating import preset_lags
         from friction_ros.core.presets import load_preset
 
         known = preset_lags(load_preset(args.plant_preset))
@@ -28,9 +28,9 @@ def gate_options(args) -> dict:
 
 
 def fit_options(args):
-    """The fit's options (:class:`~friction_ros.core.identification.fit_options.FitOptions`) from
+    """The fit's options (:class:`~friction_ros.core.identification.fit.fit_options.FitOptions`) from
     the command line; a bad value is refused naming its command-line option."""
-    from friction_ros.core.identification.fit_options import FitOptions
+    from friction_ros.core.identification.fit.fit_options import FitOptions
     from friction_ros.core.validation import ParameterError
 
     given = dict(

@@ -114,7 +114,7 @@ def main_fit(args) -> int:
     from friction_ros.cli.fit import parse_columns
     from friction_ros.core.fleet import driver
     from friction_ros.core.fleet.discovery import discover
-    from friction_ros.core.identification.models import check_model_names
+    from friction_ros.core.identification.fit.models import check_model_names
     from friction_ros.core.validation import ParameterError
 
     try:

@@ -272,7 +272,7 @@ def expand_joints(task: RunTask) -> list[RunTask]:
     """A bag task without a joint: one task per joint on its topic (sorted)."""
     if task.joint or task.problem:
         return [task]
-    from friction_ros.core.identification.joint_selection import bag_joint_names
+    from friction_ros.core.identification.data.joint_selection import bag_joint_names
 
     try:
         names = bag_joint_names([task.path], task.topic)

@@ -1,11 +1,11 @@
 """One (run, joint) in, its fleet-table rows out: the friction-fit pipeline, no files written.
 
-The run is read by :func:`~friction_ros.core.identification.log_loading.load_log` and fitted by
-:func:`~friction_ros.core.identification.pipeline.fit_records` with the options of
+The run is read by :func:`~friction_ros.core.identification.data.log_loading.load_log` and fitted by
+:func:`~friction_ros.core.identification.fit.pipeline.fit_records` with the options of
 :data:`QUICK_OPTIONS` (a short daily run: the models the wear trend reads, no learned residual,
 fewer global-search generations);
 the joint type, units, recommendation and verdict are friction-fit's
-(:func:`~friction_ros.core.identification.recommendation.verdict_label`). One row per model
+(:func:`~friction_ros.core.identification.fit.recommendation.verdict_label`). One row per model
 (the inverse-dynamics baseline included); a run that cannot be read or fitted gives one row with
 ``error`` set and ``compensate`` False. Never raises for a bad run. Pure: no rclpy.
 
@@ -127,10 +127,10 @@ def run_rows(task: RunTask, options: dict | None = None) -> list[dict]:
 
 
 def _fit(task: RunTask, opts: dict) -> list[dict]:
-    from friction_ros.core.identification.fit_logs import log_joint_type
-    from friction_ros.core.identification.log_loading import is_csv, load_log
-    from friction_ros.core.identification.pipeline import fit_records
-    from friction_ros.core.identification.recommendation import verdict_label
+    from friction_ros.core.identification.data.log_loading import is_csv, load_log
+    from friction_ros.core.identification.fit.pipeline import fit_records
+    from friction_ros.core.identification.fit.recommendation import verdict_label
+    from friction_ros.core.identification.report.fit_logs import log_joint_type
 
     opts = dict(opts)
     models = tuple(opts.pop("models"))

@@ -18,7 +18,7 @@ A geared joint on a robot carries more than friction. The torque it needs (REP-1
 * ``sgn_eps(v) = clip(v / eps, -1, 1)`` (ABB M19-S paper A.2.1).
 
 ``F(v)`` is the friction model (any of the library's); this module holds the rest, identified
-jointly with inertia and friction by :mod:`friction_ros.core.identification.load_terms` and used by
+jointly with inertia and friction by :mod:`friction_ros.core.identification.fit.load_terms` and used by
 the controller as feedforward.
 """
 

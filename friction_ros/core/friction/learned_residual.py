@@ -7,7 +7,7 @@ presliding, history):
 
 **Causal features** x (one recursion, :class:`FeatureState`, used by :meth:`LearnedResidual.step`,
 :meth:`LearnedResidual.predict_batch` and the training in
-:mod:`friction_ros.core.identification.residual_learning`), in this order:
+:mod:`friction_ros.core.identification.fit.residual_learning`), in this order:
 
 * position: ``sin q, cos q`` (``position_input = sincos``), ``q`` (``raw``) or nothing (``none``);
 * ``v`` [rad/s];
