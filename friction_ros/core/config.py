@@ -64,7 +64,8 @@ class Field:
 
     ``kind`` (bool, int, float or str) is taken from the default when not given (float for a
     required field). ``lo``/``hi`` bound numbers (and every element of a number list), open when
-    ``lo_open``/``hi_open``. ``read_only`` settings are fixed once the owner is built (a node
+    ``lo_open``/``hi_open``; ``ros_range`` False keeps them out of the ROS descriptor (the node's
+    own check then names a refused run-time value in the schema's words). ``read_only`` settings are fixed once the owner is built (a node
     refuses to change them at run time). A list field (``is_list``) holds elements of ``kind``; a
     required list must not be empty. Numbers must be finite unless ``allow_inf``.
     """
@@ -82,6 +83,7 @@ class Field:
     kind: type | None = None
     is_list: bool = False
     allow_inf: bool = False
+    ros_range: bool = True
 
     def __post_init__(self) -> None:
         default = self.default
@@ -265,11 +267,14 @@ class Schema:
     ) -> TypedConfig:
         """Validate ``config`` once (as :meth:`validate`) and return it as a frozen typed object.
 
-        Messages name ``prefix.<dotted key>`` (``gains.joint2.friction.fc = -1 is out of range``),
-        or ``names(<dotted key>)`` when given (a per-joint layout); the object's :meth:`TypedConfig.path`
-        gives the same names to the code that checks cross-field rules.
+        ``config`` is nested or in dotted ROS names (``pid.p``). Messages name ``prefix.<dotted key>``
+        (``gains.joint2.friction.fc = -1 is out of range``), or ``names(<dotted key>)`` when given (a
+        per-joint layout); the object's :meth:`TypedConfig.path` gives the same names to the code that
+        checks cross-field rules.
         """
         names = prefixed(prefix) if names is None else names
+        if config and any("." in str(k) for k in config):
+            config = unflatten(config)
         return self._typed(self._validate(config, names, ""), names, "")
 
     def _typed(self, valid: Mapping[str, Any], names: Names, rel: str) -> TypedConfig:
@@ -313,6 +318,11 @@ class TypedConfig:
     _extra: Mapping[str, Any]
     _names: Names
     _rel: str
+
+    @property
+    def extras(self) -> Mapping[str, Any]:
+        """The keys of an open section that are no fields (read-only; the owner checks them)."""
+        return self._extra
 
     def path(self, key: str = "") -> str:
         """The parameter name of ``key`` (a dotted key below this section; '' for the section)."""

@@ -110,8 +110,8 @@ def given_joint_type(node: ParameterNode) -> str:
 def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
     """The ROS parameter descriptor of a field: type, description with unit, choices, range, read-only.
 
-    A field that admits infinity gets no ROS range (a ROS range cannot hold it); its range is
-    checked by the field itself.
+    A field that admits infinity (a ROS range cannot hold it) or has ``ros_range`` False gets no ROS
+    range; its range is checked by the field itself.
     """
     name = spec.name if name is None else name
     d = ParameterDescriptor(
@@ -121,7 +121,8 @@ def descriptor(spec: Field, name: str | None = None) -> ParameterDescriptor:
         additional_constraints=("one of: " + ", ".join(spec.choices)) if spec.choices else "",
         read_only=spec.read_only,
     )
-    if not spec.is_list and not spec.allow_inf and (spec.lo is not None or spec.hi is not None):
+    bounded = spec.lo is not None or spec.hi is not None
+    if not spec.is_list and not spec.allow_inf and spec.ros_range and bounded:
         lo = -sys.float_info.max if spec.lo is None else spec.lo
         hi = sys.float_info.max if spec.hi is None else spec.hi
         if spec.kind is int:

@@ -36,42 +36,58 @@ from typing import Any
 
 import numpy as np
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Schema, TypedConfig
 from friction_ros.core.estimation.lugre_observer import LuGreObserver
-from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
+from friction_ros.core.validation import ParameterError
 
 SOURCES = ("none", "feedforward", "feedback", "blended", "observer")
 SMOOTHING = ("none", "tanh", "linear")
 
-#: How the model is applied: the compensating_controller's ``compensation.*`` parameters. Open
-#: section (the safety gate also writes ``refused`` / ``refused_reasons`` lists there); no ROS
-#: ranges: :class:`FrictionCompensator` checks the values itself.
+#: How the model is applied: the compensating_controller's ``compensation.*`` parameters, with their
+#: ranges (no ROS ranges: a refused run-time change is named in these words). ``refused`` /
+#: ``refused_reasons``: the sources the fitter's safety gate refused (compensation_gate) and why.
+_NO_ROS = {"ros_range": False}
 COMPENSATION_SCHEMA = Schema(
     "compensation",
     [
         Field("source", "feedforward", "none, feedforward, feedback, blended or observer", choices=SOURCES),
         Field(
-            "gain", 1.0, "compensation gain g_c in [0, 2] (GA friction thesis 2002 used 0.95)", allow_inf=True
+            "gain",
+            1.0,
+            "compensation gain g_c in [0, 2] (GA friction thesis 2002 used 0.95)",
+            lo=0.0,
+            hi=2.0,
+            **_NO_ROS,
         ),
-        Field("blend", 0.5, "blended: feedforward weight w in [0, 1] (feedback gets 1 - w)", allow_inf=True),
+        Field("blend", 0.5, "blended: feedforward weight w (feedback gets 1 - w)", lo=0.0, hi=1.0, **_NO_ROS),
         Field("smoothing", "none", "static models near v = 0: none, tanh or linear", choices=SMOOTHING),
-        Field("smoothing_velocity", 1e-3, "v_eps of the smoothing", unit="rad/s", allow_inf=True),
-        Field("observer_gain", 0.0, "observer: LuGre observer gain L >= 0", unit="1/s", allow_inf=True),
+        Field("smoothing_velocity", 1e-3, "v_eps of the smoothing", lo=0.0, unit="rad/s", **_NO_ROS),
+        Field("observer_gain", 0.0, "observer: LuGre observer gain L", lo=0.0, unit="1/s", **_NO_ROS),
         Field(
             "feedback_bound",
             0.5,
-            "feedback path: share f in (0, 1] of the loop's Kp / Kd that fed-back presliding "
+            "feedback path: share f of the loop's Kp / Kd that fed-back presliding "
             "stiffness / damping may remove",
-            allow_inf=True,
+            lo=0.0,
+            hi=1.0,
+            lo_open=True,
+            **_NO_ROS,
         ),
         Field(
             "allow_refused",
             False,
             "run a source the safety gate refused (written by friction-fit in ``refused``) anyway",
         ),
+        Field(
+            "refused",
+            [],
+            "sources the fitter's safety gate refused (written by friction-fit)",
+            kind=str,
+            choices=SOURCES,
+        ),
+        Field("refused_reasons", [], "why each refused source was refused", kind=str),
     ],
     doc="how the friction model is applied",
-    open=True,
 )
 #: model config dict {"model": name, coef: value ...} or None (no compensation); refused sources
 #: and their reasons as written by the fitter's safety gate (compensation_gate)
@@ -83,12 +99,27 @@ COMPENSATION_DEFAULTS: dict[str, Any] = {
 }
 
 
+def compensation_settings(config: Mapping[str, Any], prefix: str = "friction") -> TypedConfig:
+    """The typed settings of a core ``friction`` section (its keys but ``model``; None: default)."""
+    return COMPENSATION_SCHEMA.typed(
+        {k: v for k, v in config.items() if k != "model" and v is not None}, prefix
+    )
+
+
 def build_model(model: Any, name: str = "friction.model", path: str = ""):
     """:func:`friction_ros.core.friction.registry.build_model`, imported on first use (the models
     load their compiled kernels)."""
     from friction_ros.core.friction.registry import build_model as build
 
     return build(model, name, path)
+
+
+def model_of(section: TypedConfig):
+    """The library model of a typed ``friction`` section (``model`` + its coefficients; None for
+    ``none``): the coefficients are handed to the model as keywords, messages name ``section.path()``."""
+    if section.model in ("", "none"):
+        return None
+    return build_model(section.as_dict(), section.path("model"), section.path())
 
 
 def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
@@ -138,37 +169,33 @@ class FrictionCompensator:
         model_path: str = "",
         **kwargs,
     ):
-        """``prefix``: how messages name this section; ``model_path``: the model's section
-        (``friction`` in the ROS layout; default: the model's name)."""
-        cfg = dict(COMPENSATION_DEFAULTS)
-        given = dict(config or {})
-        given.update(kwargs)
-        check_keys(prefix, given, COMPENSATION_DEFAULTS)
-        cfg.update(given)
-        self.prefix, self.model_path = prefix, model_path
-        self.source = check_choice(f"{prefix}.source", cfg["source"], SOURCES)
-        self.gain = check_real(f"{prefix}.gain", cfg["gain"], 0.0, 2.0)
-        self.blend = check_real(f"{prefix}.blend", cfg["blend"], 0.0, 1.0)
-        self.smoothing = check_choice(f"{prefix}.smoothing", cfg["smoothing"], SMOOTHING)
-        self.smoothing_velocity = check_real(
-            f"{prefix}.smoothing_velocity", cfg["smoothing_velocity"], 0.0, unit="rad/s"
-        )
-        self.observer_gain = check_real(f"{prefix}.observer_gain", cfg["observer_gain"], 0.0, unit="1/s")
-        self.feedback_bound = check_real(
-            f"{prefix}.feedback_bound", cfg["feedback_bound"], 0.0, 1.0, lo_open=True
-        )
-        self.refused = [str(x) for x in (cfg["refused"] or []) if str(x)]
-        self.refused_reasons = [str(x) for x in (cfg["refused_reasons"] or [])]
-        for i, r in enumerate(self.refused):
-            check_choice(f"{prefix}.refused[{i}]", r, SOURCES)
-        allow = cfg["allow_refused"]
-        if not isinstance(allow, bool):
-            raise ParameterError(f"{prefix}.allow_refused = {allow!r} must be true or false")
-        self.allow_refused = allow
-        if self.source in self.refused and not allow and cfg["model"] is not None:
+        """From a core ``friction`` section (the settings and ``model``: a model config, a model or
+        None), typed once. ``prefix``: how messages name this section; ``model_path``: the model's
+        section (``friction`` in the ROS layout; default: the model's name)."""
+        given = {**dict(config or {}), **kwargs}
+        settings = compensation_settings(given, prefix)
+        self._setup(settings, build_model(given.get("model"), f"{prefix}.model", model_path), model_path)
+
+    @classmethod
+    def from_config(cls, settings: TypedConfig, model, model_path: str = "") -> FrictionCompensator:
+        """From a typed ``compensation`` section (:data:`COMPENSATION_SCHEMA`), as it is, and the
+        library model (None: no compensation)."""
+        self = cls.__new__(cls)
+        self._setup(settings, model, model_path)
+        return self
+
+    def _setup(self, c: TypedConfig, model, model_path: str) -> None:
+        self._settings, self.model_path = c, model_path
+        self.source, self.gain, self.blend = c.source, c.gain, c.blend
+        self.smoothing, self.smoothing_velocity = c.smoothing, c.smoothing_velocity
+        self.observer_gain, self.feedback_bound = c.observer_gain, c.feedback_bound
+        self.refused, self.refused_reasons = list(c.refused), list(c.refused_reasons)
+        self.allow_refused = c.allow_refused
+        if self.source in self.refused and not self.allow_refused and model is not None:
             i = self.refused.index(self.source)
             why = self.refused_reasons[i] if i < len(self.refused_reasons) else "see the fit report"
             ok = [x for x in ("feedforward", "feedback", "blended") if x not in self.refused]
+            prefix = self.prefix
             section = (
                 prefix if prefix.endswith("compensation") else f"{prefix.rsplit('.', 1)[0]}.compensation"
             )
@@ -176,19 +203,24 @@ class FrictionCompensator:
                 f"{section}.source = {self.source} was refused by the safety gate "
                 f"({why}): use {', '.join(ok + ['none'])}, or set compensation.allow_refused: true"
             )
-        self._install(build_model(cfg["model"], f"{prefix}.model", model_path))
+        self._install(model)
+
+    @property
+    def prefix(self) -> str:
+        """How messages name this section."""
+        return self._settings.path()
 
     # -- model management -------------------------------------------------------------------------
     def _install(self, model) -> None:
         self.model = model
         self._ff_model = build_model(model) if model is not None else None
         self._fb_model = build_model(model) if model is not None else None
+        self.bound_note = ""
+        if getattr(self, "_loop_gains", None) is not None:  # bounds the feedback model
+            self.bound_note = self._apply_bound(*self._loop_gains)
         self._observer = None
         if model is not None and self.source == "observer" and LuGreObserver.observes(model):
             self._observer = LuGreObserver(self._fb_model, self.observer_gain)
-        self.bound_note = ""
-        if getattr(self, "_loop_gains", None) is not None:
-            self.bound_note = self._apply_bound(*self._loop_gains)
 
     def config(self) -> dict[str, Any]:
         return {
@@ -282,8 +314,6 @@ class FrictionCompensator:
         if not changes:
             return ""
         self._fb_model = build_model({**cfg, **changes})
-        if self._observer is not None:
-            self._observer = LuGreObserver(self._fb_model, self.observer_gain)
         return (
             f"feedback path of {m.name} limited for loop stability: {'; '.join(notes)} "
             f"(gain x feedback weight {w:.3g})"

@@ -72,52 +72,46 @@ The ROS node is a thin adapter: ``update(t, reference, measured, dt) -> command`
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Mapping
 from typing import Any
 
-from friction_ros.core.config import Names, TypedConfig, unflatten
+from friction_ros.core.config import Names, TypedConfig
 from friction_ros.core.control.command_safety import JointLimits, TermGuard, check_reference_sample
-from friction_ros.core.control.compensation import (
-    FrictionCompensator,
-)
+from friction_ros.core.control.compensation import FrictionCompensator, model_of
 from friction_ros.core.control.compensation_watch import CompensationWatch
 from friction_ros.core.control.controller_config import (
-    CONTROLLER_FIELDS,
     core_config,
-    core_names,
-    default_config,
+    core_controller_config,
     merge_config,
     ros_controller_config,
 )
 from friction_ros.core.control.controller_terms import ControllerTerms
-from friction_ros.core.control.load_compensation import (
-    LearnedFeedforward,
-    LoadFeedforward,
-    joint_load,
-    learned_residual,
-)
+from friction_ros.core.control.load_compensation import LearnedFeedforward, LoadFeedforward
 from friction_ros.core.control.pid import Pid
 from friction_ros.core.control.schemes import DNPF, Cascade, GainScheduling, SlidingMode, loop_gains
 from friction_ros.core.control.velocity_estimate import VelocityEstimator
+from friction_ros.core.friction.joint_load import JointLoad
+from friction_ros.core.friction.learned_residual import LearnedResidual
 from friction_ros.core.input_gate import PLAUSIBLE_EFFORT
-from friction_ros.core.validation import ParameterError, check_real
+from friction_ros.core.validation import ParameterError
 
 
 def controller_from_ros_parameters(
     values: Mapping[str, Any], names: Names | None = None
 ) -> tuple[CompensatingController, dict[str, Any]]:
-    """compensating_controller ROS parameters -> (controller, reference config).
+    """compensating_controller ROS parameters (nested or dotted) -> (controller, reference config).
 
     The values become the controller's typed config (:func:`.controller_config.ros_controller_config`)
     once; every refused parameter is named as the user wrote it in the ROS layout
     (``compensation.gain``, ``friction.fc``; ``names`` maps the dotted keys, e.g. to per-joint names).
     """
-    if any("." in str(k) for k in values):
-        values = unflatten(values)
-    cfg = ros_controller_config(values, names, values.get("joint_type", "revolute"))
-    return CompensatingController.from_typed(cfg), dict(values.get("reference") or {"type": "constant"})
+    joint_type = values.get("joint_type", "revolute")
+    controller = CompensatingController.from_config(ros_controller_config(values, names, joint_type))
+    reference = values.get("reference")
+    if reference is None:  # dotted names
+        reference = {str(k)[10:]: v for k, v in values.items() if str(k).startswith("reference.")}
+    return controller, dict(reference or {"type": "constant"})
 
 
 class CompensatingController:
@@ -126,42 +120,36 @@ class CompensatingController:
     _dt_checked: float | None = None  # the last period length compute() validated
 
     def __init__(self, config: Mapping[str, Any] | None = None):
-        self._at = core_names
-        self._build(merge_config(default_config(), config or {}))
+        """From a config dict in the core layout (nested or dotted), typed once
+        (:func:`.controller_config.core_controller_config`)."""
+        self._build(core_controller_config(config))
 
     @classmethod
-    def from_typed(cls, cfg: TypedConfig) -> CompensatingController:
-        """Build from the typed ROS config (:func:`.controller_config.ros_controller_config`):
-        messages name its parameters (``cfg.path``); the ROS ``compensation`` section is the core's
-        ``friction`` and the ROS ``friction`` section its model."""
+    def from_config(cls, config: TypedConfig) -> CompensatingController:
+        """From the typed config (:func:`.controller_config.ros_controller_config`), as it is: each
+        part takes its section; messages name its parameters (``config.path``)."""
         self = cls.__new__(cls)
-        ros_key = {"friction": "compensation", "model": "friction"}
-        self._at = lambda key: cfg.path(ros_key.get(key, key))
-        self._build(merge_config(default_config(), core_config(cfg)))
+        self._build(config)
         return self
 
     @classmethod
     def from_parameters(cls, params: Mapping[str, Any]) -> CompensatingController:
         """Build from flat ROS parameters with dotted names (``pid.p``, ``friction.source`` ...)."""
-        return cls(unflatten(params))
+        return cls(params)
 
-    def _build(self, cfg: dict[str, Any]) -> None:
-        at = self._at  # core key -> the name messages give it
-        top = {f.name: f.check(cfg[f.name], at(f.name)) for f in CONTROLLER_FIELDS}
-        mode, ffg, inertia = top["mode"], top["feedforward_gain"], top["inertia"]
-        self.load_feedforward = top["load_feedforward"]
-        self.compensation_scale = top["compensation_scale"]
-        umax = top["u_clamp_max"]
-        umin = check_real(at("u_clamp_min"), top["u_clamp_min"], hi=umax, allow_inf=True, unit="N*m")
+    def _build(self, c: TypedConfig) -> None:
+        """The parts from their typed sections; only the rules across sections are checked here."""
+        at = c.path  # dotted key -> the name messages give it
+        mode, inertia = c.mode, c.inertia
+        umax, umin = c.u_clamp_max, c.u_clamp_min
         if umin >= umax:
-            raise ParameterError(f"{at('u_clamp_min')} = {umin:g} is out of range: must be < u_clamp_max")
+            raise ParameterError(
+                f"{at('u_clamp_min')} = {umin:g} is out of range: must be "
+                + (f"<= {umax:g} [N*m]" if umin > umax else "< u_clamp_max")
+            )
         try:
             limits = JointLimits(
-                top["effort_limit"],
-                top["position_min"],
-                top["position_max"],
-                top["velocity_limit"],
-                top["acceleration_limit"],
+                c.effort_limit, c.position_min, c.position_max, c.velocity_limit, c.acceleration_limit
             )
         except ParameterError as exc:  # JointLimits names its keys without the section
             raise ParameterError(f"{at('')}.{exc}" if at("") else str(exc)) from None
@@ -174,44 +162,41 @@ class CompensatingController:
         # a running node needs a finite limit (see limits_given); the pure core keeps a plausibility bound
         limits_given = math.isfinite(umin) and math.isfinite(umax)
         umin, umax = max(umin, -PLAUSIBLE_EFFORT), min(umax, PLAUSIBLE_EFFORT)
-        rate, vsrc, vtf = top["rate_limit"], top["velocity_source"], top["velocity_filter_time_constant"]
-        jump, lc_on = top["position_jump_limit"], top["limit_cycle_detection"]
-        lc_f, lc_a = top["limit_cycle_min_frequency"], top["limit_cycle_min_amplitude"]
-        lc_w, lc_h = top["limit_cycle_window"], top["limit_cycle_hold"]
+        lc_w, lc_h = c.limit_cycle_window, c.limit_cycle_hold
         if lc_w + lc_h > 0.1:
             raise ParameterError(
                 f"{at('limit_cycle_window')} + limit_cycle_hold = {lc_w + lc_h:g} is out of range: "
                 "must be <= 0.1 [s] (the fallback must come within 0.1 s of an established limit cycle)"
             )
-        pid = Pid(cfg["pid"], prefix=at("pid"))
-        friction = FrictionCompensator(cfg["friction"], prefix=at("friction"), model_path=at("model"))
-        load = joint_load(cfg["load"], at("load"))
-        cfg["load"] = load.to_config()
-        residual = learned_residual(cfg["residual"], at("residual"))
+        pid = Pid.from_config(c.pid)
+        model = model_of(c.friction)
+        friction = FrictionCompensator.from_config(c.compensation, model, at("friction"))
+        load = JointLoad.from_section(c.load)
+        residual = LearnedResidual.from_section(c.residual)
         scheme = None
         if mode == "dnpf":
-            scheme = DNPF(cfg["dnpf"])
+            scheme = DNPF(c.dnpf)
         elif mode == "gain_scheduling":
-            gs = dict(cfg["gain_scheduling"])
-            if gs.get("k") is None and gs.get("model") is None and friction.model is not None:
-                if GainScheduling.has_virgin_curve(friction.model):
-                    gs["model"] = friction.model.to_config()
-            scheme = GainScheduling(gs)
+            scheme = GainScheduling(c.gain_scheduling, friction.model)
         elif mode == "cascade":
-            scheme = Cascade(cfg["cascade"])
+            scheme = Cascade(c.cascade)
         elif mode == "sliding_mode":
-            scheme = SlidingMode(cfg["sliding_mode"])
+            scheme = SlidingMode(c.sliding_mode)
         # everything validated: commit
-        self._cfg = cfg
+        self._config = c
         self.mode = mode
-        self.feedforward_gain = ffg
+        self.feedforward_gain = c.feedforward_gain
         self.inertia = inertia
+        self.load_feedforward = c.load_feedforward
+        self.compensation_scale = c.compensation_scale
         self.u_clamp_max, self.u_clamp_min = umax, umin
         self.limits, self.limits_given = limits, limits_given
         self.guard = TermGuard()  # non-finite terms dropped (see command_safety)
         self._hold_ref: float | None = None  # the last reference position that passed the check
-        self.rate_limit = rate
-        self.velocity = VelocityEstimator(vsrc, vtf, jump)
+        self.rate_limit = c.rate_limit
+        self.velocity = VelocityEstimator(
+            c.velocity_source, c.velocity_filter_time_constant, c.position_jump_limit
+        )
         self.pid = pid
         self.friction = friction
         self.scheme = scheme
@@ -241,8 +226,13 @@ class CompensatingController:
             (friction.model is not None or self.load.has_friction) and self.load.w_fb > 0.0
         ) or self.residual is not None
         self.watch = CompensationWatch(
-            enabled=lc_on,
-            limit_cycle={"min_frequency": lc_f, "min_amplitude": lc_a, "window": lc_w, "hold": lc_h},
+            enabled=c.limit_cycle_detection,
+            limit_cycle={
+                "min_frequency": c.limit_cycle_min_frequency,
+                "min_amplitude": c.limit_cycle_min_amplitude,
+                "window": lc_w,
+                "hold": lc_h,
+            },
             feedback_path=feedback_path,
             overcompensation=friction.model is not None and mode != "compensation_only",
             command_range=umax - umin,
@@ -280,10 +270,12 @@ class CompensatingController:
         return "" if self.residual is None else self.residual.note
 
     def config(self) -> dict[str, Any]:
-        """The effective configuration (nested dict; round-trips through the constructor)."""
-        cfg = copy.deepcopy(self._cfg)
+        """The effective configuration in the core layout (nested dict; round-trips through the
+        constructor)."""
+        cfg = core_config(self._config)
         cfg["pid"] = self.pid.config()
         cfg["friction"] = self.friction.config()
+        cfg["load"] = self.load.load.to_config()
         return cfg
 
     def set_pid_gains(self, **gains: Any) -> None:
@@ -295,8 +287,9 @@ class CompensatingController:
             self.feedback_bound_note = self.friction.bound_feedback(self.loop_stiffness, self.loop_damping)
 
     def reconfigure(self, changes: Mapping[str, Any]) -> None:
-        """Apply parameter changes (nested or dotted keys); all-or-nothing, resets the states."""
-        self._build(merge_config(self.config(), changes))
+        """Apply parameter changes (nested or dotted keys, core layout); all-or-nothing, resets the
+        states."""
+        self._build(core_controller_config(merge_config(self.config(), changes)))
 
     def set_coefficients(self, coefficients: Mapping[str, Any]) -> None:
         """Hot-swap the friction model without a restart.
@@ -312,9 +305,6 @@ class CompensatingController:
         else:
             self.friction.set_coefficients(**coefficients)
         self.feedback_bound_note = self.friction.bound_note
-        self._cfg["friction"]["model"] = (
-            None if self.friction.model is None else self.friction.model.to_config()
-        )
 
     def reset(self) -> None:
         """Clear integrators, filters, observer and dynamic-model states."""

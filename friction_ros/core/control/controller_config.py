@@ -1,7 +1,12 @@
 """The compensating controller's configuration: its fields (:data:`CONTROLLER_FIELDS`, defaults,
 units and meaning), the ROS parameter layout of the compensating_controller node
-(:func:`controller_parameter_schema`) and its typed config (:func:`ros_controller_config`). :class:`~friction_ros.core.control.controller.CompensatingController`
-validates a config against these once.
+(:func:`controller_parameter_schema`) and its typed config (:func:`ros_controller_config`: the ROS
+layout is the struct, as in ros2_controllers' generate_parameter_library). Every section's schema
+lives beside the part it configures (``pid``: :data:`.pid.PID_SCHEMA`, ``compensation``:
+:data:`.compensation.COMPENSATION_SCHEMA`, a scheme's ``SCHEMA`` ...); a config is validated and
+typed here once, and :class:`~friction_ros.core.control.controller.CompensatingController` hands
+each part its typed section. A dict in the core layout (``friction`` = how the model is applied
++ ``model``) is typed once by :func:`core_controller_config`.
 """
 
 from __future__ import annotations
@@ -198,10 +203,7 @@ def controller_parameter_schema(friction_model: bool = True, reference: bool = T
     the section brings its own).
     """
     items: list[Field | Schema] = list(CONTROLLER_FIELDS)
-    for s in SCHEME_SECTIONS:
-        items.append(
-            PID_SCHEMA if s == "pid" else Schema.from_defaults(s, CONTROLLER_DEFAULTS[s], f"{s} parameter")
-        )
+    items += [PID_SCHEMA, DNPF.SCHEMA, GainScheduling.SCHEMA, Cascade.SCHEMA, SlidingMode.SCHEMA]
     items.append(COMPENSATION_SCHEMA)
     items.append(JOINT_LOAD_SCHEMA)
     items.append(LEARNED_RESIDUAL_SCHEMA)
@@ -237,17 +239,68 @@ def ros_controller_config(
     validated against the model's coefficients) and ``compensation`` holds source, gain, blend,
     smoothing. Keys of the node itself (joint_name, control_period, reference ...) are left out.
     Validated once; messages name the ROS parameters (``names``, default: the dotted key itself)
-    in the joint's units.
+    in the joint's units. ``values`` nested or in dotted names.
     """
-    model = (values.get("friction") or {}).get("model", "none")
+    friction = values.get("friction")
+    model = (
+        friction.get("model", "none")
+        if isinstance(friction, Mapping)
+        else values.get("friction.model", "none")
+    )
     schema = _ros_schema(model if isinstance(model, str) else "", joint_type)
-    given = {k: values[k] for k in schema.items if k in values}
+    given = {k: v for k, v in values.items() if str(k).split(".", 1)[0] in schema.items}
     return schema.typed(given, names=names)
 
 
+def core_controller_config(config: Mapping[str, Any] | None) -> TypedConfig:
+    """A controller config in the core layout (nested or dotted; ``friction`` = how the model is
+    applied, with ``model``: a model config, a model or None; None values: the default) as the
+    typed config, validated once; messages name ``controller.<key>`` and a model's coefficients by
+    the model's name (``gms.fc``)."""
+    given = unflatten(config) if config and any("." in str(k) for k in config) else dict(config or {})
+    check_keys("controller", given, CONTROLLER_DEFAULTS)
+    ros: dict[str, Any] = {}
+    for k, v in given.items():
+        if v is None:
+            continue
+        if k in CONFIG_SECTIONS and not isinstance(v, Mapping):
+            raise ParameterError(f"controller.{k} = {v!r} must be a mapping (a parameter section)")
+        ros[k] = {kk: vv for kk, vv in v.items() if vv is not None} if k in CONFIG_SECTIONS else v
+    model = None
+    if "friction" in ros:
+        settings = ros.pop("friction")
+        model = settings.pop("model", None)
+        ros["compensation"] = settings
+    if hasattr(model, "to_config"):
+        model = model.to_config()
+    if model is not None and not isinstance(model, Mapping):
+        raise ParameterError(
+            f"controller.friction.model = {model!r} must be a model config dict with a 'model' key"
+        )
+    name = (model or {}).get("model") or "none"
+    ros["friction"] = dict(model) if model else {"model": "none"}
+    return ros_controller_config(ros, _core_names(name if isinstance(name, str) else "friction"))
+
+
+def _core_names(model: str):
+    """Message names of the core layout: ``controller.<key>``, the ``compensation`` section as
+    ``controller.friction`` and a model's coefficients by the model's name."""
+
+    def names(rel: str) -> str:
+        head, _, tail = rel.partition(".")
+        if head == "compensation":
+            return f"controller.friction.{tail}" if tail else "controller.friction"
+        if head == "friction":  # the model's section: '' lets the model name itself
+            return "controller.friction.model" if tail == "model" else f"{model}.{tail}" if tail else ""
+        return f"controller.{rel}" if rel else "controller"
+
+    return names
+
+
 def core_config(cfg: TypedConfig) -> dict[str, Any]:
-    """A typed ROS config as the core's nested config: the ROS ``compensation`` section is the
-    core's ``friction`` section and the ROS ``friction`` section its ``model`` (None for none)."""
+    """A typed ROS config as the core's nested config (a view for people and files, not a way into
+    the controller): the ROS ``compensation`` section is the core's ``friction`` section and the
+    ROS ``friction`` section its ``model`` (None for none)."""
     out = cfg.as_dict()
     model = out.pop("friction")
     out["friction"] = {
@@ -290,7 +343,6 @@ def merge_config(base: dict[str, Any], given: Mapping[str, Any]) -> dict[str, An
     friction ``model`` replaces the previous one as a whole."""
     if any("." in str(k) for k in given):
         given = unflatten(given)
-    check_keys("controller", given, CONTROLLER_DEFAULTS)
     out = copy.deepcopy(base)
     for k, v in given.items():
         if k in CONFIG_SECTIONS:

@@ -33,18 +33,6 @@ from __future__ import annotations
 
 from friction_ros.core.friction.joint_load import JointLoad
 from friction_ros.core.friction.learned_residual import LearnedResidual
-from friction_ros.core.validation import ParameterError
-
-
-def joint_load(config, prefix: str = "controller.load") -> JointLoad:
-    """Validated :class:`JointLoad` from a ``load`` section; every refusal names ``prefix.<key>``."""
-    try:
-        return JointLoad.from_config(config, prefix)
-    except ParameterError as exc:
-        text = str(exc)
-        if text.startswith("load.") and prefix != "load":  # JointLoad's own cross-field checks
-            text = prefix + text[len("load") :]
-        raise ParameterError(text) from None
 
 
 class LoadFeedforward:
@@ -72,11 +60,6 @@ class LoadFeedforward:
         return tl + s * level
 
 
-def learned_residual(config, prefix: str = "controller.residual") -> LearnedResidual | None:
-    """Validated :class:`LearnedResidual` from a ``residual`` section (None for kind none)."""
-    return LearnedResidual.from_config(config, prefix)
-
-
 class LearnedFeedforward:
     """``tau_r`` of the module docstring: ``gain`` times the residual map, non-finite outputs -> 0."""
 
@@ -85,7 +68,7 @@ class LearnedFeedforward:
         self.gain = float(gain)
         self.nonfinite = 0
         self.note = ""
-        self.period = float(residual.to_config()["dt"])
+        self.period = residual.period
 
     def match_period(self, dt: float) -> None:
         """The map's velocity filters assume its ``dt`` (the training log's sample period): a

@@ -33,22 +33,29 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Schema, TypedConfig
 from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
-from friction_ros.core.validation import ParameterError, check_choice, check_keys, check_real
+from friction_ros.core.validation import ParameterError
 
 ANTIWINDUP_STRATEGIES = ("none", "back_calculation", "conditional_integration")
 
-#: The PID's settings (control_toolbox names): the compensating_controller's ``pid.*`` parameters.
-#: Open section without ROS ranges: :class:`Pid` checks the values and their cross-rules itself.
+#: The PID's settings (control_toolbox names): the compensating_controller's ``pid.*`` parameters,
+#: with their ranges (no ROS ranges: a refused run-time change is named in these words).
+_G = {"lo": 0.0, "hi": PLAUSIBLE_GAIN, "allow_inf": True}
 PID_SCHEMA = Schema(
     "pid",
     [
-        Field("p", 0.0, "proportional gain: p_term = p * e", unit="N*m/rad", allow_inf=True),
-        Field("i", 0.0, "integral gain: I += i * e * dt", unit="N*m/(rad*s)", allow_inf=True),
-        Field("d", 0.0, "derivative gain on the (filtered) error rate", unit="N*m*s/rad", allow_inf=True),
+        Field("p", 0.0, "proportional gain: p_term = p * e", unit="N*m/rad", **_G),
+        Field("i", 0.0, "integral gain: I += i * e * dt", unit="N*m/(rad*s)", **_G),
+        Field("d", 0.0, "derivative gain on the (filtered) error rate", unit="N*m*s/rad", **_G),
         Field("i_clamp_max", math.inf, "upper bound of the integral term I", unit="N*m", allow_inf=True),
-        Field("i_clamp_min", -math.inf, "lower bound of the integral term I", unit="N*m", allow_inf=True),
+        Field(
+            "i_clamp_min",
+            -math.inf,
+            "lower bound of the integral term I (<= i_clamp_max)",
+            unit="N*m",
+            allow_inf=True,
+        ),
         Field(
             "antiwindup_strategy",
             "conditional_integration",
@@ -59,22 +66,29 @@ PID_SCHEMA = Schema(
             "tracking_time_constant",
             0.0,
             "back_calculation: T_t (0: sqrt(d / i) if d != 0 else p / i)",
+            lo=0.0,
             unit="s",
-            allow_inf=True,
+            ros_range=False,
         ),
         Field("u_clamp_max", math.inf, "upper bound of the PID output", unit="N*m", allow_inf=True),
-        Field("u_clamp_min", -math.inf, "lower bound of the PID output", unit="N*m", allow_inf=True),
-        Field("error_deadband", 0.0, "|e| below this counts as 0", unit="rad", allow_inf=True),
+        Field(
+            "u_clamp_min",
+            -math.inf,
+            "lower bound of the PID output (< u_clamp_max)",
+            unit="N*m",
+            allow_inf=True,
+        ),
+        Field("error_deadband", 0.0, "|e| below this counts as 0", lo=0.0, unit="rad", ros_range=False),
         Field(
             "derivative_filter_time_constant",
             0.0,
             "first-order filter of the error rate (0: unfiltered)",
+            lo=0.0,
             unit="s",
-            allow_inf=True,
+            ros_range=False,
         ),
     ],
     doc="PID gains and limits",
-    open=True,
 )
 PID_DEFAULTS: dict[str, Any] = PID_SCHEMA.defaults()
 
@@ -97,48 +111,49 @@ class Pid:
     """PID controller; see the module docstring for the law and the anti-windup strategies."""
 
     def __init__(self, config: Mapping[str, Any] | None = None, *, prefix: str = "pid", **kwargs):
-        cfg = dict(PID_DEFAULTS)
-        given = dict(config or {})
-        given.update(kwargs)
-        check_keys(prefix, given, PID_DEFAULTS)
-        cfg.update(given)
-        self.prefix = prefix
-        self._set(cfg)
+        """From a dict of control_toolbox names and/or keywords (``Pid(p=1.0)``), typed once with
+        :data:`PID_SCHEMA`; messages name ``prefix.<key>``."""
+        self._set(PID_SCHEMA.typed({**dict(config or {}), **kwargs}, prefix))
         self.reset()
 
-    def _set(self, cfg: Mapping[str, Any]) -> None:
-        n = self.prefix
-        p = check_real(f"{n}.p", cfg["p"], 0.0, PLAUSIBLE_GAIN)
-        i = check_real(f"{n}.i", cfg["i"], 0.0, PLAUSIBLE_GAIN)
-        d = check_real(f"{n}.d", cfg["d"], 0.0, PLAUSIBLE_GAIN)
-        imax = check_real(f"{n}.i_clamp_max", cfg["i_clamp_max"], allow_inf=True)
-        imin = check_real(f"{n}.i_clamp_min", cfg["i_clamp_min"], hi=imax, allow_inf=True)
-        umax = check_real(f"{n}.u_clamp_max", cfg["u_clamp_max"], allow_inf=True)
-        umin = check_real(f"{n}.u_clamp_min", cfg["u_clamp_min"], hi=umax, allow_inf=True)
+    @classmethod
+    def from_config(cls, config: TypedConfig) -> Pid:
+        """From a typed ``pid`` section (:data:`PID_SCHEMA`), as it is."""
+        self = cls.__new__(cls)
+        self._set(config)
+        self.reset()
+        return self
+
+    def _set(self, cfg: TypedConfig) -> None:
+        """Take a typed section; only the rules across fields are checked here."""
+        imax, imin, umax, umin = cfg.i_clamp_max, cfg.i_clamp_min, cfg.u_clamp_max, cfg.u_clamp_min
+        if imin > imax:
+            raise ParameterError(f"{cfg.path('i_clamp_min')} = {imin:g} is out of range: must be <= {imax:g}")
         if umin >= umax:
-            raise ParameterError(f"{n}.u_clamp_min = {umin:g} is out of range: must be < u_clamp_max")
-        strategy = check_choice(f"{n}.antiwindup_strategy", cfg["antiwindup_strategy"], ANTIWINDUP_STRATEGIES)
-        tt = check_real(f"{n}.tracking_time_constant", cfg["tracking_time_constant"], 0.0, unit="s")
-        db = check_real(f"{n}.error_deadband", cfg["error_deadband"], 0.0)
-        tf = check_real(f"{n}.derivative_filter_time_constant", cfg["derivative_filter_time_constant"], 0.0)
-        self.p, self.i, self.d = p, i, d
+            raise ParameterError(
+                f"{cfg.path('u_clamp_min')} = {umin:g} is out of range: must be < u_clamp_max"
+            )
+        self._typed = cfg
+        self.p, self.i, self.d = cfg.p, cfg.i, cfg.d
         self.i_clamp_max, self.i_clamp_min = imax, imin
         self.u_clamp_max, self.u_clamp_min = umax, umin
-        self.antiwindup_strategy = strategy
-        self.tracking_time_constant = tt
-        self.error_deadband = db
-        self.derivative_filter_time_constant = tf
+        self.antiwindup_strategy = cfg.antiwindup_strategy
+        self.tracking_time_constant = cfg.tracking_time_constant
+        self.error_deadband = cfg.error_deadband
+        self.derivative_filter_time_constant = cfg.derivative_filter_time_constant
+
+    @property
+    def prefix(self) -> str:
+        """How messages name this PID's section."""
+        return self._typed.path()
 
     def config(self) -> dict[str, Any]:
         """Current parameters as a dict with control_toolbox names."""
         return {k: getattr(self, k) for k in PID_DEFAULTS}
 
     def set_gains(self, **kwargs) -> None:
-        """Change parameters at run time (validated as a whole; nothing changes on error)."""
-        check_keys(self.prefix, kwargs, PID_DEFAULTS)
-        cfg = self.config()
-        cfg.update(kwargs)
-        self._set(cfg)
+        """Change parameters at run time (typed as a whole; nothing changes on error)."""
+        self._set(PID_SCHEMA.typed({**self.config(), **kwargs}, names=self._typed.path))
         self.integral = min(max(self.integral, self.i_clamp_min), self.i_clamp_max)
 
     def reset(self, integral: float = 0.0) -> None:

@@ -23,8 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.config import Field, Schema, TypedConfig
 from friction_ros.core.control.pid import Pid
-from friction_ros.core.validation import ParameterError, check_keys, check_real
+from friction_ros.core.validation import ParameterError, check_real
+
+COULOMB_SOURCES = ("measured", "reference")
+SCHEDULES = ("bias", "stiffness")
 
 # ---------------------------------------------------------------------------------------------------
 # describing function of a presliding virgin curve (ABB M19-S paper A.4.3 eqs. (5)-(6))
@@ -74,12 +78,14 @@ class SchemeOutput:
     friction_feedback: float = 0.0
 
 
-def _cfg(section: str, defaults: Mapping[str, Any], given: Mapping[str, Any] | None) -> dict[str, Any]:
-    given = dict(given or {})
-    check_keys(section, given, defaults)
-    out = dict(defaults)
-    out.update(given)
-    return out
+def _f(name: str, default: Any, doc: str, unit: str = "", **bounds: Any) -> Field:
+    """A scheme setting; its range is checked when the section is typed (no ROS range)."""
+    return Field(name, default, doc, unit=unit, ros_range=False, **bounds)
+
+
+def _typed(schema: Schema, config: Any, prefix: str | None = None) -> TypedConfig:
+    """A scheme's section as given: typed (a dict, once) or as it is (a typed section)."""
+    return config if isinstance(config, TypedConfig) else schema.typed(config or {}, prefix or schema.name)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -93,17 +99,30 @@ class DNPF:
     K_p = (tau_st + epsilon) / Q_h.
     """
 
-    DEFAULTS = {"q_h": 0.004, "tau_st": 0.95, "epsilon": 0.05, "kp": 0.0, "kd": 0.15, "zero_band": 0.0}
+    SCHEMA = Schema(
+        "dnpf",
+        [
+            _f("q_h", 0.004, "presliding distance Q_h", "rad", lo=0.0, lo_open=True),
+            _f("tau_st", 0.95, "breakaway torque tau_st", "N*m", lo=0.0),
+            _f("epsilon", 0.05, "margin epsilon above tau_st", "N*m", lo=0.0),
+            _f("kp", 0.0, "K_p beyond Q_h (0: (tau_st + epsilon) / Q_h)", "N*m/rad", lo=0.0),
+            _f("kd", 0.15, "K_d", "N*m*s/rad", lo=0.0),
+            _f("zero_band", 0.0, "no torque inside |e| <= zero_band (<= q_h)", "rad", lo=0.0),
+        ],
+        doc="dnpf parameter",
+    )
+    DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | None = None):
-        c = _cfg("dnpf", self.DEFAULTS, config)
-        self.q_h = check_real("dnpf.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
-        self.tau_st = check_real("dnpf.tau_st", c["tau_st"], 0.0, unit="N*m")
-        self.epsilon = check_real("dnpf.epsilon", c["epsilon"], 0.0, unit="N*m")
-        kp = check_real("dnpf.kp", c["kp"], 0.0, unit="N*m/rad")
-        self.kp = kp if kp > 0.0 else (self.tau_st + self.epsilon) / self.q_h
-        self.kd = check_real("dnpf.kd", c["kd"], 0.0, unit="N*m*s/rad")
-        self.zero_band = check_real("dnpf.zero_band", c["zero_band"], 0.0, self.q_h, unit="rad")
+    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
+        c = _typed(self.SCHEMA, config)
+        self.q_h, self.tau_st, self.epsilon, self.kd = c.q_h, c.tau_st, c.epsilon, c.kd
+        self.kp = c.kp if c.kp > 0.0 else (self.tau_st + self.epsilon) / self.q_h
+        if c.zero_band > self.q_h:
+            raise ParameterError(
+                f"{c.path('zero_band')} = {c.zero_band:g} is out of range: must be in [0, {self.q_h:g}], "
+                f"i.e. >= 0 and <= {self.q_h:g} [rad]"
+            )
+        self.zero_band = c.zero_band
 
     def config(self) -> dict[str, Any]:
         return {k: getattr(self, k) for k in self.DEFAULTS}
@@ -154,26 +173,30 @@ class GainScheduling:
     The virgin curve is the GMS one: ``k``, ``alpha``, ``fs`` (or a GMS ``model`` config).
     """
 
-    DEFAULTS = {
-        "kp": 200.0,
-        "kd": 0.15,
-        "coulomb": 0.8,
-        "coulomb_velocity": 0.01,
-        "coulomb_source": "measured",
-        "coulomb_deadband": 0.0,
-        "schedule": "bias",
-        "q_h": 0.004,
-        "standstill_velocity": 1e-3,
-        "dwell": 0.01,
-        "tolerance": 5e-5,
-        "zeta": 0.7,
-        "kp_max": 2000.0,
-        "inertia": 0.0012,
-        "k": None,
-        "alpha": None,
-        "fs": None,
-        "model": None,
-    }
+    SCHEMA = Schema(
+        "gain_scheduling",
+        [
+            _f("kp", 200.0, "mode 1 K_p", "N*m/rad", lo=0.0),
+            _f("kd", 0.15, "mode 1 K_d", "N*m*s/rad", lo=0.0),
+            _f("coulomb", 0.8, "Coulomb compensation F_c", "N*m", lo=0.0),
+            _f("coulomb_velocity", 0.01, "linear zone of the Coulomb compensation", "rad/s", lo=0.0),
+            Field(
+                "coulomb_source", "measured", "velocity of the Coulomb compensation", choices=COULOMB_SOURCES
+            ),
+            _f("coulomb_deadband", 0.0, "no Coulomb compensation while |v_c| <= this", "rad/s", lo=0.0),
+            Field("schedule", "bias", "mode 2 schedule: bias or stiffness", choices=SCHEDULES),
+            _f("q_h", 0.004, "presliding distance: mode 2 while |e| < q_h", "rad", lo=0.0, lo_open=True),
+            _f("standstill_velocity", 1e-3, "standstill: |v| <= this", "rad/s", lo=0.0),
+            _f("dwell", 0.01, "standstill time before a re-adjustment", "s", lo=0.0),
+            _f("tolerance", 5e-5, "no re-adjustment while |e| <= this", "rad", lo=0.0),
+            _f("zeta", 0.7, "damping ratio of the stiffness schedule", lo=0.0, hi=5.0),
+            _f("kp_max", 2000.0, "largest scheduled K_p (>= kp)", "N*m/rad", lo=0.0),
+            _f("inertia", 0.0012, "J of the stiffness schedule", "kg*m^2", lo=0.0, lo_open=True),
+        ],
+        doc="gain_scheduling parameter: the virgin curve k, alpha, fs (or a GMS model config) is checked by GainScheduling",
+        open=True,
+    )
+    DEFAULTS = {**SCHEMA.defaults(), "k": None, "alpha": None, "fs": None, "model": None}
 
     @staticmethod
     def has_virgin_curve(model) -> bool:
@@ -181,36 +204,26 @@ class GainScheduling:
         c = model.coefficients
         return all(key in c for key in ("k", "alpha", "fs"))
 
-    def __init__(self, config: Mapping[str, Any] | None = None):
-        c = _cfg("gain_scheduling", self.DEFAULTS, config)
-        n = "gain_scheduling"
-        self.kp = check_real(f"{n}.kp", c["kp"], 0.0, unit="N*m/rad")
-        self.kd = check_real(f"{n}.kd", c["kd"], 0.0, unit="N*m*s/rad")
-        self.coulomb = check_real(f"{n}.coulomb", c["coulomb"], 0.0, unit="N*m")
-        self.coulomb_velocity = check_real(f"{n}.coulomb_velocity", c["coulomb_velocity"], 0.0, unit="rad/s")
-        if c["coulomb_source"] not in ("measured", "reference"):
+    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None, model=None):
+        """``model``: a library model whose virgin curve is used when the section gives none."""
+        c = _typed(self.SCHEMA, config)
+        n = c.path()
+        self.kp, self.kd, self.coulomb = c.kp, c.kd, c.coulomb
+        self.coulomb_velocity, self.coulomb_source = c.coulomb_velocity, c.coulomb_source
+        self.coulomb_deadband, self.schedule_kind, self.q_h = c.coulomb_deadband, c.schedule, c.q_h
+        self.standstill_velocity, self.dwell, self.tolerance = c.standstill_velocity, c.dwell, c.tolerance
+        self.zeta, self.inertia = c.zeta, c.inertia
+        if c.kp_max < self.kp:
             raise ParameterError(
-                f"{n}.coulomb_source = {c['coulomb_source']!r} is not allowed: must be one of measured, reference"
+                f"{n}.kp_max = {c.kp_max:g} is out of range: must be >= {self.kp:g} [N*m/rad]"
             )
-        self.coulomb_source = c["coulomb_source"]
-        self.coulomb_deadband = check_real(f"{n}.coulomb_deadband", c["coulomb_deadband"], 0.0, unit="rad/s")
-        if c["schedule"] not in ("bias", "stiffness"):
-            raise ParameterError(
-                f"{n}.schedule = {c['schedule']!r} is not allowed: must be one of bias, stiffness"
-            )
-        self.schedule_kind = c["schedule"]
-        self.q_h = check_real(f"{n}.q_h", c["q_h"], 0.0, lo_open=True, unit="rad")
-        self.standstill_velocity = check_real(
-            f"{n}.standstill_velocity", c["standstill_velocity"], 0.0, unit="rad/s"
-        )
-        self.dwell = check_real(f"{n}.dwell", c["dwell"], 0.0, unit="s")
-        self.tolerance = check_real(f"{n}.tolerance", c["tolerance"], 0.0, unit="rad")
-        self.zeta = check_real(f"{n}.zeta", c["zeta"], 0.0, 5.0)
-        self.kp_max = check_real(f"{n}.kp_max", c["kp_max"], self.kp, unit="N*m/rad")
-        self.inertia = check_real(f"{n}.inertia", c["inertia"], 0.0, lo_open=True, unit="kg*m^2")
-        k, alpha, fs = c["k"], c["alpha"], c["fs"]
-        if c["model"] is not None:
-            m = c["model"] if hasattr(c["model"], "coefficients") else dict(c["model"])
+        self.kp_max = c.kp_max
+        extra = c.extras
+        k, alpha, fs, given_model = (extra.get(key) for key in ("k", "alpha", "fs", "model"))
+        if k is None and given_model is None and model is not None and self.has_virgin_curve(model):
+            given_model = model
+        if given_model is not None:
+            m = given_model
             coefs = m.coefficients if hasattr(m, "coefficients") else m
             try:
                 k, alpha, fs = coefs["k"], coefs["alpha"], coefs["fs"]
@@ -298,23 +311,23 @@ class Cascade:
     u = PI(v_cmd - v) (velocity PI with back-calculation anti-windup), integrating baseline.
     """
 
-    DEFAULTS = {
-        "kp_position": 60.0,
-        "kp_velocity": 0.3,
-        "ki_velocity": 6.0,
-        "velocity_feedforward": 1.0,
-        "i_clamp": 2.0,
-    }
+    SCHEMA = Schema(
+        "cascade",
+        [
+            _f("kp_position", 60.0, "position loop gain", "1/s", lo=0.0),
+            _f("kp_velocity", 0.3, "velocity PI: proportional gain", "N*m*s/rad", lo=0.0),
+            _f("ki_velocity", 6.0, "velocity PI: integral gain", "N*m/rad", lo=0.0),
+            _f("velocity_feedforward", 1.0, "velocity feedforward share", lo=0.0, hi=2.0),
+            _f("i_clamp", 2.0, "velocity PI: integral bound", "N*m", lo=0.0, allow_inf=True),
+        ],
+        doc="cascade parameter",
+    )
+    DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | None = None, u_clamp: tuple[float, float] | None = None):
-        c = _cfg("cascade", self.DEFAULTS, config)
-        self.kp_position = check_real("cascade.kp_position", c["kp_position"], 0.0, unit="1/s")
-        self.kp_velocity = check_real("cascade.kp_velocity", c["kp_velocity"], 0.0, unit="N*m*s/rad")
-        self.ki_velocity = check_real("cascade.ki_velocity", c["ki_velocity"], 0.0, unit="N*m/rad")
-        self.velocity_feedforward = check_real(
-            "cascade.velocity_feedforward", c["velocity_feedforward"], 0.0, 2.0
-        )
-        self.i_clamp = check_real("cascade.i_clamp", c["i_clamp"], 0.0, unit="N*m", allow_inf=True)
+    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
+        c = _typed(self.SCHEMA, config)
+        self.kp_position, self.kp_velocity, self.ki_velocity = c.kp_position, c.kp_velocity, c.ki_velocity
+        self.velocity_feedforward, self.i_clamp = c.velocity_feedforward, c.i_clamp
         self.pi = Pid(
             {
                 "p": self.kp_velocity,
@@ -323,7 +336,7 @@ class Cascade:
                 "i_clamp_min": -self.i_clamp,
                 "antiwindup_strategy": "back_calculation",
             },
-            prefix="cascade.velocity_pi",
+            prefix=f"{c.path()}.velocity_pi",
         )
 
     def config(self) -> dict[str, Any]:
@@ -352,17 +365,23 @@ class SlidingMode:
     The inertia feed-forward J_hat theta_ddot_d is added by the façade.
     """
 
-    DEFAULTS = {"lambda": 50.0, "gain": 1.0, "k_s": 0.0, "boundary_layer": 0.0, "inertia": 0.0}
+    SCHEMA = Schema(
+        "sliding_mode",
+        [
+            _f("lambda", 50.0, "sliding surface S = e_dot + lambda e", "1/s", lo=0.0),
+            _f("gain", 1.0, "switching gain M", "N*m", lo=0.0),
+            _f("k_s", 0.0, "linear gain on S", "N*m*s/rad", lo=0.0),
+            _f("boundary_layer", 0.0, "boundary layer phi (0: relay)", "rad/s", lo=0.0),
+            _f("inertia", 0.0, "J_hat of J_hat lambda e_dot", "kg*m^2", lo=0.0),
+        ],
+        doc="sliding_mode parameter",
+    )
+    DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | None = None):
-        c = _cfg("sliding_mode", self.DEFAULTS, config)
-        self.lam = check_real("sliding_mode.lambda", c["lambda"], 0.0, unit="1/s")
-        self.gain = check_real("sliding_mode.gain", c["gain"], 0.0, unit="N*m")
-        self.k_s = check_real("sliding_mode.k_s", c["k_s"], 0.0, unit="N*m*s/rad")
-        self.boundary_layer = check_real(
-            "sliding_mode.boundary_layer", c["boundary_layer"], 0.0, unit="rad/s"
-        )
-        self.inertia = check_real("sliding_mode.inertia", c["inertia"], 0.0, unit="kg*m^2")
+    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
+        c = _typed(self.SCHEMA, config)
+        self.lam, self.gain, self.k_s = c.lambda_, c.gain, c.k_s
+        self.boundary_layer, self.inertia = c.boundary_layer, c.inertia
 
     def config(self) -> dict[str, Any]:
         return {

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Schema, TypedConfig
 from friction_ros.core.validation import ParameterError
 
 JOINT_LOAD_SCHEMA = Schema(
@@ -117,8 +117,28 @@ class JointLoad:
     @classmethod
     def from_config(cls, config: Mapping | None, prefix: str = "load") -> JointLoad:
         """Validated from a ``load`` section (nested dict); unknown keys and bad values name the key."""
-        c = JOINT_LOAD_SCHEMA.validate(config or {}, prefix)
-        return cls(**{k: c[k] for k in JOINT_LOAD_SCHEMA.items})
+        return cls.from_section(JOINT_LOAD_SCHEMA.typed(config or {}, prefix))
+
+    @classmethod
+    def from_section(cls, c: TypedConfig) -> JointLoad:
+        """From a typed ``load`` section (:data:`JOINT_LOAD_SCHEMA`), as it is; the one rule across
+        its fields (as many sine as cosine coefficients) names the section's parameters."""
+        if len(c.ripple_cos) != len(c.ripple_sin):
+            raise ParameterError(
+                f"{c.path('ripple_sin')} has {len(c.ripple_sin)} values: must have as many as "
+                f"{c.path('ripple_cos')} ({len(c.ripple_cos)})"
+            )
+        return cls(
+            c.gravity,
+            c.gravity_phase,
+            c.offset,
+            c.spring,
+            c.load_friction,
+            c.ripple_period,
+            list(c.ripple_cos),
+            list(c.ripple_sin),
+            c.eps,
+        )
 
     def to_config(self) -> dict:
         return {

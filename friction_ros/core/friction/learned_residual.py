@@ -40,7 +40,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Schema, TypedConfig
 from friction_ros.core.validation import ParameterError
 
 KINDS = ("none", "mlp", "rff")
@@ -214,28 +214,35 @@ class FeatureState:
         return out
 
 
-def _float_array(config: Mapping, key: str, n: int, prefix: str) -> np.ndarray:
-    a = np.asarray(config[key], dtype=float)
+def _float_array(config: TypedConfig, key: str, n: int, prefix: str) -> np.ndarray:
+    a = np.asarray(getattr(config, key), dtype=float)
     if a.size != n:
         raise ParameterError(f"{prefix}.{key} has {a.size} values: must have {n} (one per feature)")
     return a
 
 
+def _listed(value):
+    return list(value) if isinstance(value, tuple) else value
+
+
 class LearnedResidual:
     """The run-time residual map: ``step`` per sample (1 kHz loop), ``predict_batch`` over records."""
 
-    def __init__(self, config: Mapping, prefix: str = "residual"):
-        c = LEARNED_RESIDUAL_SCHEMA.validate(config, prefix)
-        if c["kind"] == "none":
+    def __init__(self, config: Mapping | TypedConfig, prefix: str = "residual"):
+        """From a ``residual`` section: a dict (typed once, messages name ``prefix.<key>``) or a
+        typed section (:data:`LEARNED_RESIDUAL_SCHEMA`), as it is."""
+        c = config if isinstance(config, TypedConfig) else LEARNED_RESIDUAL_SCHEMA.typed(config, prefix)
+        prefix = c.path()
+        if c.kind == "none":
             raise ParameterError(
                 f"{prefix}.kind = none: no learned residual to build (from_config gives None)"
             )
         self._config = c
-        self.kind = c["kind"]
-        self.settings = {k: c[k] for k in FEATURE_KEYS}
+        self.kind = c.kind
+        self.settings = {k: _listed(getattr(c, k)) for k in FEATURE_KEYS}
         self.features = FeatureState(self.settings)
         n = self.features.n
-        sizes = [int(s) for s in c["layer_sizes"]]
+        sizes = [int(s) for s in c.layer_sizes]
         if len(sizes) < 3 or sizes[0] != n or sizes[-1] != 1:
             raise ParameterError(
                 f"{prefix}.layer_sizes = {sizes} must be [n_features = {n}, hidden..., 1] "
@@ -245,8 +252,8 @@ class LearnedResidual:
             raise ParameterError(f"{prefix}.layer_sizes = {sizes}: rff has one hidden layer [n, D, 1]")
         n_w = sum(a * b for a, b in zip(sizes[:-1], sizes[1:]))
         n_b = sum(sizes[1:])
-        w = np.asarray(c["weights"], dtype=float)
-        b = np.asarray(c["biases"], dtype=float)
+        w = np.asarray(c.weights, dtype=float)
+        b = np.asarray(c.biases, dtype=float)
         if w.size != n_w:
             raise ParameterError(
                 f"{prefix}.weights has {w.size} values: must have {n_w} for layer_sizes {sizes}"
@@ -264,9 +271,9 @@ class LearnedResidual:
             raise ParameterError(
                 f"{prefix}.feature_high[{j}] = {hi[j]:g} is below {prefix}.feature_low[{j}] = {lo[j]:g}"
             )
-        if c["clip_high"] < c["clip_low"]:
+        if c.clip_high < c.clip_low:
             raise ParameterError(
-                f"{prefix}.clip_high = {c['clip_high']:g} is below {prefix}.clip_low = {c['clip_low']:g}"
+                f"{prefix}.clip_high = {c.clip_high:g} is below {prefix}.clip_low = {c.clip_low:g}"
             )
         # layers, standardisation folded in: W1' = W1 / scale, b1' = b1 - W1' mean; output likewise
         self.layers: list[tuple[np.ndarray, np.ndarray]] = []
@@ -279,32 +286,39 @@ class LearnedResidual:
         w0 = w0 / scale[None, :]
         self.layers[0] = (w0, b0 - w0 @ mean)
         wl, bl = self.layers[-1]
-        self._w_out = wl[0] * c["output_scale"]
-        self._b_out = float(bl[0] * c["output_scale"] + c["output_mean"])
+        self._w_out = wl[0] * c.output_scale
+        self._b_out = float(bl[0] * c.output_scale + c.output_mean)
         self._hidden = self.layers[:-1]
         self._act = _ACTIVATION[self.kind]
         self._lo, self._hi = lo, hi
         width = np.maximum(hi - lo, 1e-9 * (1.0 + np.abs(hi)))
-        self._inv_fade = 1.0 / (c["fade"] * width) if c["fade"] > 0.0 else np.full(n, np.inf)
+        self._inv_fade = 1.0 / (c.fade * width) if c.fade > 0.0 else np.full(n, np.inf)
         self._fade_rows = list(zip(lo.tolist(), hi.tolist(), self._inv_fade.tolist()))
-        self.clip_low = float(c["clip_low"])
-        self.clip_high = float(c["clip_high"])
+        self.clip_low = float(c.clip_low)
+        self.clip_high = float(c.clip_high)
 
     # ------------------------------------------------------------------------------ config
     @classmethod
     def from_config(cls, section: Mapping | None, prefix: str = "residual") -> LearnedResidual | None:
         """Validated from a ``residual`` section (flat values); None when ``kind`` is ``none``."""
-        section = dict(section or {})
-        if LEARNED_RESIDUAL_SCHEMA.validate(section, prefix)["kind"] == "none":
-            return None
-        return cls(section, prefix)
+        return cls.from_section(LEARNED_RESIDUAL_SCHEMA.typed(section or {}, prefix))
+
+    @classmethod
+    def from_section(cls, section: TypedConfig) -> LearnedResidual | None:
+        """From a typed ``residual`` section, as it is; None when ``kind`` is ``none``."""
+        return None if section.kind == "none" else cls(section)
+
+    @property
+    def period(self) -> float:
+        """The sample period the map's velocity filters assume (``dt``) [s]."""
+        return float(self.settings["dt"])
 
     def to_config(self) -> dict:
         """Flat ROS-parameter values (str, float, bool, int list, float lists); round-trips."""
         c = self._config
         out: dict = {}
         for name, f in LEARNED_RESIDUAL_SCHEMA.fields():
-            v = c[name]
+            v = getattr(c, name)
             if f.is_list:
                 out[name] = [f.kind(x) for x in v]
             else:
