@@ -26,6 +26,7 @@ from friction_ros.core.can.cia402.config import Cia402Config, eds_defaults
 from friction_ros.core.can.cia402.sdo_script import SdoScript, SdoStep
 from friction_ros.core.can.cia402.state_machine import (
     CW_DISABLE_VOLTAGE,
+    CW_ENABLE_OPERATION,
     STATE_NAMES,
     State,
     master_controlword,
@@ -39,6 +40,7 @@ _RPDO1 = fr.RPDO1.pack
 _TPDO1 = fr.TPDO1.unpack_from
 _TPDO2 = fr.TPDO2.unpack_from
 _HALF, _MASK = 1 << 31, (1 << 32) - 1
+_ENABLED, _QUICK_STOP = State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE
 _UNIT_OBJECTS = {  # parameter -> objects read from the drive when neither parameter nor EDS gives it
     "counts_per_rev": ((ob.OD_ENCODER_RESOLUTION, 1), (ob.OD_ENCODER_RESOLUTION, 2)),
     "gear_ratio": ((ob.OD_GEAR_RATIO, 1), (ob.OD_GEAR_RATIO, 2)),
@@ -170,11 +172,21 @@ class Cia402Master:
 
     def set_torque(self, joint_torque: float) -> None:
         """Joint torque [N*m or N] for the next RPDO, clamped to the configured max torque."""
-        if self.scaling is None:
+        if self._scaling is None:
             return
-        p = self.scaling.torque_permille(joint_torque)
-        m = self.max_permille
-        self.torque_permille = m if p > m else -m if p < -m else p
+        p = round(joint_torque / self._k_tau)  # Cia402Scaling.torque_permille, with the int16 and
+        lo, hi = self._p_range  # max torque bounds in one clamp
+        self.torque_permille = lo if p < lo else hi if p > hi else p
+
+    @property
+    def max_permille(self) -> int:
+        """Max torque 0x6072 [per mille of the rated torque]; commands are clamped to it."""
+        return self._max_permille
+
+    @max_permille.setter
+    def max_permille(self, m: int) -> None:
+        self._max_permille = m
+        self._p_range = (max(-m, fr.I16_MIN), min(m, fr.I16_MAX))
 
     @property
     def stale_after(self) -> float:
@@ -197,8 +209,19 @@ class Cia402Master:
         configuring. The period's RPDO is :meth:`rpdo_frame` (separate for drivers that send the
         command themselves)."""
         if self.phase == "operational":
-            self._supervise(t)
-            self.controlword = master_controlword(self.state, self.target, self.controlword)
+            state, target = self.state, self.target
+            if (  # anything for _supervise to check or do (else, every period: hold the state)
+                state != target
+                or target == _QUICK_STOP
+                or t - self._t_tpdo1 > self._stale_after
+                or t - self._t_heartbeat > self._consumer_timeout
+            ):
+                self._supervise(t)
+                state, target = self.state, self.target
+            if state == target == _ENABLED:
+                self.controlword = CW_ENABLE_OPERATION
+            else:
+                self.controlword = master_controlword(state, target, self.controlword)
             return []
         if self.phase in ("units", "configure"):
             return self._configure(t)
@@ -330,8 +353,6 @@ class Cia402Master:
                 t,
                 ob.ERROR_COMMUNICATION,
             )
-        if self.state == self.target != State.QUICK_STOP_ACTIVE:
-            return  # the every-period case: nothing to walk
         if self.target == State.QUICK_STOP_ACTIVE and self.state == State.QUICK_STOP_ACTIVE:
             self._set_target(State.SWITCH_ON_DISABLED, t)
         elif self.state != self.target and t - self._t_state > cfg.state_timeout:

@@ -61,8 +61,9 @@ class _SyncGroup:
 
     def due(self, t: float, key: int, operational: bool) -> bool:
         if t != self.t:
-            self.t, self.prev, self.cur, self.sent = t, self.cur, set(), False
-        self.cur.add(key)
+            self.t, self.prev, self.cur, self.sent = t, self.cur, {key}, False
+        else:
+            self.cur.add(key)
         if self.sent or not operational or not self.cur >= self.prev:
             return False
         self.sent = True
