@@ -28,7 +28,8 @@ restart by itself (no automatic restart after a communication loss, as in EN 602
 CiA 402 fault reset), even when its telemetry comes back. Disabling means the protocol's
 ``disable_frames`` (zero torque, then IDLE on ODrive, exit motor mode on MIT). Every fault is logged once when
 it starts and once when it clears (or is reset) through :class:`~friction_ros.core.can.faults.FaultLog`:
-:meth:`DriveAxis.cycle` returns the lines as ``events``.
+:meth:`DriveAxis.cycle` returns the lines as ``events``. The receive side (frames -> telemetry, with
+the fast paths of the per-period telemetry frames) is :mod:`~friction_ros.core.can.axis_rx`.
 """
 
 from __future__ import annotations

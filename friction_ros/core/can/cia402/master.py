@@ -14,6 +14,15 @@ voltage: an EMCY (its error code text), the statusword fault bit, a missing hear
 time :attr:`Cia402Config.consumer_timeout`), the drive leaving OPERATIONAL, no TPDO1 for
 ``telemetry_timeout``, a state transition not done within ``state_timeout``, an SDO abort/timeout.
 ``enable()`` clears the latch and walks the drive to OPERATION ENABLED (fault reset first).
+
+The cyclic path is hand-made for speed (the ``canopen`` library stays for start-up, EDS and the
+conformance tests): :meth:`effort_report` / :meth:`motion_report` unpack TPDO1 / TPDO2 with pre-built
+structs and the unit factors folded into four constants (``Cia402Scaling.factors``), allocate no
+object per frame and are called directly by DriveAxis' fast path; :meth:`step` only supervises when
+there is something to check. Measured reason (``bench/can_decode.py``: drive_interface's CAN work
+per 1 kHz period, CPU us per axis, 1 / 3 axes): 17.4 / 16.6 through the general decoder (a report
+object and a telemetry tuple per TPDO, supervision every period) -> 12.2 / 11.9; ODrive CANSimple
+10.2 / 10.1 (its float fast path), MIT 13.5 / 13.4.
 """
 
 from __future__ import annotations
@@ -244,10 +253,6 @@ class Cia402Master:
             [fr.nmt(ob.NMT_PRE_OPERATIONAL, self.node_id)],
         ]
 
-    # The cyclic PDO path, per frame: pre-built structs and the unit factors folded into four
-    # constants (Cia402Scaling.factors), no object per frame. ``bench/can_decode.py``, drive_interface's
-    # CAN work per 1 kHz period with one axis: 19.6 us through the general decoder (canopen-style
-    # report objects, a telemetry tuple per TPDO1) -> 13.3 us (ODrive CANSimple: 10.6 us).
     def effort_report(self, data: bytes) -> tuple[float, int, int] | None:
         """TPDO1 at :attr:`now`: statusword (state machine), torque, position (unwrapped across int32);
         returns (torque, state, fault code), or None (nothing done) when short or before the units."""
