@@ -3,6 +3,7 @@ emulated CiA 402 drives (canopen LocalNode + plant) on a python-can ``virtual`` 
 
 from __future__ import annotations
 
+import math
 import time
 import uuid
 
@@ -243,3 +244,116 @@ def test_frame_level_drive_emulator_speaks_cia402_in_lock_step():
     finally:
         link.close()
         emu_bus.shutdown()
+
+
+def _lock_step(fast: bool, effort_source: str):
+    """DriveAxis against the frame-level emulator on a simulated clock, with odd frames mixed in;
+    returns (per-period trace, axis, frames that reached the protocol's decode)."""
+    from friction_ros.core.can.cia402 import frames as fr
+    from friction_ros.core.can.emulator import DriveEmulator, EmulatorConfig
+    from friction_ros.core.can.frame import Frame
+
+    n = 5
+    emu = DriveEmulator(
+        None,
+        StandInPlant(inertia=0.5, viscous=0.5, coulomb=0.2),
+        EmulatorConfig(protocol="cia402", node_id=n, conversion=CONV),
+    )
+    axis = DriveAxis(
+        AxisConfig(
+            protocol="cia402",
+            node_id=n,
+            conversion=CONV,
+            telemetry_period=DT,
+            torque_limit=5.0,
+            effort_source=effort_source,
+            command_timeout=1.0,
+        )
+    )
+    if not fast:
+        axis._fast = {}
+    decoded = []
+    decode = axis._decode
+
+    def counted(*frame):
+        decoded.append(frame[0])
+        return decode(*frame)
+
+    axis._decode = counted
+    odd = {  # period -> frames a broken or foreign sender adds
+        400: [Frame(0x180 + n, bytes(7))],  # short TPDO1: rejected
+        410: [Frame(0x280 + n, bytes(5))],  # short TPDO2: rejected
+        420: [Frame(0x180 + n, b"", is_remote=True, dlc=8)],  # RTR: ignored
+        430: [Frame(0x180 + n, fr.TPDO1.pack(0x0237, 0, 2**30)), Frame(0x280 + n, fr.TPDO2.pack(0, 0))],
+        600: [Frame(0x180 + n, fr.TPDO1.pack(0x0208, 0, 0))],  # statusword FAULT: latched
+    }  # 430: a position 8192 motor turns away (TPDO1), reported with a TPDO2: implausible
+    t, trace, rx = 0.0, [], []
+    for f in axis.startup_frames():
+        emu.handle(f, t)
+    for k in range(900):
+        t += DT
+        if k in (150, 550, 700):
+            axis.request_enable()
+        if k == 500:
+            emu.inject_axis_error()  # EMCY (general path)
+        for f in rx + odd.get(k, []):
+            axis.on_frame(f.arbitration_id, bytearray(f.data), f.is_remote, f.is_extended, False, t)
+        axis.set_command(2.0 * math.sin(k * DT * 6.0), t)
+        r = axis.cycle(t)
+        trace.append((r, repr(axis.telemetry), axis.fault_reason))
+        for f in r.frames:
+            emu.handle(f, t)
+        emu.advance(t + DT)
+        rx = emu.pop_due(t + DT)
+    return trace, axis, decoded
+
+
+@pytest.mark.parametrize("effort_source", ["torque_estimate", "current"])
+def test_fast_tpdo_path_matches_the_decoder(effort_source):
+    """TPDO1/TPDO2 through DriveAxis' fast path (fast_reports) and through the protocol's decode:
+    the same frames sent, samples, telemetry, faults, counters and decode statistics, period by period."""
+    fast, a, dec_fast = _lock_step(True, effort_source)
+    slow, b, dec_slow = _lock_step(False, effort_source)
+    assert len(fast) == len(slow)
+    for k, (x, y) in enumerate(zip(fast, slow)):
+        assert x == y, k
+    assert a.counters == b.counters and a.decoder.stats == b.decoder.stats
+    assert a.gate.log.total == b.gate.log.total >= 3  # 2 undecodable, 1 implausible
+    assert a.decoder.stats.rejected == 2 and a.decoder.stats.ignored == 1
+    # the run did enable, move, fault on EMCY and on the statusword and enable again
+    assert a.counters.fault_trips >= 2 and a.enabled
+    assert any(r[0].sample is not None and r[0].sample.velocity > 0.01 for r in fast)
+    tpdo = {0x185, 0x285}
+    assert sum(i in tpdo for i in dec_slow) > 1000  # the general path decoded every TPDO
+    assert sum(i in tpdo for i in dec_fast) < 20  # the fast path: only odd ones and the first ones
+
+
+def test_payload_less_frames_reuse_one_message_and_the_bus_still_carries_each():
+    from friction_ros.core.can.cia402 import frames as fr
+    from friction_ros.core.can.frame import Frame
+    from friction_ros.nodes.can_bus import FrameMessages
+
+    message = FrameMessages().message
+    sync = message(fr.SYNC_FRAME)
+    assert message(Frame(0x080, b"")) is sync
+    assert (sync.arbitration_id, sync.dlc, sync.is_extended_id, sync.is_remote_frame) == (
+        0x080,
+        0,
+        False,
+        False,
+    )
+    rtr = message(Frame(0x21, b"", is_remote=True, dlc=8))
+    assert rtr.is_remote_frame and rtr.dlc == 8 and message(Frame(0x21, b"", True, dlc=8)) is rtr
+    rpdo = Frame(0x205, fr.RPDO1.pack(0x0F, -250))
+    a, b = message(rpdo), message(rpdo)
+    assert a is not b and bytes(a.data) == rpdo.data and a.dlc == 4 and not a.is_extended_id
+    channel = f"cia402m-{uuid.uuid4().hex[:8]}"
+    tx, rx = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
+    try:
+        for f in (rpdo, fr.SYNC_FRAME, rpdo, fr.SYNC_FRAME):
+            tx.send(message(f))
+        got = [rx.recv(1.0) for _ in range(4)]
+        assert [(m.arbitration_id, bytes(m.data)) for m in got] == [(0x205, rpdo.data), (0x080, b"")] * 2
+    finally:
+        tx.shutdown()
+        rx.shutdown()

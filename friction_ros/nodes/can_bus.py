@@ -30,6 +30,35 @@ CAN_ERR_BUSOFF = 0x40  # SocketCAN error class bit in the id of an error frame
 RX_BATCH_MAX = 256  # frames read per period at most (a 1 Mbit/s bus carries ~8 per ms)
 
 
+class FrameMessages:
+    """The python-can Message of each Frame to send. A frame without payload (CiA 402 SYNC, an RTR
+    request) is a constant: its Message is built once and reused, which is safe because python-can
+    interfaces serialise a message in ``send`` (SocketCAN packs it, ``virtual`` deep-copies it,
+    ``friction_local`` packs it) and nothing here changes one after building it."""
+
+    def __init__(self) -> None:
+        self._constant: dict[Frame, can.Message] = {}
+
+    def message(self, f: Frame) -> can.Message:
+        if f.data:
+            return can.Message(
+                arbitration_id=f.arbitration_id,
+                data=f.data,
+                is_extended_id=f.is_extended,
+                is_remote_frame=f.is_remote,
+                dlc=f.dlc,  # None: len(data)
+            )
+        msg = self._constant.get(f)
+        if msg is None:
+            msg = self._constant[f] = can.Message(
+                arbitration_id=f.arbitration_id,
+                is_extended_id=f.is_extended,
+                is_remote_frame=f.is_remote,
+                dlc=f.length,
+            )
+        return msg
+
+
 def bus_filters(axes: list[DriveAxis]) -> list[dict]:
     """Kernel receive filters for every drive on the bus (each filter once), from their protocols."""
     out: list[dict] = []
@@ -76,6 +105,7 @@ class CanBusLink:
         self.dead_since: float | None = None
         self._consecutive_send_errors = 0
         self._lock = threading.Lock()
+        self._message = FrameMessages().message
         self.bus = open_bus(interface, channel, bitrate, self.filters)
         self._rx_ok = True  # False after a read failure until the bus is reopened
         self._rx_prev = time.monotonic()  # start of the previous drain (lower bound of receive times)
@@ -88,24 +118,19 @@ class CanBusLink:
     def send(self, frames: list[Frame]) -> bool:
         """Send ``frames``; False if any failed (counted; too many in a row: the bus is dead)."""
         ok = True
-        for f in frames:
-            msg = can.Message(
-                arbitration_id=f.arbitration_id,
-                data=f.data,
-                is_extended_id=f.is_extended,
-                is_remote_frame=f.is_remote,
-                dlc=f.length,
-            )
-            try:
-                with self._lock:
-                    self.bus.send(msg, timeout=0.001)
-                self._consecutive_send_errors = 0
-            except Exception as exc:  # can.CanError, OSError (ENOBUFS), closed bus ...
-                ok = False
-                self.send_errors += 1
-                self._consecutive_send_errors += 1
-                if self._consecutive_send_errors >= self.error_limit:
-                    self.dead(f"{self._consecutive_send_errors} consecutive send failures: {exc}")
+        message = self._message
+        with self._lock:  # once per batch (the bus is replaced only under it)
+            send = self.bus.send
+            for f in frames:
+                try:
+                    send(message(f), timeout=0.001)
+                    self._consecutive_send_errors = 0
+                except Exception as exc:  # can.CanError, OSError (ENOBUFS), closed bus ...
+                    ok = False
+                    self.send_errors += 1
+                    self._consecutive_send_errors += 1
+                    if self._consecutive_send_errors >= self.error_limit:
+                        self.dead(f"{self._consecutive_send_errors} consecutive send failures: {exc}")
         return ok
 
     def send_final(self, frames: list[Frame], attempts: int = 3) -> bool:

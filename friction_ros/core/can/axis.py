@@ -28,17 +28,18 @@ restart by itself (no automatic restart after a communication loss, as in EN 602
 CiA 402 fault reset), even when its telemetry comes back. Disabling means the protocol's
 ``disable_frames`` (zero torque, then IDLE on ODrive, exit motor mode on MIT). Every fault is logged once when
 it starts and once when it clears (or is reset) through :class:`~friction_ros.core.can.faults.FaultLog`:
-:meth:`DriveAxis.cycle` returns the lines as ``events``.
+:meth:`DriveAxis.cycle` returns the lines as ``events``. The receive side (frames -> telemetry, with
+the fast paths of the per-period telemetry frames) is :mod:`~friction_ros.core.can.axis_rx`.
 """
 
 from __future__ import annotations
 
 import math
-import struct
 import threading
 
 from friction_ros.core.can.axis_config import AxisConfig
 from friction_ros.core.can.axis_records import AxisCounters, CycleResult, JointSample, Telemetry
+from friction_ros.core.can.axis_rx import AxisReceiver
 from friction_ros.core.can.faults import (
     DISABLE_ACTION,
     FAULT_BUS,
@@ -53,14 +54,12 @@ from friction_ros.core.can.faults import (
     FaultEvent,
     FaultLog,
 )
-from friction_ros.core.can.frame import DecodeStats, Frame
-from friction_ros.core.can.protocol import MOTION_PAIR, DriveProtocol, DriveTelemetry, drive_protocol
+from friction_ros.core.can.frame import Frame
+from friction_ros.core.can.protocol import DriveProtocol, drive_protocol
 from friction_ros.core.can.telemetry_gate import TelemetryGate
 
-_F2 = struct.Struct("<ff")
 
-
-class DriveAxis:
+class DriveAxis(AxisReceiver):
     """One axis: decode telemetry, supervise, produce command frames. Thread-safe."""
 
     ERROR_GRACE_S = 0.05  # error reports sent before the drive processed Clear_Errors are ignored
@@ -96,13 +95,7 @@ class DriveAxis:
         self.faults = FaultLog(
             {b: n for b, n in FAULT_NAMES.items() if b != FAULT_COMMAND_REJECTED}, FAULT_HOLD
         )  # rejected commands are logged one by one (rate-limited) by the adapter
-        # Fast path of the two telemetry frames of every period (e.g. ODrive encoder estimates + Iq):
-        # one dict lookup by arbitration id and one unpack instead of a report object. Same checks and
-        # counters as the general path; anything else takes it (the protocol's decode).
-        self._fast: dict[int, int] = self.protocol.float_pairs()
-        self._channel = self.protocol.gated_ids()
-        self._reports_state = self.protocol.reports_state
-        self._decode = self.protocol.decode  # bound once: the per-frame and per-period calls
+        self._bind_receive()  # receive side (axis_rx): fast paths of the telemetry of every period
         self._torque_frame = self.protocol.torque_frame
         self._poll_frames = self.protocol.poll_frames
         proto_cls = type(self.protocol)
@@ -122,102 +115,10 @@ class DriveAxis:
             self.decoder = self.protocol.decoder
         self.protocol.reconfigure(config)
         self._cfg, self.conv = config, config.conversion
-        self.gate.limits, c = config.plausibility(), self.conv
-        self._scale = self.protocol.motion_scale  # motor rad per wire unit (fast path)
-        self._turn = c.direction * self._scale / c.ratio  # joint units per wire unit
-        self._amp = c.direction * c.torque_constant * c.ratio  # joint effort per A
-        self._effort_current = self.protocol.effort_source == "current"
-
-    def _admit(self, r: DriveTelemetry, t: float) -> bool:
-        """Pass a decoded report through the telemetry gate (lock held): position with torque as one
-        reading, position alone as motion, current or torque as effort."""
-        c, gate = self.conv, self.gate
-        if r.position is not None:
-            q, v = c.joint_position(r.position), c.joint_velocity(r.velocity)
-            if r.torque is not None:
-                return gate.reading(q, v, c.joint_torque(r.torque), t)
-            return gate.motion(q, v, t)
-        if r.current is not None:
-            a = c.joint_torque_from_current(r.current)
-            if r.current_setpoint is None:
-                return gate.effort(t, a)
-            return gate.effort(t, c.joint_torque_from_current(r.current_setpoint), a)
-        if r.torque is not None:
-            a = c.joint_torque(r.torque)
-            return gate.effort(t, a if r.torque_target is None else c.joint_torque(r.torque_target), a)
-        return True
+        self.gate.limits = config.plausibility()
+        self._bind_conversion()
 
     # ---- inputs ------------------------------------------------------------------------------------
-    @property
-    def decode_stats(self) -> DecodeStats:
-        return self.decoder.stats
-
-    def on_frame(
-        self, arb_id: int, data: bytes, is_remote: bool, is_extended: bool, is_error: bool, t: float
-    ):
-        """Feed one received frame (control or reader thread). ``t`` is the receive time."""
-        kind = self._fast.get(arb_id)
-        if kind is not None and len(data) == 8 and not (is_remote or is_extended or is_error):
-            a, b = _F2.unpack_from(data)
-            if a - a == 0.0 and b - b == 0.0:  # both finite (inf - inf and NaN - NaN are NaN)
-                tel, c = self.telemetry, self.counters
-                with self._lock:
-                    self.decoder.stats.decoded += 1
-                    c.frames_rx += 1
-                    if kind == MOTION_PAIR:
-                        k = self._turn
-                        q = a * k - self.conv.zero_offset
-                        if not self.gate.motion(q, b * k, t):
-                            return
-                        s = self._scale
-                        tel.motor_position, tel.motor_velocity = a * s, b * s
-                        tel.encoder_time = t
-                        c.encoder_frames += 1
-                    else:
-                        if not self.gate.effort(t, a * self._amp, b * self._amp):
-                            return
-                        tel.current_setpoint, tel.current_measured, tel.iq_time = a, b, t
-                        if self._effort_current:
-                            c.effort_frames += 1
-                return
-        rejected = self.decoder.stats.rejected
-        r = self._decode(arb_id, data, is_remote, is_extended, is_error)
-        if r is None:
-            channel = self._channel.get(arb_id)
-            if channel is not None and self.decoder.stats.rejected > rejected:
-                with self._lock:
-                    self.gate.undecodable(channel, self.decoder.stats.last_reject_reason, t)
-            return
-        tel, c = self.telemetry, self.counters
-        with self._lock:
-            c.frames_rx += 1
-            if not self._admit(r, t):
-                return
-            if r.position is not None:
-                tel.motor_position, tel.motor_velocity, tel.encoder_time = r.position, r.velocity, t
-                c.encoder_frames += 1
-            if r.current is not None:
-                if r.current_setpoint is not None:
-                    tel.current_setpoint = r.current_setpoint
-                tel.current_measured, tel.iq_time = r.current, t
-                if self._effort_current:
-                    c.effort_frames += 1
-            if r.torque is not None:
-                if r.torque_target is not None:
-                    tel.torque_target = r.torque_target
-                tel.torque_estimate, tel.torque_time = r.torque, t
-                if not self._effort_current:
-                    c.effort_frames += 1
-            if r.state is not None:
-                tel.axis_state, tel.heartbeat_time = r.state, t
-                c.heartbeat_frames += 1
-            elif not self._reports_state:
-                tel.axis_state = 1 if self.enabled else 0
-            if r.error is not None and t >= self._ignore_errors_until:
-                tel.axis_error = r.error
-            if r.bus_voltage is not None:
-                tel.bus_voltage = r.bus_voltage
-
     def set_command(self, joint_torque: float, t: float) -> bool:
         """Store a joint torque command [N*m]. NaN/inf -> rejected (zero torque), returns False."""
         with self._lock:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import importlib
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from importlib import metadata
 from typing import TYPE_CHECKING, Any, NamedTuple
 
@@ -41,6 +41,8 @@ BUILTIN = {
 }
 MOTION_PAIR = 0  # float_pairs(): (position, velocity) x motion_scale -> motor rad, rad/s
 CURRENT_PAIR = 1  # float_pairs(): (current setpoint, measured) [A]
+MOTION_REPORT = 2  # fast_reports(): (position, velocity, current) motor rad, rad/s, A
+EFFORT_REPORT = 3  # fast_reports(): (torque [N*m], state, error)
 
 
 class DriveTelemetry(NamedTuple):
@@ -120,6 +122,14 @@ class DriveProtocol:
     def float_pairs(self) -> dict[int, int]:
         """Hot path: ids whose payload is two little-endian float32, ``MOTION_PAIR`` (x
         :attr:`motion_scale`) or ``CURRENT_PAIR`` (A); DriveAxis decodes these inline."""
+        return {}
+
+    def fast_reports(self) -> dict[int, tuple[int, Callable[[bytes], tuple | None]]]:
+        """Hot path of other telemetry frames of every period: id -> (``MOTION_REPORT`` or
+        ``EFFORT_REPORT``, handler). ``handler(data)`` (never called for RTR, extended or error
+        frames) decodes a frame as :meth:`decode` would, without counting it, and returns the report
+        as that plain tuple (motor side, SI); or returns None, untouched, to leave the frame to
+        :meth:`decode`. DriveAxis stores the tuple as it stores the same DriveTelemetry."""
         return {}
 
     def route_key(self, arb_id: int, data: bytes) -> int | None:

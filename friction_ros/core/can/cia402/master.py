@@ -14,6 +14,15 @@ voltage: an EMCY (its error code text), the statusword fault bit, a missing hear
 time :attr:`Cia402Config.consumer_timeout`), the drive leaving OPERATIONAL, no TPDO1 for
 ``telemetry_timeout``, a state transition not done within ``state_timeout``, an SDO abort/timeout.
 ``enable()`` clears the latch and walks the drive to OPERATION ENABLED (fault reset first).
+
+The cyclic path is hand-made for speed (the ``canopen`` library stays for start-up, EDS and the
+conformance tests): :meth:`effort_report` / :meth:`motion_report` unpack TPDO1 / TPDO2 with pre-built
+structs and the unit factors folded into four constants (``Cia402Scaling.factors``), allocate no
+object per frame and are called directly by DriveAxis' fast path; :meth:`step` only supervises when
+there is something to check. Measured reason (``bench/can_decode.py``: drive_interface's CAN work
+per 1 kHz period, CPU us per axis, 1 / 3 axes): 17.4 / 16.6 through the general decoder (a report
+object and a telemetry tuple per TPDO, supervision every period) -> 12.2 / 11.9; ODrive CANSimple
+10.2 / 10.1 (its float fast path), MIT 13.5 / 13.4.
 """
 
 from __future__ import annotations
@@ -26,6 +35,7 @@ from friction_ros.core.can.cia402.config import Cia402Config, eds_defaults
 from friction_ros.core.can.cia402.sdo_script import SdoScript, SdoStep
 from friction_ros.core.can.cia402.state_machine import (
     CW_DISABLE_VOLTAGE,
+    CW_ENABLE_OPERATION,
     STATE_NAMES,
     State,
     master_controlword,
@@ -39,6 +49,7 @@ _RPDO1 = fr.RPDO1.pack
 _TPDO1 = fr.TPDO1.unpack_from
 _TPDO2 = fr.TPDO2.unpack_from
 _HALF, _MASK = 1 << 31, (1 << 32) - 1
+_ENABLED, _QUICK_STOP = State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE
 _UNIT_OBJECTS = {  # parameter -> objects read from the drive when neither parameter nor EDS gives it
     "counts_per_rev": ((ob.OD_ENCODER_RESOLUTION, 1), (ob.OD_ENCODER_RESOLUTION, 2)),
     "gear_ratio": ((ob.OD_GEAR_RATIO, 1), (ob.OD_GEAR_RATIO, 2)),
@@ -89,10 +100,12 @@ class Cia402Master:
         if cfg.eds_path:
             for k, v in eds_defaults(cfg.eds_path).items():
                 self.units.setdefault(k, v)
-        self.scaling: Cia402Scaling | None = None
+        self.scaling = None  # Cia402Scaling once the units are known
         self.sdo: SdoScript | None = None
         self.statusword = 0
         self.state = State.UNKNOWN
+        self._state_code = int(State.UNKNOWN)
+        self.now = 0.0  # time of the current period (the driver sets it; TPDOs are stamped with it)
         self.target = State.SWITCH_ON_DISABLED
         self.controlword = CW_DISABLE_VOLTAGE
         self.torque_permille = 0
@@ -103,7 +116,7 @@ class Cia402Master:
         self._fault_from_statusword = False  # an EMCY arriving just after replaces the text
         self.emcy_log: list[tuple[float, fr.EmcyMessage]] = []
         self.nmt_state: int | None = None  # from the heartbeat
-        self.telemetry: Cia402Telemetry | None = None
+        self._pos = 0.0
         self._tau = 0.0
         self._vel = 0.0
         self._cur = 0.0
@@ -114,7 +127,35 @@ class Cia402Master:
         self.tpdo1_count = 0
         self._counts = 0  # position actual unwrapped across int32 overflow (multi-turn joints)
         self._last_counts: int | None = None
+        self._consumer_timeout = cfg.consumer_timeout
         self.control_period = 1e-3  # set by the network; sizes the automatic stale timeout
+
+    @property
+    def scaling(self) -> Cia402Scaling | None:
+        return self._scaling
+
+    @scaling.setter
+    def scaling(self, sc: Cia402Scaling | None) -> None:
+        self._scaling = sc
+        self._k_pos, self._zero, self._k_tau, self._k_cur = sc.factors() if sc else (0.0,) * 4
+
+    @property
+    def control_period(self) -> float:
+        return self._control_period
+
+    @control_period.setter
+    def control_period(self, period: float) -> None:
+        self._control_period = period
+        self._stale_after = self.cfg.stale_after(period)
+
+    @property
+    def telemetry(self) -> Cia402Telemetry | None:
+        """The newest reports (None before the first TPDO1): TPDO1's and the newest TPDO2's."""
+        if not self.tpdo1_count:
+            return None
+        return Cia402Telemetry(
+            self._t_tpdo1, self._pos, self._vel, self._tau, self._cur, self.statusword, self.state
+        )
 
     # ---- commands -------------------------------------------------------------------------------------
     def start(self, t: float) -> list[Frame]:
@@ -140,15 +181,25 @@ class Cia402Master:
 
     def set_torque(self, joint_torque: float) -> None:
         """Joint torque [N*m or N] for the next RPDO, clamped to the configured max torque."""
-        if self.scaling is None:
+        if self._scaling is None:
             return
-        p = self.scaling.torque_permille(joint_torque)
-        m = self.max_permille
-        self.torque_permille = m if p > m else -m if p < -m else p
+        p = round(joint_torque / self._k_tau)  # Cia402Scaling.torque_permille, with the int16 and
+        lo, hi = self._p_range  # max torque bounds in one clamp
+        self.torque_permille = lo if p < lo else hi if p > hi else p
+
+    @property
+    def max_permille(self) -> int:
+        """Max torque 0x6072 [per mille of the rated torque]; commands are clamped to it."""
+        return self._max_permille
+
+    @max_permille.setter
+    def max_permille(self, m: int) -> None:
+        self._max_permille = m
+        self._p_range = (max(-m, fr.I16_MIN), min(m, fr.I16_MAX))
 
     @property
     def stale_after(self) -> float:
-        return self.cfg.stale_after(self.control_period)
+        return self._stale_after
 
     @property
     def enabled(self) -> bool:
@@ -167,8 +218,19 @@ class Cia402Master:
         configuring. The period's RPDO is :meth:`rpdo_frame` (separate for drivers that send the
         command themselves)."""
         if self.phase == "operational":
-            self._supervise(t)
-            self.controlword = master_controlword(self.state, self.target, self.controlword)
+            state, target = self.state, self.target
+            if (  # anything for _supervise to check or do (else, every period: hold the state)
+                state != target
+                or target == _QUICK_STOP
+                or t - self._t_tpdo1 > self._stale_after
+                or t - self._t_heartbeat > self._consumer_timeout
+            ):
+                self._supervise(t)
+                state, target = self.state, self.target
+            if state == target == _ENABLED:
+                self.controlword = CW_ENABLE_OPERATION
+            else:
+                self.controlword = master_controlword(state, target, self.controlword)
             return []
         if self.phase in ("units", "configure"):
             return self._configure(t)
@@ -191,25 +253,38 @@ class Cia402Master:
             [fr.nmt(ob.NMT_PRE_OPERATIONAL, self.node_id)],
         ]
 
+    def effort_report(self, data: bytes) -> tuple[float, int, int] | None:
+        """TPDO1 at :attr:`now`: statusword (state machine), torque, position (unwrapped across int32);
+        returns (torque, state, fault code), or None (nothing done) when short or before the units."""
+        if len(data) < 8 or self._scaling is None:
+            return None
+        sw, tq, pos = _TPDO1(data)
+        t = self._t_tpdo1 = self.now
+        self.tpdo1_count += 1
+        if sw != self.statusword:
+            self._on_statusword(sw, t)
+        self._tau = tau = self._k_tau * tq
+        last = self._last_counts
+        self._counts = c = pos if last is None else self._counts + ((pos - last + _HALF) & _MASK) - _HALF
+        self._last_counts = pos
+        self._pos = self._k_pos * c - self._zero
+        return tau, self._state_code, self.fault_code
+
+    def motion_report(self, data: bytes) -> tuple[float, float, float] | None:
+        """TPDO2: velocity, current; returns (position of the TPDO1 before, velocity, current), or
+        None when short or before the units (nothing done) or before the first TPDO1."""
+        if len(data) < 6 or self._scaling is None:
+            return None
+        vel, cur = _TPDO2(data)
+        self._vel, self._cur = self._k_pos * vel, self._k_cur * cur
+        return (self._pos, self._vel, self._cur) if self.tpdo1_count else None
+
     def handle(self, cob: int, data: bytes, t: float) -> None:
         if cob == self.cob_tpdo1:
-            sw, tq, pos = _TPDO1(data)
-            self._t_tpdo1 = t
-            self.tpdo1_count += 1
-            sc = self.scaling
-            if sw != self.statusword:
-                self._on_statusword(sw, t)
-            self._tau = sc.joint_torque(tq)
-            last = self._last_counts
-            self._counts = pos if last is None else self._counts + ((pos - last + _HALF) & _MASK) - _HALF
-            self._last_counts = pos
-            self.telemetry = Cia402Telemetry(
-                t, sc.joint_position(self._counts), self._vel, self._tau, self._cur, sw, self.state
-            )
+            self.now = t
+            self.effort_report(data)
         elif cob == self.cob_tpdo2:
-            vel, cur = _TPDO2(data)
-            sc = self.scaling
-            self._vel, self._cur = sc.joint_velocity(vel), sc.current(cur)
+            self.motion_report(data)
         elif cob == self.cob_heartbeat:
             self._t_heartbeat = t
             state = data[0] & 0x7F if data else -1
@@ -254,7 +329,7 @@ class Cia402Master:
         self.statusword = sw
         state = state_from_statusword(sw)
         if state != self.state:
-            self.state = state
+            self.state, self._state_code = state, int(state)
             self._t_state = t
             if (
                 state in (State.FAULT, State.FAULT_REACTION_ACTIVE)
@@ -268,18 +343,18 @@ class Cia402Master:
 
     def _supervise(self, t: float) -> None:
         cfg = self.cfg
-        if t - self._t_heartbeat > cfg.consumer_timeout:
+        if t - self._t_heartbeat > self._consumer_timeout:
             self._t_heartbeat = t  # one report per missing episode
             self._latch(
-                f"heartbeat of drive node {self.node_id} missing for more than {cfg.consumer_timeout * 1e3:.0f} ms",
+                f"heartbeat of drive node {self.node_id} missing for more than {self._consumer_timeout * 1e3:.0f} ms",
                 t,
                 ob.ERROR_HEARTBEAT,
             )
-        if t - self._t_tpdo1 > self.stale_after:
+        if t - self._t_tpdo1 > self._stale_after:
             self._t_tpdo1 = t
             self._latch(
                 f"telemetry of drive node {self.node_id} stale: no TPDO1 for more than "
-                f"{self.stale_after * 1e3:.0f} ms",
+                f"{self._stale_after * 1e3:.0f} ms",
                 t,
                 ob.ERROR_COMMUNICATION,
             )

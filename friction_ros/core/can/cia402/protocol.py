@@ -32,7 +32,7 @@ from friction_ros.core.can.cia402.state_machine import (
     State,
 )
 from friction_ros.core.can.frame import Frame, SafeDecoder
-from friction_ros.core.can.protocol import DriveProtocol, DriveTelemetry
+from friction_ros.core.can.protocol import EFFORT_REPORT, MOTION_REPORT, DriveProtocol, DriveTelemetry
 from friction_ros.core.can.telemetry_gate import EFFORT, MOTION
 from friction_ros.core.validation import check_int
 
@@ -61,8 +61,9 @@ class _SyncGroup:
 
     def due(self, t: float, key: int, operational: bool) -> bool:
         if t != self.t:
-            self.t, self.prev, self.cur, self.sent = t, self.cur, set(), False
-        self.cur.add(key)
+            self.t, self.prev, self.cur, self.sent = t, self.cur, {key}, False
+        else:
+            self.cur.add(key)
         if self.sent or not operational or not self.cur >= self.prev:
             return False
         self.sent = True
@@ -97,14 +98,11 @@ class Cia402Decoder(SafeDecoder):
             self.stats.ignored += 1  # PDOs before our start-up finished (units not known yet)
             return None
         self.stats.decoded += 1
-        m.handle(arb_id, data, self.p.t)
-        tel = m.telemetry
+        m.handle(arb_id, data, m.now)
         if arb_id == m.cob_tpdo1:
-            return DriveTelemetry(
-                None, None, tel.torque, None, None, None, None, m.fault_code, int(tel.state)
-            )
-        if arb_id == m.cob_tpdo2 and tel is not None:
-            return DriveTelemetry(tel.position, m._vel, None, None, m._cur)
+            return DriveTelemetry(None, None, m._tau, None, None, None, None, m.fault_code, m._state_code)
+        if arb_id == m.cob_tpdo2 and m.tpdo1_count:
+            return DriveTelemetry(m._pos, m._vel, None, None, m._cur)
         if arb_id == m.cob_emcy and m.fault_code:
             return DriveTelemetry(error=m.fault_code)
         return None
@@ -122,7 +120,17 @@ class Cia402Protocol(DriveProtocol):
         self.master = Cia402Master(mcfg)
         self.master.control_period = cfg.telemetry_period
         self.decoder = Cia402Decoder(self)
-        self.t = time.monotonic()  # time of the current period (receive times are not passed to decode)
+        self.t = time.monotonic()
+        self._key = id(self)  # in the SYNC group
+
+    @property
+    def t(self) -> float:
+        """Time of the current period, the master's ``now`` (receive times are not passed to decode)."""
+        return self.master.now
+
+    @t.setter
+    def t(self, t: float) -> None:
+        self.master.now = t
 
     @classmethod
     def check_config(cls, cfg) -> None:
@@ -136,6 +144,10 @@ class Cia402Protocol(DriveProtocol):
 
     def gated_ids(self) -> dict[int, str]:
         return {self.master.cob_tpdo2: MOTION, self.master.cob_tpdo1: EFFORT}
+
+    def fast_reports(self):
+        m = self.master
+        return {m.cob_tpdo1: (EFFORT_REPORT, m.effort_report), m.cob_tpdo2: (MOTION_REPORT, m.motion_report)}
 
     def route_key(self, arb_id: int, data: bytes) -> int | None:
         return arb_id & 0x7F if arb_id >= 0x100 else None  # not NMT (0x000), SYNC (0x080)
@@ -183,9 +195,10 @@ class Cia402Protocol(DriveProtocol):
         return [self.master.rpdo_frame()]
 
     def cycle_frames(self, t: float) -> list[Frame]:
-        self.t = t
-        out = self.master.step(t)
-        if SYNC_GROUP.due(t, id(self), self.master.phase == "operational"):
+        m = self.master
+        m.now = t
+        out = m.step(t)
+        if SYNC_GROUP.due(t, self._key, m.phase == "operational"):
             out.append(fr.SYNC_FRAME)
         return out
 

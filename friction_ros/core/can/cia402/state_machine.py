@@ -84,6 +84,8 @@ def master_controlword(state: State, target: State, last_cw: int = 0) -> int:
     In FAULT the fault-reset bit alternates with 0 so that every second period is a rising edge
     (transition 15); states the drive leaves on its own get ``last_cw`` without the reset bit.
     """
+    if state == target == State.OPERATION_ENABLED:
+        return CW_ENABLE_OPERATION  # the every-period case first
     if state == State.FAULT:
         if target == State.OPERATION_ENABLED:
             return CW_DISABLE_VOLTAGE if last_cw & CW_FAULT_RESET else CW_FAULT_RESET
@@ -96,14 +98,16 @@ def master_controlword(state: State, target: State, last_cw: int = 0) -> int:
         if state in (State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE):
             return CW_QUICK_STOP
         return CW_DISABLE_VOLTAGE
-    # target OPERATION ENABLED
-    return {
-        State.SWITCH_ON_DISABLED: CW_SHUTDOWN,  # transition 2
-        State.READY_TO_SWITCH_ON: CW_SWITCH_ON,  # 3
-        State.SWITCHED_ON: CW_ENABLE_OPERATION,  # 4
-        State.OPERATION_ENABLED: CW_ENABLE_OPERATION,  # hold
-        State.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,  # 12, then up again from SWITCH ON DISABLED
-    }[state]
+    return _UP[state]  # target OPERATION ENABLED
+
+
+_UP = {  # controlword towards OPERATION ENABLED, per state
+    State.SWITCH_ON_DISABLED: CW_SHUTDOWN,  # transition 2
+    State.READY_TO_SWITCH_ON: CW_SWITCH_ON,  # 3
+    State.SWITCHED_ON: CW_ENABLE_OPERATION,  # 4
+    State.OPERATION_ENABLED: CW_ENABLE_OPERATION,  # hold
+    State.QUICK_STOP_ACTIVE: CW_DISABLE_VOLTAGE,  # 12, then up again from SWITCH ON DISABLED
+}
 
 
 class DriveStateMachine:

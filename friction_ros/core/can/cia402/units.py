@@ -41,6 +41,11 @@ class Cia402Scaling:
         object.__setattr__(self, "_k_tau", c.joint_torque(self.rated_torque / 1000.0))
         object.__setattr__(self, "_k_cur", self.rated_current / 1000.0)
 
+    def factors(self) -> tuple[float, float, float, float]:
+        """(k_pos, zero_offset, k_tau, k_cur): q = k_pos * counts - zero_offset, dq = k_pos *
+        counts_per_s, tau = k_tau * permille, i = k_cur * permille (the cyclic PDO path inlines them)."""
+        return self._k_pos, self.conversion.zero_offset, self._k_tau, self._k_cur
+
     # drive -> joint
     def joint_position(self, counts: int) -> float:
         return self._k_pos * counts - self.conversion.zero_offset
