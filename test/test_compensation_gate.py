@@ -54,7 +54,7 @@ def _gate(model, gains, scale, reference=None, **kw):
 @pytest.fixture
 def unbounded(monkeypatch):
     """The controller as it was before the feedback-path bound (the bound is a no-op)."""
-    monkeypatch.setattr(FrictionCompensator, "bound_feedback", lambda self, kp, kd: "")
+    monkeypatch.setattr(FrictionCompensator, "_apply_bound", lambda self, kp, kd: "")
 
 
 def _summary(v):

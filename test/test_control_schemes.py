@@ -54,7 +54,7 @@ def test_describing_function_linear_spring():
 
 
 def test_dnpf_law_seed003():
-    d = DNPF({"q_h": 0.004, "tau_st": 0.95, "epsilon": 0.05, "kd": 0.0})
+    d = DNPF.from_dict({"q_h": 0.004, "tau_st": 0.95, "epsilon": 0.05, "kd": 0.0})
     assert d.kp == pytest.approx(250.0)  # continuous at |e| = Q_h
     assert d.proportional(0.001) == pytest.approx(1.0)  # constant tau_st + eps inside Q_h
     assert d.proportional(-1e-6) == pytest.approx(-1.0)
@@ -64,7 +64,7 @@ def test_dnpf_law_seed003():
 
 
 def test_gain_scheduling_stiffness_schedule_switches_and_raises_gains():
-    gs = GainScheduling({"model": GMS, "dwell": 0.0, "schedule": "stiffness"})
+    gs = GainScheduling.from_dict({"model": GMS, "dwell": 0.0, "schedule": "stiffness"})
     ref = (0.4, 0.0, 0.0)
     out = gs.compute(0.01, 0.0, ref, (0.39, 0.5), 1e-3)
     assert gs.mode == 1 and out.friction_feedback == pytest.approx(0.8)
@@ -80,7 +80,7 @@ def test_gain_scheduling_stiffness_schedule_switches_and_raises_gains():
 
 def test_gain_scheduling_bias_schedule_holds_the_describing_function_torque():
     """bias schedule: u_b += (kp + k_e(A)) e at each standstill, kd2 = kd - c_e(A); reset on leaving."""
-    gs = GainScheduling({"model": GMS, "dwell": 0.0, "kd": 0.4})
+    gs = GainScheduling.from_dict({"model": GMS, "dwell": 0.0, "kd": 0.4})
     ref = (0.4, 0.0, 0.0)
     e = 0.001
     out = gs.compute(e, 0.0, ref, (0.4 - e, 0.0), 1e-3)
@@ -98,14 +98,14 @@ def test_gain_scheduling_bias_schedule_holds_the_describing_function_torque():
     gs.compute(-2e-4, 0.0, (0.4, 0.5, 0.0), (0.4002, 0.0), 1e-3)  # the reference moves -> mode 1
     assert gs.mode == 1 and gs.bias == 0.0
     with pytest.raises(ParameterError, match="schedule.*bias, stiffness"):
-        GainScheduling({"model": GMS, "schedule": "integral"})
+        GainScheduling.from_dict({"model": GMS, "schedule": "integral"})
 
 
 def test_sliding_mode_and_relay():
-    s = SlidingMode({"lambda": 10.0, "gain": 2.0})
+    s = SlidingMode.from_dict({"lambda": 10.0, "gain": 2.0})
     assert s.compute(0.01, 0.0, (0, 0, 0), (0, 0), 1e-3).friction_feedback == 2.0
     assert s.compute(-0.01, 0.05, (0, 0, 0), (0, 0), 1e-3).friction_feedback == -2.0 + 4.0 * 0  # S = -0.05
-    b = SlidingMode({"lambda": 10.0, "gain": 2.0, "boundary_layer": 0.2})
+    b = SlidingMode.from_dict({"lambda": 10.0, "gain": 2.0, "boundary_layer": 0.2})
     assert b.compute(0.01, 0.0, (0, 0, 0), (0, 0), 1e-3).friction_feedback == pytest.approx(1.0)
     # Chatterjee et al. 2017 A-T7
     assert list(seed000_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]

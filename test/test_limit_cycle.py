@@ -36,7 +36,7 @@ COUNT = 2.0 * math.pi / 60000.0  # abb_m19s: 20000 cpr at the motor x encoder_ra
 @pytest.fixture
 def unbounded(monkeypatch):
     """The controller as it was before the feedback-path bound (the bound is a no-op)."""
-    monkeypatch.setattr(FrictionCompensator, "bound_feedback", lambda self, kp, kd: "")
+    monkeypatch.setattr(FrictionCompensator, "_apply_bound", lambda self, kp, kd: "")
 
 
 def _run(model, source, gains=SEED003_PD, ref=REF, duration=10.0, detect=True):

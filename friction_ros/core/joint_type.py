@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from friction_ros.core.config import Field, Schema
-from friction_ros.core.validation import ParameterError, check_choice
+from friction_ros.core.validation import ParameterError
 
 JOINT_TYPES = ("revolute", "prismatic")
 DEFAULT_JOINT_TYPE = "revolute"
@@ -57,9 +57,9 @@ QUANTITY_UNITS = {
 
 def check_joint_type(value: Any, name: str = "joint_type") -> str:
     """``value`` if it is a joint type, else a one-line ParameterError naming the allowed values."""
-    if not isinstance(value, str):
+    if not (isinstance(value, str) and value in JOINT_TYPES):
         raise ParameterError(f"{name} = {value!r} is not allowed: must be one of {', '.join(JOINT_TYPES)}")
-    return check_choice(name, value, JOINT_TYPES)
+    return value
 
 
 def joint_unit(unit: str, joint_type: str = DEFAULT_JOINT_TYPE) -> str:

@@ -115,11 +115,11 @@ def build_model(model: Any, name: str = "friction.model", path: str = ""):
 
 
 def model_of(section: TypedConfig):
-    """The library model of a typed ``friction`` section (``model`` + its coefficients; None for
-    ``none``): the coefficients are handed to the model as keywords, messages name ``section.path()``."""
-    if section.model in ("", "none"):
-        return None
-    return build_model(section.as_dict(), section.path("model"), section.path())
+    """:func:`friction_ros.core.friction.registry.model_from_section` (the library model of a typed
+    ``friction`` section; None for ``none``), imported on first use like :func:`build_model`."""
+    from friction_ros.core.friction.registry import model_from_section
+
+    return model_from_section(section)
 
 
 def smoothed_static(model, v: float, smoothing: str, v_eps: float) -> float:
@@ -177,10 +177,15 @@ class FrictionCompensator:
         self._setup(settings, build_model(given.get("model"), f"{prefix}.model", model_path), model_path)
 
     @classmethod
-    def from_config(cls, settings: TypedConfig, model, model_path: str = "") -> FrictionCompensator:
+    def from_config(
+        cls, settings: TypedConfig, model, model_path: str = "", loop_gains: tuple[float, float] | None = None
+    ) -> FrictionCompensator:
         """From a typed ``compensation`` section (:data:`COMPENSATION_SCHEMA`), as it is, and the
-        library model (None: no compensation)."""
+        library model (None: no compensation); ``loop_gains`` (K_p, K_d): the feedback path is
+        bounded from the start (:meth:`bound_feedback`)."""
         self = cls.__new__(cls)
+        if loop_gains is not None:
+            self._loop_gains = (float(loop_gains[0]), float(loop_gains[1]))
         self._setup(settings, model, model_path)
         return self
 

@@ -170,18 +170,20 @@ class CompensatingController:
             )
         pid = Pid.from_config(c.pid)
         model = model_of(c.friction)
-        friction = FrictionCompensator.from_config(c.compensation, model, at("friction"))
-        load = JointLoad.from_section(c.load)
-        residual = LearnedResidual.from_section(c.residual)
         scheme = None
         if mode == "dnpf":
             scheme = DNPF(c.dnpf)
         elif mode == "gain_scheduling":
-            scheme = GainScheduling(c.gain_scheduling, friction.model)
+            scheme = GainScheduling(c.gain_scheduling, model)
         elif mode == "cascade":
             scheme = Cascade(c.cascade)
         elif mode == "sliding_mode":
             scheme = SlidingMode(c.sliding_mode)
+        # stability bound of the feedback path against the loop's linear gains (loop_gains)
+        kp, kd = loop_gains(mode, pid, scheme)
+        friction = FrictionCompensator.from_config(c.compensation, model, at("friction"), (kp, kd))
+        load = JointLoad.from_section(c.load)
+        residual = LearnedResidual.from_section(c.residual)
         # everything validated: commit
         self._config = c
         self.mode = mode
@@ -214,9 +216,8 @@ class CompensatingController:
         if not hasattr(self, "compensation_enabled"):
             self.compensation_enabled = True  # kept across a rebuild (a parameter change)
         self.terms = ControllerTerms(mode=mode)
-        # stability bound of the feedback path against the loop's linear gains (loop_gains)
-        self.loop_stiffness, self.loop_damping = loop_gains(mode, pid, scheme)
-        self.feedback_bound_note = friction.bound_feedback(self.loop_stiffness, self.loop_damping)
+        self.loop_stiffness, self.loop_damping = kp, kd
+        self.feedback_bound_note = friction.bound_note
         # only a feedback path puts the compensation inside the loop: a feedforward term is a function
         # of the reference and cannot make the loop oscillate by itself (so it is not watched for limit
         # cycles); the load's friction part fed back from the measured velocity and the learned residual,

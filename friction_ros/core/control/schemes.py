@@ -83,15 +83,22 @@ def _f(name: str, default: Any, doc: str, unit: str = "", **bounds: Any) -> Fiel
     return Field(name, default, doc, unit=unit, ros_range=False, **bounds)
 
 
-def _typed(schema: Schema, config: Any, prefix: str | None = None) -> TypedConfig:
-    """A scheme's section as given: typed (a dict, once) or as it is (a typed section)."""
-    return config if isinstance(config, TypedConfig) else schema.typed(config or {}, prefix or schema.name)
+class _Scheme:
+    """A scheme is built from its typed section (``SCHEMA``, typed by the controller's config);
+    :meth:`from_dict` types a section dict first (scripts, tests)."""
+
+    SCHEMA: Schema
+
+    @classmethod
+    def from_dict(cls, config: Mapping[str, Any] | None = None, *args: Any):
+        """From a section dict: typed once against ``SCHEMA`` (messages name ``<section>.<key>``)."""
+        return cls(cls.SCHEMA.typed(config or {}, cls.SCHEMA.name), *args)
 
 
 # ---------------------------------------------------------------------------------------------------
 
 
-class DNPF:
+class DNPF(_Scheme):
     """ABB M19-S paper A.4.2 DNPF (Southward et al. 1991), used without feed-forward.
 
     u_P(e) = K_p e for |e| > Q_h; (tau_st + epsilon) sgn(e) for zero_band < |e| <= Q_h; 0 inside
@@ -113,8 +120,7 @@ class DNPF:
     )
     DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
-        c = _typed(self.SCHEMA, config)
+    def __init__(self, c: TypedConfig):
         self.q_h, self.tau_st, self.epsilon, self.kd = c.q_h, c.tau_st, c.epsilon, c.kd
         self.kp = c.kp if c.kp > 0.0 else (self.tau_st + self.epsilon) / self.q_h
         if c.zero_band > self.q_h:
@@ -142,7 +148,7 @@ class DNPF:
         return SchemeOutput(p_term=self.proportional(e), d_term=self.kd * edot)
 
 
-class GainScheduling:
+class GainScheduling(_Scheme):
     """ABB M19-S paper A.4.3 gain-scheduling controller (Fig. 10), no integrator.
 
     Mode 1 (gross sliding): ``u = kp e + kd e_dot + F_c sgn(v_c)`` (Coulomb compensation with a
@@ -204,10 +210,8 @@ class GainScheduling:
         c = model.coefficients
         return all(key in c for key in ("k", "alpha", "fs"))
 
-    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None, model=None):
+    def __init__(self, c: TypedConfig, model=None):
         """``model``: a library model whose virgin curve is used when the section gives none."""
-        c = _typed(self.SCHEMA, config)
-        n = c.path()
         self.kp, self.kd, self.coulomb = c.kp, c.kd, c.coulomb
         self.coulomb_velocity, self.coulomb_source = c.coulomb_velocity, c.coulomb_source
         self.coulomb_deadband, self.schedule_kind, self.q_h = c.coulomb_deadband, c.schedule, c.q_h
@@ -215,10 +219,10 @@ class GainScheduling:
         self.zeta, self.inertia = c.zeta, c.inertia
         if c.kp_max < self.kp:
             raise ParameterError(
-                f"{n}.kp_max = {c.kp_max:g} is out of range: must be >= {self.kp:g} [N*m/rad]"
+                f"{c.path('kp_max')} = {c.kp_max:g} is out of range: must be >= {self.kp:g} [N*m/rad]"
             )
         self.kp_max = c.kp_max
-        extra = c.extras
+        extra, n = c.extras, c.path()
         k, alpha, fs, given_model = (extra.get(key) for key in ("k", "alpha", "fs", "model"))
         if k is None and given_model is None and model is not None and self.has_virgin_curve(model):
             given_model = model
@@ -306,7 +310,7 @@ class GainScheduling:
         return SchemeOutput(p_term=self.kp * e, d_term=self.kd * edot, friction_feedback=fc)
 
 
-class Cascade:
+class Cascade(_Scheme):
     """ABB M19-S paper A.4.4 classical cascade: v_cmd = kp_position e + velocity_feedforward v_ref;
     u = PI(v_cmd - v) (velocity PI with back-calculation anti-windup), integrating baseline.
     """
@@ -324,8 +328,7 @@ class Cascade:
     )
     DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
-        c = _typed(self.SCHEMA, config)
+    def __init__(self, c: TypedConfig):
         self.kp_position, self.kp_velocity, self.ki_velocity = c.kp_position, c.kp_velocity, c.ki_velocity
         self.velocity_feedforward, self.i_clamp = c.velocity_feedforward, c.i_clamp
         self.pi = Pid(
@@ -357,7 +360,7 @@ class Cascade:
         )
 
 
-class SlidingMode:
+class SlidingMode(_Scheme):
     """Chatterjee et al. 2017 A.5.1 sliding-mode compensator: S = e_dot + lambda e,
     u = J_hat lambda e_dot + k_s S + M sat(S / phi)   (phi = 0: M sign(S), the relay of (5.2.6.3)).
 
@@ -378,8 +381,7 @@ class SlidingMode:
     )
     DEFAULTS = SCHEMA.defaults()
 
-    def __init__(self, config: Mapping[str, Any] | TypedConfig | None = None):
-        c = _typed(self.SCHEMA, config)
+    def __init__(self, c: TypedConfig):
         self.lam, self.gain, self.k_s = c.lambda_, c.gain, c.k_s
         self.boundary_layer, self.inertia = c.boundary_layer, c.inertia
 

@@ -27,6 +27,13 @@ class Asymmetric(FrictionModel):
     name = "asymmetric"
     KIND = _kernels.K_ASYMMETRIC
 
+    @classmethod
+    def from_section(cls, section: Any) -> Asymmetric:
+        """From a typed ``friction`` section (open: ``base``, ``positive``, ``negative`` are checked
+        here, the base model's coefficients by the base model)."""
+        values = {k: v for k, v in section.as_dict().items() if k != "model"}
+        return cls(**values, _path=section.path())
+
     def __init__(
         self,
         base: str = "",

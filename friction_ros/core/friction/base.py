@@ -38,14 +38,34 @@ class FrictionModel:
     STIFFNESS: ClassVar[str | None] = None
 
     def __init__(self, *, _path: str = "", **coefficients: Any) -> None:
+        path = _path or self.name
+        check_keys(path, coefficients, [c.name for c in self.COEFS])
+        self._set(
+            path,
+            OrderedDict(
+                (c.name, c.check(coefficients.get(c.name, c.default), f"{path}.{c.name}")) for c in self.COEFS
+            ),
+        )
+
+    @classmethod
+    def from_section(cls, section: Any) -> FrictionModel:
+        """From a typed ``friction`` section (``model`` + the fields :attr:`COEFS`, each checked when
+        the section was typed: :meth:`~friction_ros.core.config.Schema.typed`), as it is: only the
+        rules across coefficients (``_validate``) run; messages name ``section.path()``."""
+        self = cls.__new__(cls)
+        values = ((c.name, getattr(section, c.name)) for c in cls.COEFS)
+        self._set(
+            section.path() or cls.name,
+            OrderedDict((k, list(v) if isinstance(v, tuple) else v) for k, v in values),
+        )
+        return self
+
+    def _set(self, path: str, values: OrderedDict[str, Any]) -> None:
+        """Take checked coefficient values; the cross-coefficient rules, kernel parameters, state."""
         #: the parameter name of the model's section in messages (``friction`` in a ROS parameter
         #: file; the model's name by default)
-        self.path = _path or self.name
-        check_keys(self.path, coefficients, [c.name for c in self.COEFS])
-        vals: OrderedDict[str, Any] = OrderedDict()
-        for c in self.COEFS:
-            vals[c.name] = c.check(coefficients.get(c.name, c.default), f"{self.path}.{c.name}")
-        self._c = vals
+        self.path = path
+        self._c = values
         self._validate()
         self._p = np.ascontiguousarray(self._kernel_params(), dtype=np.float64)
         self._state = self.initial_state()

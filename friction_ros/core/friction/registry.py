@@ -76,3 +76,11 @@ def build_model(model: Any, name: str = "friction.model", path: str = ""):
     if not model or model.get("model") in (None, "", "none"):
         return None
     return model_from_config(dict(model), path)
+
+
+def model_from_section(section: Any) -> FrictionModel | None:
+    """The model of a typed ``friction`` section (``model`` + its coefficients, typed against the
+    model's fields: :func:`~friction_ros.core.control.controller_config.friction_schema`); None for
+    ``none``."""
+    name = section.model
+    return None if name in ("", "none") else MODEL_CLASSES[name].from_section(section)
