@@ -5,6 +5,7 @@
 #   3. colcon build of the interface package msg_defs/friction_msgs, installed into the venv prefix
 #   4. friction_ros installed in editable mode so its entry points are on the venv PATH
 # Every step is skipped when its inputs did not change, so a second run takes about a second.
+# `bootstrap.sh --deps` does step 1 only.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$(pwd)
@@ -41,6 +42,10 @@ if ! stamp_ok requirements "$req_hash"; then
   stamp_set requirements "$req_hash"
   rm -f "$STAMPS/msgs" "$STAMPS/package"
 fi
+
+# --deps: stop here (the venv and its pinned dependencies; run-tests.sh compiles the numba kernels
+# while the rest of the set-up runs)
+[ "${1:-}" = "--deps" ] && exit 0
 
 mkdir -p "$ROOT/build"
 msg_hash=$(hash_of msg_defs/friction_msgs/package.xml msg_defs/friction_msgs/CMakeLists.txt msg_defs/friction_msgs/msg/*.msg)

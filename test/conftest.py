@@ -65,7 +65,9 @@ def pytest_configure(config) -> None:
 
 
 def pin_worker(index: int, count: int) -> None:
-    """Each parallel worker (and every process it starts) on its own CPU, when there are enough.
+    """Each parallel worker (and every process it starts) on its own CPU, when there are enough;
+    with more workers than CPUs, worker ``i`` on CPU ``i mod n`` (``make test`` runs two per CPU: one
+    computes while the other waits for a graph's discovery or a wall-clock run).
 
     The ROS graphs of the tests run in lockstep or at 1 kHz: a message between two processes on one
     core costs about half the CPU of a wake-up across cores, and a worker's graph then never waits
@@ -73,7 +75,8 @@ def pin_worker(index: int, count: int) -> None:
     if os.environ.get("FRICTION_TEST_PIN", "1") == "0" or not hasattr(os, "sched_setaffinity"):
         return
     cpus = sorted(os.sched_getaffinity(0))
-    if len(cpus) < count:
+    if len(cpus) < count:  # more workers than CPUs: worker i on CPU i mod n (one waits, one runs)
+        os.sched_setaffinity(0, {cpus[index % len(cpus)]})
         return
     share = len(cpus) // count
     os.sched_setaffinity(0, set(cpus[index * share : (index + 1) * share]))

@@ -55,7 +55,7 @@ def start(module: str, *args: str) -> subprocess.Popen:
     )
 
 
-def wait_subscribed(pubs, proc, timeout=15.0):
+def wait_subscribed(pubs, proc, timeout=60.0):
     end = time.monotonic() + timeout
     while not all(p.get_subscription_count() >= 1 for p in pubs):
         assert proc.poll() is None, proc.stdout.read()
