@@ -140,7 +140,7 @@ def replay(protocol: str, n_axes: int, t0: float, script) -> tuple[list[float], 
     axes, route, emus = _setup(protocol, n_axes)
     t, _ = _warm_up(axes, route, emus)
     assert t == t0
-    message = FrameMessages().message  # CanBusLink.send's
+    message = FrameMessages(reuse=True).message  # CanBusLink.send's (SocketCAN, friction_local)
     sent, chunks = [], []
     clock = time.thread_time
     c0 = clock()
