@@ -11,9 +11,14 @@ a 0.5 Hz sine) run in lock step once and recorded; an identical second set-up re
 timer running (``time.thread_time``: CPU time of this thread; per chunk of 250 periods the least of
 5 replays, as other processes' load only adds to it). The replayed node must send exactly the frames of the recording (checked).
 
-Not included, the same for every protocol: the syscalls (one per frame sent and received on
-SocketCAN or ``friction_local``; CiA 402 sends one SYNC per bus and period more), ROS publishing and
-the executor's wake-up. ``bench/can_protocols.py`` measures the whole node in real time.
+A second replay goes through the node's bus link as well (column "through the bus link"):
+``CanBusLink.receive`` (``recv`` of every frame, the receive filters, routing) and
+``CanBusLink.send`` (Message, pack, one ``sendto`` per frame) on a ``friction_local`` bus whose other
+member puts the recorded frames on the bus and takes the node's outside the timing. The frames per
+period on the bus, by kind, are printed too (CiA 402 sends one SYNC per bus and period more).
+
+Not included: ROS publishing and the executor's wake-up. ``bench/can_protocols.py`` measures the
+whole node in real time.
 """
 
 from __future__ import annotations

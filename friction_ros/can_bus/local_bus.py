@@ -75,7 +75,10 @@ class RawFilter:
             return True
         ext = bool(cid & CAN_EFF_FLAG)
         arb = cid & (CAN_EFF_MASK if ext else 0x7FF)
-        return any((arb & m) == i and (e is None or e == ext) for i, m, e in self.masked)
+        for i, m, e in self.masked:
+            if arb & m == i and (e is None or e == ext):
+                return True
+        return False
 
 
 def default_dir() -> Path:
