@@ -11,9 +11,14 @@ a 0.5 Hz sine) run in lock step once and recorded; an identical second set-up re
 timer running (``time.thread_time``: CPU time of this thread; per chunk of 250 periods the least of
 5 replays, as other processes' load only adds to it). The replayed node must send exactly the frames of the recording (checked).
 
-Not included, the same for every protocol: the syscalls (one per frame sent and received on
-SocketCAN or ``friction_local``; CiA 402 sends one SYNC per bus and period more), ROS publishing and
-the executor's wake-up. ``bench/can_protocols.py`` measures the whole node in real time.
+A second replay goes through the node's bus link as well (column "through the bus link"):
+``CanBusLink.receive`` (``recv`` of every frame, the receive filters, routing) and
+``CanBusLink.send`` (Message, pack, one ``sendto`` per frame) on a ``friction_local`` bus whose other
+member puts the recorded frames on the bus and takes the node's outside the timing. The frames per
+period on the bus, by kind, are printed too (CiA 402 sends one SYNC per bus and period more).
+
+Not included: ROS publishing and the executor's wake-up. ``bench/can_protocols.py`` measures the
+whole node in real time.
 """
 
 from __future__ import annotations
@@ -140,7 +145,7 @@ def replay(protocol: str, n_axes: int, t0: float, script) -> tuple[list[float], 
     axes, route, emus = _setup(protocol, n_axes)
     t, _ = _warm_up(axes, route, emus)
     assert t == t0
-    message = FrameMessages().message  # CanBusLink.send's
+    message = FrameMessages(reuse=True).message  # CanBusLink.send's (SocketCAN, friction_local)
     sent, chunks = [], []
     clock = time.thread_time
     c0 = clock()
@@ -164,6 +169,118 @@ def replay(protocol: str, n_axes: int, t0: float, script) -> tuple[list[float], 
     return chunks, same
 
 
+class _ReplayLink:
+    """The node's ``CanBusLink`` on a ``friction_local`` bus of its own, with a second member (the
+    drives' side) that puts the recorded frames on the bus and takes the node's, untimed."""
+
+    def __init__(self, axes, route, directory: str):
+        import can
+
+        from friction_ros.can_bus.local_bus import LocalBus
+        from friction_ros.nodes.can_bus import CanBusLink
+
+        class Link(CanBusLink):
+            def startup_frames(self):  # the axes are started already
+                return []
+
+        self.drives = LocalBus("replay", directory=Path(directory) / "replay")  # the link's folder
+        self.link = Link("friction_local", "replay", 1_000_000, axes, route, 3, 1.0, None)
+        assert isinstance(self.link.bus, LocalBus), type(self.link.bus)
+        self.drives._refresh(-1.0)
+        self.link.bus._refresh(time.monotonic())
+        self._msg = {}  # Frame -> Message of the drives' side (built once)
+        self._can = can
+
+    def put(self, frames) -> None:
+        for f in frames:
+            m = self._msg.get(f)
+            if m is None:
+                m = self._msg[f] = self._can.Message(
+                    arbitration_id=f.arbitration_id, data=f.data, is_extended_id=f.is_extended,
+                    is_remote_frame=f.is_remote,
+                )  # fmt: skip
+            self.drives.send(m, timeout=0.01)
+
+    def take(self) -> list[tuple[int, bytes]]:
+        out = []
+        while (m := self.drives.recv(0.0)) is not None:
+            out.append((m.arbitration_id, bytes(m.data)))
+        return out
+
+    def close(self) -> None:
+        self.link.bus.shutdown()
+        self.drives.shutdown()
+
+
+def replay_bus(protocol: str, n_axes: int, t0: float, script) -> tuple[list[float], bool]:
+    """:func:`replay` through the node's bus link (``CanBusLink.receive``: ``recv`` of every frame,
+    python-can's filters, routing; ``CanBusLink.send``: Message, pack, one ``sendto`` per frame) on
+    a ``friction_local`` bus; the drives' side puts each period's frames on the bus and takes the
+    node's outside the timing (the clock pair's own cost is subtracted)."""
+    import os
+    import tempfile
+
+    axes, route, emus = _setup(protocol, n_axes)
+    t, _ = _warm_up(axes, route, emus)
+    assert t == t0
+    clock = time.thread_time
+    c0 = clock()
+    for _ in range(1000):
+        clock()
+    pair = (clock() - c0) / 1000
+    with tempfile.TemporaryDirectory() as d:
+        os.environ["FRICTION_CAN_DIR"] = d
+        bus = _ReplayLink(axes, route, d)
+        link = bus.link
+        mono = time.monotonic() - t  # the link's clock: receive times are clamped to [previous, now]
+        same, chunks, acc = True, [], 0.0
+        try:
+            for k, (rx, cmds, sent) in enumerate(script, 1):
+                t += DT
+                bus.put(rx)
+                c0 = clock()
+                link.receive(t + mono)
+                out = []
+                for a, u in zip(axes, cmds):
+                    a.set_command(u, t)
+                    out += a.cycle(t).frames
+                link.send(out)
+                acc += clock() - c0 - pair
+                same = same and bus.take() == [(f.arbitration_id, bytes(f.data)) for f in sent]
+                if k % CHUNK == 0:
+                    chunks.append(acc)
+                    acc = 0.0
+        finally:
+            bus.close()
+    return chunks, same
+
+
+def frame_kinds(protocol: str, script) -> dict[str, float]:
+    """Frames per period on the bus by kind (CiA 402 COB function, ODrive command, MIT: all one)."""
+    from friction_ros.core.can.odrive import Cmd
+
+    cia = {0x000: "NMT", 0x080: "SYNC/EMCY", 0x180: "TPDO1", 0x200: "RPDO1", 0x280: "TPDO2",
+           0x580: "SDO tx", 0x600: "SDO rx", 0x700: "heartbeat"}  # fmt: skip
+
+    def kind(arb: int) -> str:
+        if protocol == "cia402":
+            return cia.get(arb & 0x780, hex(arb & 0x780))
+        if protocol == "odrive_cansimple":
+            try:
+                return Cmd(arb & 0x1F).name.lower()
+            except ValueError:
+                return hex(arb & 0x1F)
+        return protocol
+
+    counts: dict[str, float] = {}
+    for rx, _, out in script:
+        for d, frames in (("in", rx), ("out", out)):
+            for f in frames:
+                k = f"{d} {kind(f.arbitration_id)}"
+                counts[k] = counts.get(k, 0) + 1
+    return {k: v / len(script) for k, v in sorted(counts.items())}
+
+
 def measure(protocol: str, n_axes: int, periods: int, repeat: int = REPEAT) -> dict:
     """Per chunk of periods the least CPU time of ``repeat`` replays (the same work each time: other
     processes only ever add to it), summed over the chunks."""
@@ -173,8 +290,14 @@ def measure(protocol: str, n_axes: int, periods: int, repeat: int = REPEAT) -> d
     tx = sum(len(s[2]) for s in script) / periods
     runs = [replay(protocol, n_axes, t0, script) for _ in range(repeat)]
     us = sum(map(min, zip(*(c for c, _ in runs)))) / periods * 1e6
+    bus_runs = [replay_bus(protocol, n_axes, t0, script) for _ in range(repeat)]
+    bus_us = sum(map(min, zip(*(c for c, _ in bus_runs)))) / periods * 1e6
     return {
         "us_per_period": us,
+        "bus_us_per_period": bus_us,
+        "bus_us_per_axis": bus_us / n_axes,
+        "bus_replay_identical": all(ok for _, ok in bus_runs),
+        "frame_kinds_per_period": frame_kinds(protocol, script),
         "us_per_axis": us / n_axes,
         "frames_in_per_period": rx,
         "frames_out_per_period": tx,
@@ -220,7 +343,7 @@ def main() -> int:
     if a.periods < 100:
         print(f"error: --periods {a.periods}: must be >= 100", file=sys.stderr)
         return 2
-    rows, figures = [], {}
+    rows, kinds, figures = [], [], {}
     send_us = send_cost()
     figures["friction_local_send_us"] = send_us
     for protocol in a.protocols.split(","):
@@ -230,8 +353,12 @@ def main() -> int:
             figures[f"{protocol}_{n}_axes"] = r
             rows.append([
                 protocol, n, r["frames_in_per_period"], r["frames_out_per_period"], r["us_per_period"],
-                r["us_per_axis"], r["us_per_axis_with_sends"], "yes" if r["replay_identical"] and not r["faults"] else f"NO {r['faults']}",
+                r["us_per_axis"], r["us_per_axis_with_sends"], r["bus_us_per_axis"],
+                "yes" if r["replay_identical"] and r["bus_replay_identical"] and not r["faults"] else f"NO {r['faults']}",
             ])  # fmt: skip
+            kinds.append(
+                [protocol, n, ", ".join(f"{k} {v:.3g}" for k, v in r["frame_kinds_per_period"].items())]
+            )
     _common.print_table(
         f"drive_interface CAN work per 1 kHz period, CPU us (no bus, no ROS; {a.periods} periods, least of {REPEAT} per {CHUNK} periods)",
         [
@@ -242,9 +369,13 @@ def main() -> int:
             "us / period",
             "us / period / axis",
             f"+ sends ({send_us:.1f} us each) / axis",
+            "through the bus link / axis",
             "replay ok",
         ],
         rows,
+    )
+    _common.print_table(
+        "frames per period on the bus (node's view)", ["protocol", "axes", "kind: count"], kinds
     )
     _common.write_results("can_decode", figures)
     return 0

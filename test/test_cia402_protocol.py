@@ -357,3 +357,32 @@ def test_payload_less_frames_reuse_one_message_and_the_bus_still_carries_each():
     finally:
         tx.shutdown()
         rx.shutdown()
+
+
+def test_reused_messages_are_refilled_per_frame_and_the_bus_carries_each_payload():
+    """With reuse (SocketCAN, virtual, friction_local) one Message per id and length, refilled in
+    place: every payload sent still arrives as sent; other lengths, RTR and a set dlc get their own."""
+    from friction_ros.core.can.cia402 import frames as fr
+    from friction_ros.core.can.frame import Frame
+    from friction_ros.nodes.can_bus import FrameMessages
+
+    message = FrameMessages(reuse=True).message
+    rpdos = [Frame(0x205, fr.RPDO1.pack(0x0F, p)) for p in (-250, 0, 300, 32767)]
+    first = message(rpdos[0])
+    assert all(message(f) is first for f in rpdos[1:]) and bytes(first.data) == rpdos[-1].data
+    other = Frame(0x206, fr.RPDO1.pack(0x07, 5))
+    assert message(other) is not first and bytes(message(other).data) == other.data
+    longer = Frame(0x205, bytes(range(8)))
+    assert message(longer) is not first and message(longer).dlc == 8 and first.dlc == 4
+    assert message(Frame(0x21, b"\x01", dlc=8)) is not message(Frame(0x21, b"\x01", dlc=8))
+    channel = f"cia402r-{uuid.uuid4().hex[:8]}"
+    tx, rx = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
+    try:
+        sent = [f for r in rpdos for f in (r, fr.SYNC_FRAME, other)]
+        for f in sent:
+            tx.send(message(f))
+        got = [rx.recv(1.0) for _ in sent]
+        assert [(m.arbitration_id, bytes(m.data)) for m in got] == [(f.arbitration_id, f.data) for f in sent]
+    finally:
+        tx.shutdown()
+        rx.shutdown()

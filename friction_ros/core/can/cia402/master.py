@@ -239,7 +239,7 @@ class Cia402Master:
     def rpdo_frame(self) -> Frame:
         """RPDO1: the controlword of this period and the target torque (zero unless OPERATION ENABLED
         is both the state and the target)."""
-        on = self.state == State.OPERATION_ENABLED and self.target == State.OPERATION_ENABLED
+        on = self.state == _ENABLED and self.target == _ENABLED
         return Frame(self.cob_rpdo1, _RPDO1(self.controlword, self.torque_permille if on else 0))
 
     def exit_frames(self) -> list[list[Frame]]:
