@@ -1,12 +1,13 @@
 #!/usr/bin/env bash
 # The full test suite: lint, format check, then pytest (unit + cross-process ROS 2 + CAN + bags).
 #
-# pytest runs in TEST_WORKERS parallel worker processes (pytest-xdist, default two per CPU, at most
+# pytest runs in TEST_WORKERS parallel worker processes (pytest-xdist, default one per CPU, at most
 # 16; TEST_WORKERS=0 runs in one process). Each worker owns its own ROS domain (test/conftest.py), so
 # the ROS graphs of two workers never see each other, and one CPU (every process it starts inherits
-# it: a lockstep graph's messages never cross cores; FRICTION_TEST_PIN=0 turns that off). Two workers
-# share each CPU: while one waits for a ROS graph to come up or a wall-clock run to end, the other
-# computes (measured on 2 CPUs: 4 workers 457 s, 2 workers 528 s for the parallel phase). A test file runs whole
+# it: a lockstep graph's messages never cross cores; FRICTION_TEST_PIN=0 turns that off). More
+# workers than CPUs share them (worker i on CPU i mod n): on 2 CPUs, 4 workers took the parallel
+# phase from 528 s to 457 s, but the wall-clock CAN hold tests then shared a CPU with another
+# worker's computation and failed in one run of three, so the default stays one per CPU. A test file runs whole
 # on one worker (its module fixtures are built once); the slowest files start first. Tests marked
 # `serial` (wall-clock timing that a fully loaded CPU breaks) run afterwards, alone. Extra arguments
 # go to pytest (`make test ARGS="-k demo"`); each phase prints its slowest tests.
@@ -23,7 +24,7 @@ echo "[test] ruff check + format check"
 .venv/bin/ruff check . || { kill $warm 2>/dev/null; exit 1; }
 .venv/bin/ruff format --check . || { echo "[test] run 'make format' to fix formatting"; kill $warm 2>/dev/null; exit 1; }
 cpus=$(nproc)
-default_workers=$(( 2 * cpus > 16 ? 16 : 2 * cpus ))
+default_workers=$(( cpus > 16 ? 16 : cpus ))
 workers=${TEST_WORKERS:-$default_workers}
 if ! [[ "$workers" =~ ^[0-9]+$ ]]; then
   echo "[test] TEST_WORKERS must be a whole number of worker processes (0 = no workers), not '$workers'" >&2
