@@ -25,12 +25,38 @@ fi
 VPY="$VENV/bin/python"
 SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 
+# uv pip install -r requirements.txt with pip's indexes, find-links, constraints and certificate
+# (uv does not read pip's configuration); pip's rule that every index is equal is kept.
+uv_install() {
+  local pin args=() key value
+  pin=$(grep -ixE 'uv==[0-9.]+' requirements.txt) || return 1
+  "$VPY" -m pip install --disable-pip-version-check -q "$pin" || return 1
+  while IFS='=' read -r key value; do
+    value=${value#\'}; value=${value%\'}
+    case "$key" in
+      *.index-url) args+=(--index-url "$value") ;;
+      *.extra-index-url) for v in $value; do args+=(--extra-index-url "$v"); done ;;
+      *.find-links) for v in $value; do args+=(--find-links "$v"); done ;;
+      *.constraint) for v in $value; do args+=(--constraint "$v"); done ;;
+      *.cert) export SSL_CERT_FILE="$value" ;;
+    esac
+  done < <("$VPY" -m pip config list 2>/dev/null)
+  "$VENV/bin/uv" pip install --python "$VPY" --index-strategy unsafe-best-match "${args[@]}" -r requirements.txt
+}
+
 req_hash=$(hash_of requirements.txt)
 if ! stamp_ok requirements "$req_hash"; then
   say "installing pinned dependencies (ROS 2 Jazzy wheels, numpy, scipy, python-can, mcap ...)"
   mkdir -p "$ROOT/build"
-  "$VPY" -m pip install --disable-pip-version-check -q -r requirements.txt > build/pip-requirements.log 2>&1 \
-    || { grep -v '^WARNING: Location' build/pip-requirements.log | tail -20; say "pip install failed"; exit 1; }
+  # uv (pinned in requirements.txt) installs the same pins as pip, from the same indexes (pip's own
+  # configuration), in parallel from its cache: 4 s instead of pip's 58 s here. Without uv (offline,
+  # no wheel for this machine) pip does it.
+  if uv_install > build/pip-requirements.log 2>&1; then
+    say "installed with uv $("$VENV/bin/uv" --version | cut -d' ' -f2)"
+  else
+    "$VPY" -m pip install --disable-pip-version-check -q -r requirements.txt > build/pip-requirements.log 2>&1 \
+      || { grep -v '^WARNING: Location' build/pip-requirements.log | tail -20; say "pip install failed"; exit 1; }
+  fi
   "$VPY" -c 'import rclpy, numpy, scipy, can, mcap' || { say "dependency install failed"; exit 1; }
   # The message wheels' exported CMake targets name include folders of the machine that built
   # them; point them at this venv's Python headers and numpy (reference: ros-jazzy-from-pip.md).
