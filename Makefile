@@ -11,7 +11,7 @@ setup:
 demo: setup  ## the main job
 	@if [ -x $(VENV)/bin/friction-demo ]; then $(VENV)/bin/friction-demo $(ARGS); else $(VENV)/bin/friction-doctor; fi
 
-test: setup  ## the full test suite (lint + pytest in TEST_WORKERS=2 parallel workers; ARGS go to pytest)
+test: setup  ## the full test suite (lint + pytest in parallel workers, see scripts/run-tests.sh; ARGS go to pytest)
 	@./scripts/run-tests.sh $(ARGS)
 
 lint: setup

@@ -125,7 +125,7 @@ def _rms_errors(states: dict[int, tuple[float, ...]], t_start: float) -> np.ndar
     return np.sqrt(np.mean(e**2, axis=0))
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 @pytest.mark.ros
 # in one run in five to two in three, composed and separate processes differ by up to a period's motion
 # on a few states (a start-up race of the add-on's time base, not yet found): repeated, and said in

@@ -169,7 +169,7 @@ def test_sigkill_loses_at_most_the_open_chunk(node, tmp_path):
         assert {c.topic: c.msgcount for c in rd.connections}[f"{pre}/command"] == n
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 def test_player_replays_sequence_and_timing(node, tmp_path):
     bag = tmp_path / "play"
     rng = np.random.default_rng(3)

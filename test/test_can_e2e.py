@@ -34,7 +34,7 @@ from friction_ros.nodes.qos import COMMAND_QOS, SENSOR_QOS, STATE_QOS
 HERE = Path(__file__).resolve().parent
 # Wall-clock tests across processes on a 2-core machine: a scheduler hiccup can spoil one run, so a
 # failure is retried twice (pytest-rerunfailures); a real regression fails all three.
-pytestmark = [pytest.mark.ros, pytest.mark.flaky(reruns=2)]
+pytestmark = [pytest.mark.ros, pytest.mark.realtime, pytest.mark.flaky(reruns=2)]
 
 KT = 0.49  # abb_m19s preset (gear ratio 1)
 STALE_PERIOD = 0.010  # emulator cyclic encoder + Iq at 100 Hz in the stale-telemetry run

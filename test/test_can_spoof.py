@@ -24,7 +24,7 @@ from friction_ros.core.can import odrive as od
 from friction_ros.core.can.faults import FAULT_TELEMETRY_IMPLAUSIBLE
 from friction_ros.nodes.qos import STATE_QOS
 
-pytestmark = [pytest.mark.ros, pytest.mark.flaky(reruns=2)]
+pytestmark = [pytest.mark.ros, pytest.mark.realtime, pytest.mark.flaky(reruns=2)]
 
 REJECT_RUN = 5
 

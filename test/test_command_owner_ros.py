@@ -29,7 +29,7 @@ def _controller(tmp_path, name: str, offset: float) -> NodeSpec:
     return NodeSpec("compensating_controller", "", [path], name=name)
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 def test_two_controllers_on_one_joint_are_refused_and_reported(tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState

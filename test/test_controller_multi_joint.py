@@ -164,7 +164,7 @@ def test_seven_joints_in_one_controller_equal_seven_single_joint_controllers(tmp
     assert moving > 0.9 * 7 * steps  # the commands are not trivially zero
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 @pytest.mark.ros
 def test_a_missing_joint_gets_zero_torque_and_the_others_stay_controlled(tmp_path):
     """Realtime: joint3 disappears from joint_states; after state_timeout its command is 0 (a warning

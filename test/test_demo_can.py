@@ -3,7 +3,7 @@
 The preset's plant behind an emulated CiA 402 drive (``drive_emulator``, its own process) and
 ``drive_interface`` on the ``friction_local`` bus (NMT, SDO configuration, SYNC + PDOs at 1 kHz),
 the experiment, recorder, fit and controller over DDS. Real time on the wall clock: a fully
-loaded machine makes the drive's telemetry late or stale, so the module is ``serial`` (run alone,
+loaded machine makes the drive's telemetry late or stale, so the module is ``realtime`` (a CPU of its own,
 after the parallel tests). ODrive and MIT run the same code path with another protocol name and
 take as long again (~2 min each), so they are not repeated here.
 """
@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 MODES = ("feedforward", "feedback", "blended")
 DURATION = 2.0  # tracking seconds per run (the shortest that still shows the compensation)
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.serial]
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.realtime]
 
 
 @pytest.fixture(scope="module")

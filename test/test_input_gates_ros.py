@@ -221,7 +221,7 @@ def test_controller_and_estimator_reject_bad_states_and_keep_working(tmp_path):
     assert all(math.isfinite(e.friction_torque) for e in estimates)
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 def test_plant_simulator_rejects_absurd_commands_and_keeps_running(tmp_path):
     from diagnostic_msgs.msg import DiagnosticArray
     from sensor_msgs.msg import JointState

@@ -99,7 +99,7 @@ def test_lockstep_graph_matches_the_pure_harness(tmp_path):
     assert estimates[-1].coefficient_names == ["fc", "fv"]
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 @pytest.mark.flaky(reruns=2)  # wall-clock loop on a shared 2-core machine
 def test_realtime_loop_holds_position_and_converges(tmp_path):
     from friction_msgs.msg import ControllerState

@@ -401,7 +401,7 @@ def test_lockstep_three_joints_advance_when_every_joint_is_answered(tmp_path):
     assert v["j1.preset"] == "abb_m19s" and v["j2.preset"] == "seed000_gearhead"
 
 
-@pytest.mark.serial  # wall-clock timing: run alone, after the parallel tests
+@pytest.mark.realtime  # wall-clock timing: a CPU of its own, after the other tests
 @pytest.mark.ros
 @pytest.mark.flaky(reruns=2)  # wall-clock loop on a shared 2-core machine
 def test_realtime_two_joints_zero_only_the_joint_whose_commands_stopped(tmp_path):
