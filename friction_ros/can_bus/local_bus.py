@@ -89,9 +89,10 @@ def default_dir() -> Path:
 
 def pack_frame(msg: can.Message) -> bytes:
     """python-can Message -> SocketCAN ``struct can_frame`` bytes."""
-    cid = msg.arbitration_id & (CAN_EFF_MASK if msg.is_extended_id else 0x7FF)
     if msg.is_extended_id:
-        cid |= CAN_EFF_FLAG
+        cid = (msg.arbitration_id & CAN_EFF_MASK) | CAN_EFF_FLAG
+    else:
+        cid = msg.arbitration_id & 0x7FF
     if msg.is_remote_frame:
         cid |= CAN_RTR_FLAG
     if msg.is_error_frame:

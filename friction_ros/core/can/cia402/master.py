@@ -295,8 +295,9 @@ class Cia402Master:
         if len(data) < 6 or self._scaling is None:
             return None
         vel, cur = _TPDO2(data)
-        self._vel, self._cur = self._k_pos * vel, self._k_cur * cur
-        return (self._pos, self._vel, self._cur) if self.tpdo1_count else None
+        self._vel = v = self._k_pos * vel
+        self._cur = i = self._k_cur * cur
+        return (self._pos, v, i) if self.tpdo1_count else None
 
     def handle(self, cob: int, data: bytes, t: float) -> None:
         if cob == self.cob_tpdo1:
