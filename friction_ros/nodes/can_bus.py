@@ -53,12 +53,12 @@ class FrameMessages:
         self._by_id: dict[tuple[int, bool, int], can.Message] | None = {} if reuse else None
 
     def message(self, f: Frame) -> can.Message:
-        data = f.data
+        arb, data, remote, extended, dlc = f  # one unpack, not five attribute reads
         if data:
             by_id = self._by_id
-            if by_id is None or f.is_remote or f.dlc is not None:
+            if by_id is None or remote or dlc is not None:
                 return self._build(f)
-            key = (f.arbitration_id, f.is_extended, len(data))
+            key = (arb, extended, len(data))
             msg = by_id.get(key)
             if msg is None:
                 msg = by_id[key] = self._build(f)
@@ -68,10 +68,7 @@ class FrameMessages:
         msg = self._constant.get(f)
         if msg is None:
             msg = self._constant[f] = can.Message(
-                arbitration_id=f.arbitration_id,
-                is_extended_id=f.is_extended,
-                is_remote_frame=f.is_remote,
-                dlc=f.length,
+                arbitration_id=arb, is_extended_id=extended, is_remote_frame=remote, dlc=f.length
             )
         return msg
 
@@ -150,7 +147,7 @@ class CanBusLink:
             send = self.bus.send
             for f in frames:
                 try:
-                    send(message(f), timeout=0.001)
+                    send(message(f), 0.001)
                     self._consecutive_send_errors = 0
                 except Exception as exc:  # can.CanError, OSError (ENOBUFS), closed bus ...
                     ok = False

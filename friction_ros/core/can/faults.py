@@ -66,6 +66,7 @@ class FaultLog:
         self.latched = 0
         self.since: dict[int, float] = {}  # start time of each active condition
         self._seen: dict[int, float] = {}  # last time a held condition was present
+        self._held = tuple(b for b in self.names if self.hold.get(b, 0.0))  # kinds with a hold time
         self.starts: dict[int, int] = dict.fromkeys(names, 0)  # episodes per kind
 
     def update(
@@ -73,6 +74,11 @@ class FaultLog:
     ) -> list[FaultEvent]:
         """Events for the change from the previous call. ``reasons[bit]`` describes a starting
         condition; ``action`` is appended to the start line of a condition that also latched now."""
+        if active == self.active and latched == self.latched:  # no change: no event (most periods)
+            for bit in self._held:
+                if active & bit:
+                    self._seen[bit] = t
+            return []
         events: list[FaultEvent] = []
         for bit, name in self.names.items():
             now_on = bool(active & bit)

@@ -49,6 +49,7 @@ _RPDO1 = fr.RPDO1.pack
 _TPDO1 = fr.TPDO1.unpack_from
 _TPDO2 = fr.TPDO2.unpack_from
 _HALF, _MASK = 1 << 31, (1 << 32) - 1
+_new_frame = tuple.__new__  # Frame(...) without NamedTuple.__new__'s defaults: a third of the cost
 _ENABLED, _QUICK_STOP = State.OPERATION_ENABLED, State.QUICK_STOP_ACTIVE
 _UNIT_OBJECTS = {  # parameter -> objects read from the drive when neither parameter nor EDS gives it
     "counts_per_rev": ((ob.OD_ENCODER_RESOLUTION, 1), (ob.OD_ENCODER_RESOLUTION, 2)),
@@ -218,29 +219,47 @@ class Cia402Master:
         configuring. The period's RPDO is :meth:`rpdo_frame` (separate for drivers that send the
         command themselves)."""
         if self.phase == "operational":
-            state, target = self.state, self.target
-            if (  # anything for _supervise to check or do (else, every period: hold the state)
-                state != target
-                or target == _QUICK_STOP
-                or t - self._t_tpdo1 > self._stale_after
-                or t - self._t_heartbeat > self._consumer_timeout
-            ):
-                self._supervise(t)
-                state, target = self.state, self.target
-            if state == target == _ENABLED:
-                self.controlword = CW_ENABLE_OPERATION
-            else:
-                self.controlword = master_controlword(state, target, self.controlword)
+            self.hold(t)
             return []
         if self.phase in ("units", "configure"):
             return self._configure(t)
         return []
+
+    def hold(self, t: float) -> None:
+        """:meth:`step` once operational: supervise only when there is something to check or do
+        (a state walk, a quick stop, a late TPDO1 or heartbeat), then the controlword of the walk."""
+        state, target = self.state, self.target
+        if (
+            state != target
+            or target == _QUICK_STOP
+            or t - self._t_tpdo1 > self._stale_after
+            or t - self._t_heartbeat > self._consumer_timeout
+        ):
+            self._supervise(t)
+            state, target = self.state, self.target
+        if state == target == _ENABLED:
+            self.controlword = CW_ENABLE_OPERATION
+        else:
+            self.controlword = master_controlword(state, target, self.controlword)
 
     def rpdo_frame(self) -> Frame:
         """RPDO1: the controlword of this period and the target torque (zero unless OPERATION ENABLED
         is both the state and the target)."""
         on = self.state == _ENABLED and self.target == _ENABLED
         return Frame(self.cob_rpdo1, _RPDO1(self.controlword, self.torque_permille if on else 0))
+
+    def torque_rpdo(self, joint_torque: float) -> Frame:
+        """:meth:`set_torque` then :meth:`rpdo_frame` in one call (an enabled axis' every period):
+        ``permille = clamp(round(tau / k_tau))``, RPDO1 = controlword | permille (0 unless enabled)."""
+        if self._scaling is not None:
+            p = round(joint_torque / self._k_tau)
+            lo, hi = self._p_range
+            self.torque_permille = p = lo if p < lo else hi if p > hi else p
+        else:
+            p = self.torque_permille
+        if self.state != _ENABLED or self.target != _ENABLED:
+            p = 0
+        return _new_frame(Frame, (self.cob_rpdo1, _RPDO1(self.controlword, p), False, False, None))
 
     def exit_frames(self) -> list[list[Frame]]:
         """Frames of the last periods, one list per SYNC: quick stop, disable voltage, NMT pre-operational."""
@@ -276,8 +295,9 @@ class Cia402Master:
         if len(data) < 6 or self._scaling is None:
             return None
         vel, cur = _TPDO2(data)
-        self._vel, self._cur = self._k_pos * vel, self._k_cur * cur
-        return (self._pos, self._vel, self._cur) if self.tpdo1_count else None
+        self._vel = v = self._k_pos * vel
+        self._cur = i = self._k_cur * cur
+        return (self._pos, v, i) if self.tpdo1_count else None
 
     def handle(self, cob: int, data: bytes, t: float) -> None:
         if cob == self.cob_tpdo1:

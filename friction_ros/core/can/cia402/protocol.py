@@ -51,26 +51,37 @@ def set_axis_parameters(node_id: int, **params) -> Cia402Config:
 class _SyncGroup:
     """One SYNC per period for the CiA 402 axes of the process: sent with the frames of the axis that
     completes the period, i.e. once every axis that took part in the previous period has been called
-    (an axis that is gone costs one period without SYNC; a new one joins from its second period)."""
+    (an axis that is gone costs one period without SYNC; a new one joins from its second period).
+
+    ``missing`` counts the previous period's axes not yet called in this one (no set comparison per
+    call); the two sets are swapped, not rebuilt, at each new period."""
 
     def __init__(self):
         self.t: float | None = None
         self.prev: set[int] = set()
         self.cur: set[int] = set()
+        self.missing = 0
         self.sent = False
 
     def due(self, t: float, key: int, operational: bool) -> bool:
         if t != self.t:
-            self.t, self.prev, self.cur, self.sent = t, self.cur, {key}, False
-        else:
+            prev = self.prev
+            prev.clear()
+            self.prev, self.cur, self.t, self.sent = self.cur, prev, t, False
+            prev.add(key)
+            self.missing = len(self.prev) - (key in self.prev)
+        elif key not in self.cur:
             self.cur.add(key)
-        if self.sent or not operational or not self.cur >= self.prev:
+            if key in self.prev:
+                self.missing -= 1
+        if self.sent or self.missing or not operational:
             return False
         self.sent = True
         return True
 
 
 SYNC_GROUP = _SyncGroup()
+_SYNC = (fr.SYNC_FRAME,)
 
 
 class Cia402Decoder(SafeDecoder):
@@ -122,6 +133,7 @@ class Cia402Protocol(DriveProtocol):
         self.decoder = Cia402Decoder(self)
         self.t = time.monotonic()
         self._key = id(self)  # in the SYNC group
+        self.torque_frame = self.master.torque_rpdo  # DriveAxis' per-period call, one level less
 
     @property
     def t(self) -> float:
@@ -185,18 +197,20 @@ class Cia402Protocol(DriveProtocol):
         ]
 
     def torque_frame(self, motor_torque: float) -> Frame:
-        self.master.set_torque(motor_torque)
-        return self.master.rpdo_frame()
+        return self.master.torque_rpdo(motor_torque)  # bound straight to the master in __init__
 
-    def poll_frames(self, enabled: bool) -> list[Frame]:
+    def poll_frames(self, enabled: bool) -> tuple[Frame, ...]:
         if enabled or self.master.phase != "operational":
-            return []
+            return ()
         self.master.torque_permille = 0
-        return [self.master.rpdo_frame()]
+        return (self.master.rpdo_frame(),)
 
-    def cycle_frames(self, t: float) -> list[Frame]:
+    def cycle_frames(self, t: float) -> list[Frame] | tuple[Frame, ...]:
         m = self.master
         m.now = t
+        if m.phase == "operational":  # every period: the state machine walk and the SYNC, no list
+            m.hold(t)
+            return _SYNC if SYNC_GROUP.due(t, self._key, True) else ()
         out = m.step(t)
         if SYNC_GROUP.due(t, self._key, m.phase == "operational"):
             out.append(fr.SYNC_FRAME)
