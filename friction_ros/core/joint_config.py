@@ -24,7 +24,7 @@ from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any
 
-from friction_ros.core.config import unflatten
+from friction_ros.core.config import Names, unflatten
 from friction_ros.core.validation import ParameterError
 
 JOINT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
@@ -186,13 +186,14 @@ class JointNames:
 
 
 @contextmanager
-def joint_errors(names: JointNames) -> Iterator[None]:
+def joint_errors(names: Names) -> Iterator[None]:
     """Build one joint's objects: a :class:`ParameterError` about one of the joint's own parameters
     (named by ``names``) passes as it is; one about a shared node-level value, or a rule across
-    values, says which joint's effective config it is (``joint j2: plant.gear_ratio = -2 ...``)."""
+    values, says which joint's effective config it is (``joint j2: plant.gear_ratio = -2 ...``).
+    Names that are no :class:`JointNames` (a single-joint node) let every error pass."""
     try:
         yield
     except ParameterError as exc:
-        if names.owns(exc.parameter):
+        if not isinstance(names, JointNames) or names.owns(exc.parameter):
             raise
         raise ParameterError(f"joint {names.joint}: {exc}", exc.parameter) from None

@@ -66,7 +66,9 @@ def check_real(
             ) from None
     x = float(value)
     if math.isnan(x):
-        raise ParameterError(f"{name} = nan is not finite (nan is not a number): must be {allowed}{unit_s}", name)
+        raise ParameterError(
+            f"{name} = nan is not finite (nan is not a number): must be {allowed}{unit_s}", name
+        )
     if math.isinf(x) and not allow_inf:
         raise ParameterError(f"{name} = {x} is not finite: must be a number {allowed}{unit_s}", name)
     bad = (lo is not None and (x <= lo if lo_open else x < lo)) or (

@@ -78,8 +78,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from friction_ros.core.experiment.events import ABORT, END, START, Event
 from friction_ros.core.config import Names
+from friction_ros.core.experiment.events import ABORT, END, START, Event
 from friction_ros.core.experiment.excitation_config import NAMES, resolve_config
 from friction_ros.core.experiment.segments import Rest, Segment, SegmentContext
 from friction_ros.core.experiment.torque_programs import (

@@ -145,18 +145,22 @@ def _validate(c: dict, n: Names) -> None:
     c["sequence"] = list(seq)
     validation.check_real(n("gap"), c["gap"], 0.0, 60.0, unit="s")
     lim = c["limits"]
-    validation.check_real(n("bias"), c["bias"], -lim["max_torque"], lim["max_torque"], hi_open=True, lo_open=True, unit="N*m"
+    validation.check_real(
+        n("bias"), c["bias"], -lim["max_torque"], lim["max_torque"], hi_open=True, lo_open=True, unit="N*m"
     )
-    validation.check_real(n("limits.max_travel"), lim["max_travel"], 0.0, lo_open=True, unit="rad", allow_inf=True
+    validation.check_real(
+        n("limits.max_travel"), lim["max_travel"], 0.0, lo_open=True, unit="rad", allow_inf=True
     )
-    validation.check_real(n("limits.max_velocity"), lim["max_velocity"], 0.0, lo_open=True, unit="rad/s", allow_inf=True
+    validation.check_real(
+        n("limits.max_velocity"), lim["max_velocity"], 0.0, lo_open=True, unit="rad/s", allow_inf=True
     )
     validation.check_real(n("limits.max_torque"), lim["max_torque"], 0.0, lo_open=True, unit="N*m")
     validation.check_choice(n("limits.on_limit"), lim["on_limit"], ON_LIMIT)
     vl = c["velocity_loop"]
     validation.check_real(n("velocity_loop.p"), vl["p"], 0.0, unit="N*m*s/rad")
     validation.check_real(n("velocity_loop.i"), vl["i"], 0.0, unit="N*m/rad")
-    validation.check_real(n("velocity_loop.torque_limit"), vl["torque_limit"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
+    validation.check_real(
+        n("velocity_loop.torque_limit"), vl["torque_limit"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
     validation.check_real(n("velocity_loop.inertia"), vl["inertia"], 0.0, unit="kg*m^2")
     validation.check_real(n("velocity_loop.damping"), vl["damping"], 0.0, unit="N*m*s/rad")
@@ -190,16 +194,20 @@ def _validate(c: dict, n: Names) -> None:
     r = c["random"]
     validation.check_real(n("random.duration"), r["duration"], 0.0, 3600.0, lo_open=True, unit="s")
     validation.check_real(n("random.bandwidth"), r["bandwidth"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
-    validation.check_real(n("random.amplitude"), r["amplitude"], 0.0, lim["max_velocity"], lo_open=True, unit="rad/s"
+    validation.check_real(
+        n("random.amplitude"), r["amplitude"], 0.0, lim["max_velocity"], lo_open=True, unit="rad/s"
     )
     validation.check_real(n("random.low_level"), r["low_level"], 0.0, 1.0)
-    validation.check_real(n("random.envelope_period"), r["envelope_period"], 0.0, 3600.0, lo_open=True, unit="s")
+    validation.check_real(
+        n("random.envelope_period"), r["envelope_period"], 0.0, 3600.0, lo_open=True, unit="s"
+    )
     validation.check_int(n("random.seed"), r["seed"], 0, 2**32 - 1)
     ch = c["chirp"]
     validation.check_real(n("chirp.duration"), ch["duration"], 0.0, 3600.0, lo_open=True, unit="s")
     validation.check_real(n("chirp.f0"), ch["f0"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
     validation.check_real(n("chirp.f1"), ch["f1"], ch["f0"], 0.45 / c["dt"], unit="Hz")
-    validation.check_real(n("chirp.amplitude"), ch["amplitude"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
+    validation.check_real(
+        n("chirp.amplitude"), ch["amplitude"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
     validation.check_real(n("chirp.final_amplitude"), ch["final_amplitude"], 0.0, ch["amplitude"], unit="N*m")
     ps = c["presliding"]
@@ -215,7 +223,8 @@ def _validate(c: dict, n: Names) -> None:
         )
         for i, a in enumerate(amps)
     ]
-    validation.check_real(n("presliding.frequency"), ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz"
+    validation.check_real(
+        n("presliding.frequency"), ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz"
     )
     validation.check_int(n("presliding.cycles"), ps["cycles"], 1, 10000)
     mc = c["motion_check"]
