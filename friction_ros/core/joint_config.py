@@ -151,7 +151,8 @@ class JointNames:
     :data:`~friction_ros.core.config.Names`): ``names("plant.gravity")`` is the per-joint name
     ``plant.j2.gravity`` when the joint has its own value (``overridden``: its node-level flat names),
     or a key of a section the joint replaces as a whole (``replaced_by`` as in :func:`joint_values`),
-    else the node-level name ``plant.gravity`` (the value every joint shares). Core objects take it
+    else the node-level name ``plant.gravity`` (the value every joint shares); a section with any key
+    of the joint's own by its per-joint name (``friction.j2``, ``gains.j2``). Core objects take it
     where they take a name prefix, so their messages need no renaming.
     """
 
@@ -171,8 +172,8 @@ class JointNames:
         head, _, rest = rel.partition(".")
         if rel in self.own or (rest and head in self.replaced):
             return self.layout.joint_name(self.joint, rel)
-        if not rest and head in self.replaced:  # the section itself
-            return f"{head}.{self.joint}"
+        if rel and (rel in self.replaced or any(k.startswith(f"{rel}.") for k in self.own)):
+            return self.layout.joint_name(self.joint, f"{rel}._").removesuffix("._")  # a section
         return rel
 
     def owns(self, name: str | None) -> bool:
@@ -186,7 +187,7 @@ class JointNames:
 
 
 @contextmanager
-def joint_errors(names: Names) -> Iterator[None]:
+def joint_errors(names: Names | None) -> Iterator[None]:
     """Build one joint's objects: a :class:`ParameterError` about one of the joint's own parameters
     (named by ``names``) passes as it is; one about a shared node-level value, or a rule across
     values, says which joint's effective config it is (``joint j2: plant.gear_ratio = -2 ...``).

@@ -80,7 +80,8 @@ class FrictionModel:
         if self._c[fs] < self._c[fc]:
             raise ParameterError(
                 f"{self.key(fs)} = {self._c[fs]:g} is out of range: must be >= {self.key(fc)} "
-                f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]"
+                f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]",
+                self.key(fs),
             )
 
     def key(self, coefficient: str) -> str:

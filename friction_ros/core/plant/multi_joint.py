@@ -48,7 +48,7 @@ def joint_plant_configs(
         for name in own:
             if name.split(".", 1)[0] not in PRESET_SECTIONS:
                 raise ParameterError(
-                    f"{name.split('.', 1)[0]}.{joint}.{name.split('.', 1)[-1]}: only the plant sections "
+                    f"{JointLayout(joints, ()).joint_name(joint, name)}: only the plant sections "
                     f"({', '.join(PRESET_SECTIONS)}) have per-joint values"
                 )
         sections = joint_values(node_sections, own, _REPLACED_BY)
