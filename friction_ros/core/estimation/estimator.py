@@ -129,14 +129,14 @@ class FrictionEstimateData:
         return asdict(self)
 
 
-def _dotted(mapping: Mapping[str, Any], prefix: str = ""):
+def _dotted(mapping: Mapping[str, Any], prefix: str = "", where: str = "estimator.initial"):
     """(dotted name, value) of the leaves of a nested mapping: ``{positive: {fc: x}}`` ->
     ``("positive.fc", x)``, the names :func:`~friction_ros.core.coefficient_exchange.to_fields` gives."""
     if not isinstance(mapping, Mapping):
-        raise ParameterError(f"estimator.initial = {mapping!r} must be a mapping of coefficient values")
+        raise ParameterError(f"{where} = {mapping!r} must be a mapping of coefficient values", where)
     for k, v in mapping.items():
         if isinstance(v, Mapping):
-            yield from _dotted(v, f"{prefix}{k}.")
+            yield from _dotted(v, f"{prefix}{k}.", where)
         else:
             yield f"{prefix}{k}", v
 
@@ -191,7 +191,7 @@ class OnlineFrictionEstimator:
             self.coefficient_names = list(m.param_names)
         else:
             coefs = list(ADAPTED[self.model_name].names)
-            init = dict(_dotted(cfg["initial"] or {}))
+            init = dict(_dotted(cfg["initial"] or {}, "", names("initial")))
             check_keys(names("initial"), init, coefs)
             vals = [check_real(names(f"initial.{k}"), init.get(k, 0.0)) for k in coefs]
             self.rls = RecursiveLeastSquares(
