@@ -241,3 +241,21 @@ def test_ros_parameter_errors_name_the_ros_keys(values, words, not_words):
         assert w in text, text
     for w in not_words:
         assert w not in text, text
+
+
+def test_cascade_velocity_pi_takes_the_cascade_gains_checked_once():
+    """The cascade's velocity PI is built from the cascade's typed gains (checked with the PID's
+    range when the section is typed), and names its own rules under cascade.velocity_pi."""
+    from friction_ros.core.control.schemes import Cascade
+
+    c = Cascade.from_dict({"kp_velocity": 0.4, "ki_velocity": 7.0, "i_clamp": 1.5})
+    pi = c.pi
+    assert (pi.p, pi.i, pi.d) == (0.4, 7.0, 0.0)
+    assert (pi.i_clamp_max, pi.i_clamp_min, pi.antiwindup_strategy) == (1.5, -1.5, "back_calculation")
+    assert pi.prefix == "cascade.velocity_pi"
+    with pytest.raises(ParameterError, match=r"^cascade\.kp_velocity = 2e\+12 is out of range"):
+        Cascade.from_dict({"kp_velocity": 2e12})
+    with pytest.raises(
+        ParameterError, match=r"^cascade\.velocity_pi\.i_clamp_min = 2 is out of range: must be <= 1.5"
+    ):
+        pi.set_gains(i_clamp_min=2.0)

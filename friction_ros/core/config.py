@@ -53,9 +53,40 @@ _TYPE_NAMES = {bool: "bool", int: "int", float: "float", str: "str"}
 Names = Callable[[str], str]
 
 
-def prefixed(prefix: str) -> Names:
-    """The :data:`Names` of a plain prefix: ``rel`` -> ``prefix.rel`` (``rel`` alone without prefix)."""
-    return lambda rel: f"{prefix}.{rel}" if prefix and rel else (prefix or rel)
+class prefixed:
+    """The :data:`Names` of a plain prefix: ``rel`` -> ``prefix.rel`` (``rel`` alone without prefix;
+    '' -> the prefix)."""
+
+    __slots__ = ("prefix",)
+
+    def __init__(self, prefix: str):
+        self.prefix = prefix
+
+    def __call__(self, rel: str) -> str:
+        return f"{self.prefix}.{rel}" if self.prefix and rel else (self.prefix or rel)
+
+    def __deepcopy__(self, memo: dict) -> prefixed:  # immutable
+        return self
+
+
+class within:
+    """The :data:`Names` of a section ``section`` of ``names``: ``rel`` -> ``names('section.rel')``."""
+
+    __slots__ = ("names", "section")
+
+    def __init__(self, names: Names, section: str):
+        self.names, self.section = names, section
+
+    def __call__(self, rel: str) -> str:
+        return self.names(f"{self.section}.{rel}" if rel else self.section)
+
+    def __deepcopy__(self, memo: dict) -> within:  # immutable
+        return self
+
+
+def names_of(path: str | Names) -> Names:
+    """A :data:`Names` from a section path (``friction``) or a :data:`Names` as it is."""
+    return path if callable(path) else prefixed(path)
 
 
 @dataclass(frozen=True)
@@ -123,14 +154,14 @@ class Field:
         """
         key = self.name if key is None else key
         if value is None:
-            raise ParameterError(f"{key} is missing: required {self._required_text()}")
+            raise ParameterError(f"{key} is missing: required {self._required_text()}", key)
         if self.is_list:
             if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
                 what = "numbers (flat float list)" if self.kind in (int, float) else "strings"
-                raise ParameterError(f"{key} = {value!r} must be a list of {what}")
+                raise ParameterError(f"{key} = {value!r} must be a list of {what}", key)
             items = [self._check_one(x, f"{key}[{i}]") for i, x in enumerate(list(value))]
             if not items and self.required:
-                raise ParameterError(f"{key} is empty: must hold at least one element")
+                raise ParameterError(f"{key} is empty: must hold at least one element", key)
             return items
         return self._check_one(value, key)
 
@@ -151,7 +182,7 @@ class Field:
         if self.kind is bool:
             return check_bool(key, value)
         if not isinstance(value, str):
-            raise ParameterError(f"{key} = {value!r} has type {type(value).__name__}: must be str")
+            raise ParameterError(f"{key} = {value!r} has type {type(value).__name__}: must be str", key)
         if self.choices:
             check_choice(key, value, self.choices)
         return value
@@ -241,13 +272,18 @@ class Schema:
             if isinstance(item, Field) and item.required and config.get(name) is None:
                 item.check(None, f"{prefix}.{name}" if prefix else name)
 
-    def validate(self, config: Mapping[str, Any] | None, prefix: str | None = None) -> dict[str, Any]:
+    def validate(
+        self, config: Mapping[str, Any] | None, prefix: str | None = None, names: Names | None = None
+    ) -> dict[str, Any]:
         """Validate a nested config: unknown keys, missing required values, types, ranges, choices.
 
         Returns a new nested dict with every field (defaults filled in, values normalised). Names in
-        messages start with ``prefix`` (default: the schema's name; '' for none).
+        messages start with ``prefix`` (default: the schema's name; '' for none), or are
+        ``names(<dotted key>)`` when given (a per-joint layout).
         """
-        return self._validate(config, prefixed(self.name if prefix is None else prefix), "")
+        if names is None:
+            names = prefixed(self.name if prefix is None else prefix)
+        return self._validate(config, names, "")
 
     def _validate(self, config: Mapping[str, Any] | None, names: Names, rel: str) -> dict[str, Any]:
         config = dict(config or {})

@@ -20,14 +20,17 @@ from __future__ import annotations
 
 import copy
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from typing import Any
 
-from friction_ros.core.config import unflatten
+from friction_ros.core.config import Names, unflatten
 from friction_ros.core.validation import ParameterError
 
 JOINT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 GAINS = "gains"
+#: section -> the key whose per-joint value replaces the node-level section as a whole
+REPLACED_BY = {"friction": "model", "reference": "type"}
 
 
 def check_joint_list(joints: Iterable[str], reserved: Iterable[str] = ()) -> list[str]:
@@ -121,7 +124,7 @@ def joint_values(
     """One joint's nested values: ``node_values`` with the joint's ``overrides`` (node-level flat
     names) on top. ``replaced_by`` (section -> key, default friction: model, reference: type): a section
     whose override names that key replaces the node-level section as a whole."""
-    replaced_by = {"friction": "model", "reference": "type"} if replaced_by is None else replaced_by
+    replaced_by = REPLACED_BY if replaced_by is None else replaced_by
     out = copy.deepcopy(dict(node_values))
     nested = unflatten(overrides)
     for key, value in nested.items():
@@ -143,13 +146,55 @@ def _merge(base: dict, top: Mapping) -> None:
             base[k] = copy.deepcopy(v)
 
 
-def name_joint_error(text: str, layout: JointLayout, joint: str, overridden: Iterable[str]) -> str:
-    """A core error about one joint's config, naming the parameter as the user wrote it: the
-    per-joint name when that key was given for the joint, else the node-level name and the joint."""
-    overridden = sorted(overridden, key=len, reverse=True)
-    for base in overridden:
-        if re.search(rf"(?<![\w.]){re.escape(base)}(?![\w])", text):
-            return re.sub(
-                rf"(?<![\w.]){re.escape(base)}(?![\w])", layout.joint_name(joint, base), text, count=1
-            )
-    return f"joint {joint}: {text}"
+class JointNames:
+    """The parameter names of one joint's effective values, as the user wrote them (a
+    :data:`~friction_ros.core.config.Names`): ``names("plant.gravity")`` is the per-joint name
+    ``plant.j2.gravity`` when the joint has its own value (``overridden``: its node-level flat names),
+    or a key of a section the joint replaces as a whole (``replaced_by`` as in :func:`joint_values`),
+    else the node-level name ``plant.gravity`` (the value every joint shares); a section with any key
+    of the joint's own by its per-joint name (``friction.j2``, ``gains.j2``). Core objects take it
+    where they take a name prefix, so their messages need no renaming.
+    """
+
+    def __init__(
+        self,
+        layout: JointLayout,
+        joint: str,
+        overridden: Iterable[str] = (),
+        replaced_by: Mapping[str, str] | None = None,
+    ):
+        self.layout, self.joint = layout, joint
+        self.own = frozenset(overridden)
+        replaced_by = REPLACED_BY if replaced_by is None else replaced_by
+        self.replaced = frozenset(s for s, k in replaced_by.items() if f"{s}.{k}" in self.own)
+
+    def __call__(self, rel: str) -> str:
+        head, _, rest = rel.partition(".")
+        if rel in self.own or (rest and head in self.replaced):
+            return self.layout.joint_name(self.joint, rel)
+        if rel and (rel in self.replaced or any(k.startswith(f"{rel}.") for k in self.own)):
+            return self.layout.joint_name(self.joint, f"{rel}._").removesuffix("._")  # a section
+        return rel
+
+    def owns(self, name: str | None) -> bool:
+        """Whether ``name`` (``plant.j2.gravity``, ``presliding.j2.amplitudes[0]``) is one of this
+        joint's own per-joint parameters (joint names clash with no parameter key)."""
+        parts = (name or "").split("[", 1)[0].split(".")
+        return len(parts) >= 2 and parts[1] == self.joint
+
+    def __deepcopy__(self, memo: dict) -> JointNames:  # immutable
+        return self
+
+
+@contextmanager
+def joint_errors(names: Names | None) -> Iterator[None]:
+    """Build one joint's objects: a :class:`ParameterError` about one of the joint's own parameters
+    (named by ``names``) passes as it is; one about a shared node-level value, or a rule across
+    values, says which joint's effective config it is (``joint j2: plant.gear_ratio = -2 ...``).
+    Names that are no :class:`JointNames` (a single-joint node) let every error pass."""
+    try:
+        yield
+    except ParameterError as exc:
+        if not isinstance(names, JointNames) or names.owns(exc.parameter):
+            raise
+        raise ParameterError(f"joint {names.joint}: {exc}", exc.parameter) from None

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 import yaml
 
+from friction_ros.core.config import Names
 from friction_ros.core.control_period import DEFAULT_CONTROL_PERIOD, check_control_period
 from friction_ros.core.friction import FrictionModel
 from friction_ros.core.plant.params import PlantParams
@@ -162,14 +163,17 @@ class Preset:
         """A new plant with this preset's parameters (the one way from a preset to a plant)."""
         return GearheadServoPlant(self.params)
 
-    def override(self, sections: Mapping[str, Any] | None = None, /, **changes: Any) -> Preset:
+    def override(
+        self, sections: Mapping[str, Any] | None = None, /, names: Names | None = None, **changes: Any
+    ) -> Preset:
         """This preset with ROS parameter ``sections`` and keyword ``changes`` applied.
 
         ``sections``: ``plant`` (merged key by key), ``friction_motor`` / ``friction_load`` (a section
         that names a ``model`` replaces the preset's model as a whole, one without merges its
         coefficients into the preset's model), ``control_period``; an empty section changes nothing.
         ``changes``: plant keys and/or whole ``friction_motor`` / ``friction_load`` models (configs or
-        model objects), applied after ``sections``.
+        model objects), applied after ``sections``. ``names``: the parameter names in messages
+        (:meth:`PlantParams.from_config <friction_ros.core.plant.params.PlantParams.from_config>`).
         """
         given = {k: v for k, v in dict(sections or {}).items() if v}
         check_keys("preset overrides", given, _OVERRIDE_KEYS)
@@ -182,10 +186,11 @@ class Preset:
                 sec = dict(given[side])
                 own = getattr(self.params, side)
                 friction[side] = sec if "model" in sec else {**own.to_config(), **sec}
-        params = self.params.replace(**plant, **friction) if plant or friction else self.params
+        params = self.params.replace(names, **plant, **friction) if plant or friction else self.params
         period = self.control_period
         if "control_period" in given:
-            period = check_control_period("preset.control_period", given["control_period"])
+            where = "preset.control_period" if names is None else names("control_period")
+            period = check_control_period(where, given["control_period"])
         return replace(self, params=params, control_period=period)
 
     def to_config(self) -> dict:
@@ -254,6 +259,7 @@ def resolve_preset(
     preset: str | os.PathLike | Preset | Mapping[str, Any] = "",
     overrides: Mapping[str, Any] | None = None,
     /,
+    names: Names | None = None,
     **changes: Any,
 ) -> Preset:
     """A preset by name, path or object with its sections overridden (the one way from a preset or a
@@ -264,6 +270,7 @@ def resolve_preset(
     (see :meth:`Preset.override`). ``preset`` = "" means no base preset: the sections are the whole
     plant (as in a ``friction-fit`` parameter file), missing plant keys take their defaults; a
     mapping ``preset`` is such a whole plant (``{"plant": ..., "friction_motor": ...}``).
+    ``names``: the parameter names in messages (a joint's, :class:`~friction_ros.core.joint_config.JointNames`).
     """
     if isinstance(preset, Mapping):
         preset, overrides = "", {**preset, **dict(overrides or {})}
@@ -281,7 +288,7 @@ def resolve_preset(
         }
         doc.update({side: changes[side] for side in _FRICTION_SIDES if side in changes})
         return preset_from_config(doc, source="parameter file")
-    return base.override(overrides, **changes)
+    return base.override(overrides, names=names, **changes)
 
 
 def make_plant(

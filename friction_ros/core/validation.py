@@ -14,7 +14,15 @@ import numpy as np
 
 
 class ParameterError(ValueError):
-    """A parameter is missing, of the wrong type or outside its allowed range."""
+    """A parameter is missing, of the wrong type or outside its allowed range.
+
+    ``parameter``: the name of the one parameter the message is about (as the check was given it),
+    None for a rule across several values.
+    """
+
+    def __init__(self, message: str = "", parameter: str | None = None):
+        super().__init__(message)
+        self.parameter = parameter
 
 
 def range_text(lo: float | None, hi: float | None, lo_open: bool = False, hi_open: bool = False) -> str:
@@ -53,18 +61,21 @@ def check_real(
             raise ParameterError(
                 f"{name} = {value!r} has type {type(value).__name__}: must be float, a number"
                 + ("" if allowed == "finite" else f" {allowed}")
-                + unit_s
+                + unit_s,
+                name,
             ) from None
     x = float(value)
     if math.isnan(x):
-        raise ParameterError(f"{name} = nan is not finite (nan is not a number): must be {allowed}{unit_s}")
+        raise ParameterError(
+            f"{name} = nan is not finite (nan is not a number): must be {allowed}{unit_s}", name
+        )
     if math.isinf(x) and not allow_inf:
-        raise ParameterError(f"{name} = {x} is not finite: must be a number {allowed}{unit_s}")
+        raise ParameterError(f"{name} = {x} is not finite: must be a number {allowed}{unit_s}", name)
     bad = (lo is not None and (x <= lo if lo_open else x < lo)) or (
         hi is not None and (x >= hi if hi_open else x > hi)
     )
     if bad:
-        raise ParameterError(f"{name} = {x:g} is out of range: must be {allowed}{unit_s}")
+        raise ParameterError(f"{name} = {x:g} is out of range: must be {allowed}{unit_s}", name)
     return x
 
 
@@ -75,9 +86,9 @@ def check_int(name: str, value: Any, lo: int | None = None, hi: int | None = Non
         if isinstance(value, float) and value.is_integer():
             value = int(value)
         else:
-            raise ParameterError(f"{name} = {value!r} must be an integer{allowed}")
+            raise ParameterError(f"{name} = {value!r} must be an integer{allowed}", name)
     if (lo is not None and value < lo) or (hi is not None and value > hi):
-        raise ParameterError(f"{name} = {value} is out of range: must be an integer{allowed}")
+        raise ParameterError(f"{name} = {value} is out of range: must be an integer{allowed}", name)
     return int(value)
 
 
@@ -86,7 +97,7 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
     choices = list(choices)
     if value not in choices:
         raise ParameterError(
-            f"{name} = {value!r} is not allowed: must be one of {', '.join(map(str, choices))}"
+            f"{name} = {value!r} is not allowed: must be one of {', '.join(map(str, choices))}", name
         )
     return value
 
@@ -94,7 +105,7 @@ def check_choice(name: str, value: Any, choices: Iterable[str]) -> str:
 def check_bool(name: str, value: Any) -> bool:
     """Return ``value`` if it is a bool, else raise ParameterError."""
     if not isinstance(value, bool):
-        raise ParameterError(f"{name} = {value!r} must be true or false")
+        raise ParameterError(f"{name} = {value!r} must be true or false", name)
     return value
 
 
@@ -105,5 +116,6 @@ def check_keys(section: str, given: Mapping[str, Any], allowed: Iterable[str]) -
     if unknown:
         raise ParameterError(
             f"{section}: unknown parameter(s) {', '.join(map(repr, unknown))}: "
-            f"allowed are {', '.join(allowed)}"
+            f"allowed are {', '.join(allowed)}",
+            section,
         )

@@ -4,12 +4,11 @@ input gate) and the build of one joint's controller from them (see
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 from friction_ros.core.config import Field, Schema
 from friction_ros.core.control.controller import controller_from_ros_parameters
 from friction_ros.core.control.controller_config import CONTROLLER_FIELDS, controller_parameter_schema
 from friction_ros.core.control_period import control_period_field
+from friction_ros.core.joint_config import JointNames, joint_errors
 from friction_ros.core.joint_type import JOINT_TYPE_FIELD, units_of
 from friction_ros.core.validation import ParameterError
 from friction_ros.nodes.parameters import SCHEDULING, input_gate_schema
@@ -64,35 +63,17 @@ def parameter_schema(given_section=lambda prefix: {}) -> Schema:
     )
 
 
-def joint_names(layout, joint: str, overrides: dict) -> Callable[[str], str]:
-    """The parameter names of one joint's typed config: a key given for the joint (a section with
-    such a key) by its per-joint name (``friction.j3.fc``, ``gains.j3``), others by the node-level one."""
-
-    def names(rel: str) -> str:
-        if rel in overrides:
-            return layout.joint_name(joint, rel)
-        if rel and any(k.startswith(f"{rel}.") for k in overrides):
-            return layout.joint_name(joint, f"{rel}._").removesuffix("._")
-        return rel
-
-    return names
-
-
 def build_controller(values: dict, layout, joint: str, overrides: dict, single: bool):
-    """(controller, reference config) of one joint; errors name the joint's parameter (the
-    node-level one after ``joint <name>:`` when the joint has none of its own)."""
-    names = None if single else joint_names(layout, joint, overrides)
-    try:
-        with units_of(values.get("joint_type", "revolute")):
-            ctrl, ref = controller_from_ros_parameters(values, names)
+    """(controller, reference config) of one joint; errors name the joint's parameter as written
+    (:class:`~friction_ros.core.joint_config.JointNames`; the node-level one after ``joint <name>:``
+    when the value is shared)."""
+    names = None if single else JointNames(layout, joint, overrides)
+    with units_of(values.get("joint_type", "revolute")), joint_errors(names):
+        ctrl, ref = controller_from_ros_parameters(values, names)
         if not ctrl.limits_given:
             raise ParameterError(
                 "effort_limit is not set: give the joint's torque (force) limit, e.g. effort_limit: 2.5 "
                 "(per joint gains.<joint>.effort_limit; or finite u_clamp_min/u_clamp_max): the plant "
                 "preset's, the drive's torque_limit, or the one friction-fit writes"
             )
-        return ctrl, ref
-    except ParameterError as exc:
-        if single or f".{joint}." in str(exc).split(" ", 1)[0] + ".":
-            raise
-        raise ParameterError(f"joint {joint}: {exc}") from None
+    return ctrl, ref

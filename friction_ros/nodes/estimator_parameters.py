@@ -4,12 +4,10 @@ in the layout of :mod:`friction_ros.core.joint_config` (see :mod:`friction_ros.n
 
 from __future__ import annotations
 
-import re
-
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Names, Schema, prefixed
 from friction_ros.core.control_period import control_period_field
 from friction_ros.core.estimation.estimator import ESTIMATOR_SCHEMA
-from friction_ros.core.joint_config import joint_values
+from friction_ros.core.joint_config import JointLayout, JointNames, joint_values
 from friction_ros.core.joint_type import JOINT_TYPE_FIELD
 from friction_ros.nodes.parameters import SCHEDULING, input_gate_schema
 
@@ -36,7 +34,6 @@ NODE_FIELDS = [
 PLAIN_KEYS = tuple(name for name, item in ESTIMATOR_SCHEMA.items.items() if isinstance(item, Field)) + (
     "joint_type",
 )
-ESTIMATOR_PREFIX = re.compile(r"(?<![\w.])estimator\.")
 
 
 JOINTS_FIELD = Field(
@@ -69,8 +66,20 @@ def core_config(values: dict) -> dict:
 def joint_config(node_values: dict, overrides: dict) -> dict:
     """One joint's nested values: node-level values with the joint's overrides (node-level flat
     names) on top; see the module docstring for ``initial`` / ``lugre``."""
-    out = joint_values(node_values, overrides, {"lugre": "model"})
+    out = joint_values(node_values, overrides, REPLACED_BY)
     if "model" in overrides and overrides["model"] != node_values.get("model"):
         own = {k[len("initial.") :]: v for k, v in overrides.items() if k.startswith("initial.")}
         out["initial"] = joint_values({}, own)
     return out
+
+
+#: the single-joint node's names of the estimator's keys: its ROS names (``forgetting_factor``)
+NODE_NAMES: Names = prefixed("")
+#: a per-joint section whose own ``model`` replaces the node-level section
+REPLACED_BY = {"lugre": "model"}
+
+
+def joint_names(layout: JointLayout | None, joint: str, overrides: dict) -> Names:
+    """The ROS names of one joint's estimator keys (``gains.j3.forgetting_factor`` for its own
+    value, ``forgetting_factor`` for the node-level one); the node's names without ``joints``."""
+    return NODE_NAMES if layout is None else JointNames(layout, joint, overrides, REPLACED_BY)

@@ -54,16 +54,15 @@ from friction_ros.core.estimation.estimator import OnlineFrictionEstimator
 from friction_ros.core.estimation.joint_estimators import EstimatorGroup
 from friction_ros.core.input_gate import JointInputGate
 from friction_ros.core.joint_channel import JointChannel
-from friction_ros.core.joint_config import GAINS, name_joint_error
+from friction_ros.core.joint_config import GAINS, joint_errors
 from friction_ros.core.joint_type import units_of
-from friction_ros.core.validation import ParameterError
 from friction_ros.core.wire import FrictionEstimateEncoder, JointStateDecoder
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.estimator_parameters import (  # noqa: F401 (parameter_schema, core_config: the node's API)
-    ESTIMATOR_PREFIX,
     PLAIN_KEYS,
     core_config,
     joint_config,
+    joint_names,
     parameter_schema,
 )
 from friction_ros.nodes.joint_parameters import current_joint_values, declare_joint_config, declare_joints
@@ -139,16 +138,11 @@ class FrictionEstimatorNode(ParameterNode):
     def _build(
         self, joint: str, cfg: dict, overrides: dict, joint_type: str = "revolute"
     ) -> OnlineFrictionEstimator:
-        """The joint's estimator; a ParameterError names the joint's parameter as written, in the
-        joint's units."""
-        try:
-            with units_of(joint_type):
-                return OnlineFrictionEstimator(cfg)
-        except ParameterError as exc:
-            if self.single:
-                raise
-            text = ESTIMATOR_PREFIX.sub("", str(exc))
-            raise ParameterError(name_joint_error(text, self.layout, joint, overrides)) from None
+        """The joint's estimator; a ParameterError names the joint's parameter as written
+        (:func:`~friction_ros.nodes.estimator_parameters.joint_names`), in the joint's units."""
+        names = joint_names(self.layout, joint, overrides)
+        with units_of(joint_type), joint_errors(names):
+            return OnlineFrictionEstimator(cfg, names)
 
     def _apply(self, changes: dict) -> None:
         if self.single:

@@ -31,9 +31,10 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
-from friction_ros.core.config import Field, Schema, TypedConfig
+from friction_ros.core.config import Field, Names, Schema, TypedConfig
 from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
 from friction_ros.core.validation import ParameterError
 
@@ -113,27 +114,36 @@ class Pid:
     def __init__(self, config: Mapping[str, Any] | None = None, *, prefix: str = "pid", **kwargs):
         """From a dict of control_toolbox names and/or keywords (``Pid(p=1.0)``), typed once with
         :data:`PID_SCHEMA`; messages name ``prefix.<key>``."""
-        self._set(PID_SCHEMA.typed({**dict(config or {}), **kwargs}, prefix))
+        typed = PID_SCHEMA.typed({**dict(config or {}), **kwargs}, prefix)
+        self._set(typed, typed.path)
         self.reset()
 
     @classmethod
     def from_config(cls, config: TypedConfig) -> Pid:
         """From a typed ``pid`` section (:data:`PID_SCHEMA`), as it is."""
         self = cls.__new__(cls)
-        self._set(config)
+        self._set(config, config.path)
         self.reset()
         return self
 
-    def _set(self, cfg: TypedConfig) -> None:
-        """Take a typed section; only the rules across fields are checked here."""
+    @classmethod
+    def from_checked(cls, names: Names, **values: Any) -> Pid:
+        """From gains that a typed section of the owner checked already against the ranges of
+        :data:`PID_SCHEMA` (the cascade's velocity PI: the cascade's own fields), the other keys at
+        their defaults; only the rules across fields run. ``names``: the parameter names in messages."""
+        self = cls.__new__(cls)
+        self._set(SimpleNamespace(**{**PID_DEFAULTS, **values}), names)
+        self.reset()
+        return self
+
+    def _set(self, cfg: TypedConfig | SimpleNamespace, names: Names) -> None:
+        """Take checked values (a typed section); only the rules across fields are checked here."""
         imax, imin, umax, umin = cfg.i_clamp_max, cfg.i_clamp_min, cfg.u_clamp_max, cfg.u_clamp_min
         if imin > imax:
-            raise ParameterError(f"{cfg.path('i_clamp_min')} = {imin:g} is out of range: must be <= {imax:g}")
+            raise ParameterError(f"{names('i_clamp_min')} = {imin:g} is out of range: must be <= {imax:g}")
         if umin >= umax:
-            raise ParameterError(
-                f"{cfg.path('u_clamp_min')} = {umin:g} is out of range: must be < u_clamp_max"
-            )
-        self._typed = cfg
+            raise ParameterError(f"{names('u_clamp_min')} = {umin:g} is out of range: must be < u_clamp_max")
+        self._names = names
         self.p, self.i, self.d = cfg.p, cfg.i, cfg.d
         self.i_clamp_max, self.i_clamp_min = imax, imin
         self.u_clamp_max, self.u_clamp_min = umax, umin
@@ -145,7 +155,7 @@ class Pid:
     @property
     def prefix(self) -> str:
         """How messages name this PID's section."""
-        return self._typed.path()
+        return self._names("")
 
     def config(self) -> dict[str, Any]:
         """Current parameters as a dict with control_toolbox names."""
@@ -153,7 +163,7 @@ class Pid:
 
     def set_gains(self, **kwargs) -> None:
         """Change parameters at run time (typed as a whole; nothing changes on error)."""
-        self._set(PID_SCHEMA.typed({**self.config(), **kwargs}, names=self._typed.path))
+        self._set(PID_SCHEMA.typed({**self.config(), **kwargs}, names=self._names), self._names)
         self.integral = min(max(self.integral, self.i_clamp_min), self.i_clamp_max)
 
     def reset(self, integral: float = 0.0) -> None:

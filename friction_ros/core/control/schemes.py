@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from friction_ros.core.config import Field, Schema, TypedConfig
+from friction_ros.core.config import Field, Schema, TypedConfig, within
+from friction_ros.core.control.command_safety import PLAUSIBLE_GAIN
 from friction_ros.core.control.pid import Pid
 from friction_ros.core.validation import ParameterError, check_real
 
@@ -319,8 +320,9 @@ class Cascade(_Scheme):
         "cascade",
         [
             _f("kp_position", 60.0, "position loop gain", "1/s", lo=0.0),
-            _f("kp_velocity", 0.3, "velocity PI: proportional gain", "N*m*s/rad", lo=0.0),
-            _f("ki_velocity", 6.0, "velocity PI: integral gain", "N*m/rad", lo=0.0),
+            # the velocity PI's gains: the PID's range (Pid.from_checked takes them as checked here)
+            _f("kp_velocity", 0.3, "velocity PI: proportional gain", "N*m*s/rad", lo=0.0, hi=PLAUSIBLE_GAIN),
+            _f("ki_velocity", 6.0, "velocity PI: integral gain", "N*m/rad", lo=0.0, hi=PLAUSIBLE_GAIN),
             _f("velocity_feedforward", 1.0, "velocity feedforward share", lo=0.0, hi=2.0),
             _f("i_clamp", 2.0, "velocity PI: integral bound", "N*m", lo=0.0, allow_inf=True),
         ],
@@ -331,15 +333,13 @@ class Cascade(_Scheme):
     def __init__(self, c: TypedConfig):
         self.kp_position, self.kp_velocity, self.ki_velocity = c.kp_position, c.kp_velocity, c.ki_velocity
         self.velocity_feedforward, self.i_clamp = c.velocity_feedforward, c.i_clamp
-        self.pi = Pid(
-            {
-                "p": self.kp_velocity,
-                "i": self.ki_velocity,
-                "i_clamp_max": self.i_clamp,
-                "i_clamp_min": -self.i_clamp,
-                "antiwindup_strategy": "back_calculation",
-            },
-            prefix=f"{c.path()}.velocity_pi",
+        self.pi = Pid.from_checked(
+            within(c.path, "velocity_pi"),
+            p=self.kp_velocity,
+            i=self.ki_velocity,
+            i_clamp_max=self.i_clamp,
+            i_clamp_min=-self.i_clamp,
+            antiwindup_strategy="back_calculation",
         )
 
     def config(self) -> dict[str, Any]:

@@ -40,10 +40,10 @@ from typing import Any
 
 import numpy as np
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Names, Schema, within
 from friction_ros.core.estimation.adapted_models import ADAPTED
 from friction_ros.core.estimation.lugre_observer import LuGreObserver
-from friction_ros.core.estimation.measurement import DisturbanceObserver, TorqueBalanceEstimator
+from friction_ros.core.estimation.measurement import NAMES, DisturbanceObserver, TorqueBalanceEstimator
 from friction_ros.core.estimation.rls import RecursiveLeastSquares
 from friction_ros.core.validation import (
     ParameterError,
@@ -129,14 +129,14 @@ class FrictionEstimateData:
         return asdict(self)
 
 
-def _dotted(mapping: Mapping[str, Any], prefix: str = ""):
+def _dotted(mapping: Mapping[str, Any], prefix: str = "", where: str = "estimator.initial"):
     """(dotted name, value) of the leaves of a nested mapping: ``{positive: {fc: x}}`` ->
     ``("positive.fc", x)``, the names :func:`~friction_ros.core.coefficient_exchange.to_fields` gives."""
     if not isinstance(mapping, Mapping):
-        raise ParameterError(f"estimator.initial = {mapping!r} must be a mapping of coefficient values")
+        raise ParameterError(f"{where} = {mapping!r} must be a mapping of coefficient values", where)
     for k, v in mapping.items():
         if isinstance(v, Mapping):
-            yield from _dotted(v, f"{prefix}{k}.")
+            yield from _dotted(v, f"{prefix}{k}.", where)
         else:
             yield f"{prefix}{k}", v
 
@@ -157,16 +157,17 @@ def _regressor(model: str, v: float, vs: float, delta: float) -> tuple[float, ..
 class OnlineFrictionEstimator:
     """Online friction estimator façade; see the module docstring and :data:`ESTIMATOR_SCHEMA`."""
 
-    def __init__(self, config: Mapping[str, Any] | None = None):
-        cfg = ESTIMATOR_SCHEMA.validate(config)
-        n = "estimator"
+    def __init__(self, config: Mapping[str, Any] | None = None, names: Names = NAMES):
+        """``names``: the parameter names in messages (default ``estimator.<key>``; a node gives its
+        ROS names, a joint's :class:`~friction_ros.core.joint_config.JointNames` on several joints)."""
+        cfg = ESTIMATOR_SCHEMA.validate(config, names=names)
         self.method = cfg["method"]
         self.model_name = cfg["model"]
         self.inertia = cfg["inertia"]
         if self.method == "torque_balance":
-            self.front = TorqueBalanceEstimator(self.inertia, cfg["filter_time_constant"])
+            self.front = TorqueBalanceEstimator(self.inertia, cfg["filter_time_constant"], names)
         else:  # checks inertia > 0
-            self.front = DisturbanceObserver(self.inertia, cfg["observer_bandwidth"])
+            self.front = DisturbanceObserver(self.inertia, cfg["observer_bandwidth"], names)
         self.filter_time_constant = cfg["filter_time_constant"]
         self.observer_bandwidth = cfg["observer_bandwidth"]
         self.vs, self.delta = cfg["vs"], cfg["delta"]
@@ -182,19 +183,21 @@ class OnlineFrictionEstimator:
             from friction_ros.core.friction.registry import build_model  # loads the models' kernels
 
             if not cfg["lugre"]:
-                raise ParameterError(f"{n}.lugre is missing: model = lugre needs a LuGre model config")
-            m = build_model(cfg["lugre"], f"{n}.lugre")
+                raise ParameterError(f"{names('lugre')} is missing: model = lugre needs a LuGre model config")
+            m = build_model(cfg["lugre"], names("lugre"), within(names, "lugre"))
             if m is None or m.name != "lugre":
-                raise ParameterError(f"{n}.lugre must be a config with model: lugre")
+                raise ParameterError(f"{names('lugre')} must be a config with model: lugre")
             self.lugre = LuGreObserver(m, 0.0)
             self.coefficient_names = list(m.param_names)
         else:
-            names = list(ADAPTED[self.model_name].names)
-            init = dict(_dotted(cfg["initial"] or {}))
-            check_keys(f"{n}.initial", init, names)
-            vals = [check_real(f"{n}.initial.{k}", init.get(k, 0.0)) for k in names]
-            self.rls = RecursiveLeastSquares(names, vals, cfg["forgetting_factor"], cfg["initial_covariance"])
-            self.coefficient_names = names
+            coefs = list(ADAPTED[self.model_name].names)
+            init = dict(_dotted(cfg["initial"] or {}, "", names("initial")))
+            check_keys(names("initial"), init, coefs)
+            vals = [check_real(names(f"initial.{k}"), init.get(k, 0.0)) for k in coefs]
+            self.rls = RecursiveLeastSquares(
+                coefs, vals, cfg["forgetting_factor"], cfg["initial_covariance"], param_names=names
+            )
+            self.coefficient_names = coefs
         self.reset()
 
     def config(self) -> dict[str, Any]:

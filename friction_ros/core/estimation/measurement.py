@@ -23,7 +23,11 @@ import math
 
 import numpy as np
 
+from friction_ros.core.config import Names, prefixed
 from friction_ros.core.validation import check_real
+
+#: the names of the estimator's keys in messages by default (``estimator.inertia``)
+NAMES: Names = prefixed("estimator")
 
 
 class _CriticalLowPass:
@@ -69,10 +73,10 @@ class _CriticalLowPass:
 class TorqueBalanceEstimator:
     """tau_f_hat = Q tau_m - J d/dt(Q theta_dot); see the module docstring."""
 
-    def __init__(self, inertia: float, filter_time_constant: float = 0.005):
-        self.inertia = check_real("estimator.inertia", inertia, 0.0, unit="kg*m^2")
+    def __init__(self, inertia: float, filter_time_constant: float = 0.005, names: Names = NAMES):
+        self.inertia = check_real(names("inertia"), inertia, 0.0, unit="kg*m^2")
         self.filter_time_constant = check_real(
-            "estimator.filter_time_constant", filter_time_constant, 0.0, 1.0, lo_open=True, unit="s"
+            names("filter_time_constant"), filter_time_constant, 0.0, 1.0, lo_open=True, unit="s"
         )
         w = 1.0 / self.filter_time_constant
         self._qt = _CriticalLowPass(w)
@@ -92,11 +96,9 @@ class TorqueBalanceEstimator:
 class DisturbanceObserver:
     """Disturbance observer d_hat = z - L J v, z_dot = L (tau - d_hat); see the module docstring."""
 
-    def __init__(self, inertia: float, bandwidth: float = 200.0):
-        self.inertia = check_real("estimator.inertia", inertia, 0.0, lo_open=True, unit="kg*m^2")
-        self.bandwidth = check_real(
-            "estimator.observer_bandwidth", bandwidth, 0.0, lo_open=True, unit="rad/s"
-        )
+    def __init__(self, inertia: float, bandwidth: float = 200.0, names: Names = NAMES):
+        self.inertia = check_real(names("inertia"), inertia, 0.0, lo_open=True, unit="kg*m^2")
+        self.bandwidth = check_real(names("observer_bandwidth"), bandwidth, 0.0, lo_open=True, unit="rad/s")
         self.reset()
 
     def reset(self) -> None:

@@ -21,6 +21,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from friction_ros.core.config import Names
+from friction_ros.core.estimation.measurement import NAMES
 from friction_ros.core.validation import ParameterError, check_real
 
 
@@ -34,18 +36,19 @@ class RecursiveLeastSquares:
         forgetting_factor: float = 0.999,
         initial_covariance: float = 10.0,
         max_covariance: float = 1e6,
+        param_names: Names = NAMES,
     ):
         self.names = list(names)
         n = len(self.names)
         if n == 0:
             raise ParameterError("rls: needs at least one coefficient")
         self.forgetting_factor = check_real(
-            "estimator.forgetting_factor", forgetting_factor, 0.5, 1.0, lo_open=True
+            param_names("forgetting_factor"), forgetting_factor, 0.5, 1.0, lo_open=True
         )
         self.initial_covariance = check_real(
-            "estimator.initial_covariance", initial_covariance, 0.0, lo_open=True
+            param_names("initial_covariance"), initial_covariance, 0.0, lo_open=True
         )
-        self.max_covariance = check_real("estimator.max_covariance", max_covariance, 0.0, lo_open=True)
+        self.max_covariance = check_real(param_names("max_covariance"), max_covariance, 0.0, lo_open=True)
         init = np.zeros(n) if initial is None else np.asarray(initial, dtype=float)
         if init.shape != (n,) or not np.all(np.isfinite(init)):
             raise ParameterError(

@@ -27,15 +27,16 @@ Safety: a held joint leaving its limits, a joint whose program a safety limit st
 experiment: every running program ends with an ABORT for its open segment, every joint gets zero
 torque from then on, ``abort_reasons[-1]`` names the joint first (``joint j2: position limit:
 ...``; ``not_excited``: ``joint not excited: joint j2: ...``). A held joint's ABORT event is ``program`` ``arm``, segment
-``hold``. Every ABORT a joint's program emits has its reason prefixed with the joint (``describe``
-maps it, e.g. to the per-joint parameter name). After a completed experiment every joint is held
+``hold``. Every ABORT a joint's program emits has its reason prefixed with the joint; the limits in
+a reason are named by the program's ``names`` (``limits.j2.max_travel`` for a joint's own value).
+After a completed experiment every joint is held
 (the end tail).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -72,7 +73,7 @@ def hold_gains(config: Mapping[str, Any], p: float = 0.0, d: float = 0.0) -> Hol
     return Hold(float(p) if p > 0 else float(vl["i"]), float(d) if d > 0 else float(vl["p"]), limit, bias)
 
 
-def _default_describe(joint: str, text: str) -> str:
+def _describe(joint: str, text: str) -> str:
     return f"joint {joint}: {text}"
 
 
@@ -86,7 +87,6 @@ class ArmExperiment:
         sequence: str = "one_at_a_time",
         gap: float = 0.5,
         holds: Sequence[Hold] | None = None,
-        describe: Callable[[str, str], str] | None = None,
     ):
         if sequence not in SEQUENCES:
             raise ParameterError(
@@ -99,7 +99,6 @@ class ArmExperiment:
         self.sequence = sequence
         self.gap = float(gap)
         self.holds = list(holds) if holds is not None else [hold_gains(p.config) for p in self.programs]
-        self.describe = describe or _default_describe
         n = len(self.joints)
         durations = [p.total_duration for p in self.programs]
         if sequence == "one_at_a_time":
@@ -177,19 +176,19 @@ class ArmExperiment:
         self._last = [0.0] * len(self.joints)
 
     def _held_violation(self, i: int, position: float, velocity: float) -> str | None:
-        lim = self.programs[i].config["limits"]
+        lim, names = self.programs[i].config["limits"], self.programs[i].names
         if not (math.isfinite(position) and math.isfinite(velocity)):
             return f"joint state not finite while held (position {position}, velocity {velocity})"
         travel = position - self._pos0[i]
         if abs(travel) > lim["max_travel"]:
             return (
                 f"position limit while held: travel {travel:+.4g} rad from the start exceeds "
-                f"limits.max_travel = {lim['max_travel']:g} rad"
+                f"{names('limits.max_travel')} = {lim['max_travel']:g} rad"
             )
         if abs(velocity) > lim["max_velocity"]:
             return (
                 f"velocity limit while held: |{velocity:+.4g}| rad/s exceeds "
-                f"limits.max_velocity = {lim['max_velocity']:g} rad/s"
+                f"{names('limits.max_velocity')} = {lim['max_velocity']:g} rad/s"
             )
         return None
 
@@ -227,7 +226,7 @@ class ArmExperiment:
                 continue
             why = self._held_violation(i, q[i], v[i])
             if why is not None:
-                reason = self.describe(self.joints[i], why)
+                reason = _describe(self.joints[i], why)
                 events.append((i, Event(self.t, ARM_PROGRAM, "hold", 0, ABORT, math.nan, reason)))
                 self._stop(reason, i, events)
                 return list(self._last), events
@@ -245,18 +244,18 @@ class ArmExperiment:
             prog = self.programs[i]
             tau, evs = prog.update(t, q[i], v[i])
             for e in evs:  # an ABORT's reason names the joint (and its per-joint parameter)
-                note = self.describe(self.joints[i], e.note) if e.event == ABORT and e.note else e.note
+                note = _describe(self.joints[i], e.note) if e.event == ABORT and e.note else e.note
                 events.append((i, e._replace(time=self.t, note=note)))
             torques[i] = tau
             if not prog.done:
                 continue
             if prog.not_excited is not None:
                 rest = prog.not_excited.removeprefix(NOT_EXCITED)
-                reason = NOT_EXCITED + self.describe(self.joints[i], rest)
+                reason = NOT_EXCITED + _describe(self.joints[i], rest)
                 self._stop(reason, i, events, not_excited=True)
                 return list(self._last), events
             if prog.aborted and prog.on_limit == "stop":
-                self._stop(self.describe(self.joints[i], prog.abort_reasons[-1]), i, events)
+                self._stop(_describe(self.joints[i], prog.abort_reasons[-1]), i, events)
                 return list(self._last), events
             self._running.remove(i)  # completed: held where it ended
             self._finished[i] = True

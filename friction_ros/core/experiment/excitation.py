@@ -78,8 +78,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from friction_ros.core.config import Names
 from friction_ros.core.experiment.events import ABORT, END, START, Event
-from friction_ros.core.experiment.excitation_config import resolve_config
+from friction_ros.core.experiment.excitation_config import NAMES, resolve_config
 from friction_ros.core.experiment.segments import Rest, Segment, SegmentContext
 from friction_ros.core.experiment.torque_programs import (
     BreakawayRamp,
@@ -120,8 +121,10 @@ class Status:
 class ExcitationProgram:
     """State machine over planned segments; see the module docstring."""
 
-    def __init__(self, config: Mapping[str, Any] | None = None):
-        self.config = resolve_config(config)
+    def __init__(self, config: Mapping[str, Any] | None = None, names: Names = NAMES):
+        #: the parameter names in messages (``names("limits.max_travel")``; a joint's on an arm)
+        self.names = names
+        self.config = resolve_config(config, names)
         c = self.config
         names = c["sequence"] if c["program"] == "sequence" else [c["program"]]
         segs: list[Segment] = []
@@ -298,10 +301,13 @@ class ExcitationProgram:
         if abs(travel) > self.max_travel:
             return (
                 f"position limit: travel {travel:+.4g} rad from the start exceeds "
-                f"limits.max_travel = {self.max_travel:g} rad"
+                f"{self.names('limits.max_travel')} = {self.max_travel:g} rad"
             )
         if abs(velocity) > self.max_velocity:
-            return f"velocity limit: |{velocity:+.4g}| rad/s exceeds limits.max_velocity = {self.max_velocity:g} rad/s"
+            return (
+                f"velocity limit: |{velocity:+.4g}| rad/s exceeds "
+                f"{self.names('limits.max_velocity')} = {self.max_velocity:g} rad/s"
+            )
         return None
 
     def update(self, t: float, position: float, velocity: float) -> tuple[float, list[Event]]:
@@ -382,7 +388,8 @@ class ExcitationProgram:
         if not math.isfinite(torque) or abs(torque + bias) > self.max_torque:
             self._abort(
                 self.t,
-                f"torque limit: command {torque + bias:+.4g} N*m exceeds limits.max_torque = {self.max_torque:g} N*m",
+                f"torque limit: command {torque + bias:+.4g} N*m exceeds "
+                f"{self.names('limits.max_torque')} = {self.max_torque:g} N*m",
                 events,
             )
             self._last_torque = self.ctx.last_torque = 0.0

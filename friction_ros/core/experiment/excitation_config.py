@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from friction_ros.core import validation
+from friction_ros.core.config import Names, prefixed
 from friction_ros.core.validation import ParameterError
 
 PROGRAM_NAMES = ("plateaus", "breakaway", "random", "chirp", "presliding", "sequence")
@@ -80,6 +81,9 @@ PROFILES: dict[str, dict[str, Any]] = {
         "presliding": {"amplitudes": [0.4, 0.8], "cycles": 2},
     },
 }
+#: the names of the keys in messages by default: the keys themselves (``limits.max_travel``)
+NAMES: Names = prefixed("")
+
 SECTIONS = (
     "limits",
     "velocity_loop",
@@ -108,117 +112,123 @@ def profile_defaults(profile: str = "default") -> dict[str, Any]:
     return _merge(DEFAULTS, PROFILES[validation.check_choice("profile", profile, PROFILES)])
 
 
-def resolve_config(config: Mapping[str, Any] | None = None) -> dict[str, Any]:
+def resolve_config(config: Mapping[str, Any] | None = None, names: Names = NAMES) -> dict[str, Any]:
     """Profile defaults merged with ``config`` (``profile`` key, default ``default``), validated.
 
-    Returns the complete config (every key, checked ranges); raises ParameterError naming the key.
+    Returns the complete config (every key, checked ranges); raises ParameterError naming the key
+    as ``names(<dotted key>)`` (default: the key; a joint's names on an arm).
     """
     config = dict(config or {})
-    profile = validation.check_choice("profile", config.pop("profile", "default"), PROFILES)
+    profile = validation.check_choice(names("profile"), config.pop("profile", "default"), PROFILES)
     validation.check_keys("excitation", config, list(DEFAULTS))
     for s in SECTIONS:
         if s in config:
             if not isinstance(config[s], Mapping):
-                raise ParameterError(f"{s} = {config[s]!r} must be a mapping of {s} parameters")
-            validation.check_keys(s, config[s], DEFAULTS[s])
+                raise ParameterError(f"{names(s)} = {config[s]!r} must be a mapping of {s} parameters")
+            validation.check_keys(names(s), config[s], DEFAULTS[s])
     cfg = _merge(_merge(DEFAULTS, PROFILES[profile]), config)
     cfg["profile"] = profile
-    _validate(cfg)
+    _validate(cfg, names)
     return cfg
 
 
-def _validate(c: dict) -> None:
-    validation.check_choice("program", c["program"], PROGRAM_NAMES)
-    validation.check_real("dt", c["dt"], 1e-5, 0.1, unit="s")
+def _validate(c: dict, n: Names) -> None:
+    validation.check_choice(n("program"), c["program"], PROGRAM_NAMES)
+    validation.check_real(n("dt"), c["dt"], 1e-5, 0.1, unit="s")
     seq = c["sequence"]
     if isinstance(seq, str):
         seq = [s.strip() for s in seq.split(",") if s.strip()]
     if not isinstance(seq, (list, tuple)) or not seq:
-        raise ParameterError(f"sequence = {seq!r} must be a non-empty list of programs")
+        raise ParameterError(f"{n('sequence')} = {seq!r} must be a non-empty list of programs", n("sequence"))
     for i, name in enumerate(seq):
-        validation.check_choice(f"sequence[{i}]", name, [p for p in PROGRAM_NAMES if p != "sequence"])
+        validation.check_choice(f"{n('sequence')}[{i}]", name, [p for p in PROGRAM_NAMES if p != "sequence"])
     c["sequence"] = list(seq)
-    validation.check_real("gap", c["gap"], 0.0, 60.0, unit="s")
+    validation.check_real(n("gap"), c["gap"], 0.0, 60.0, unit="s")
     lim = c["limits"]
     validation.check_real(
-        "bias", c["bias"], -lim["max_torque"], lim["max_torque"], hi_open=True, lo_open=True, unit="N*m"
+        n("bias"), c["bias"], -lim["max_torque"], lim["max_torque"], hi_open=True, lo_open=True, unit="N*m"
     )
     validation.check_real(
-        "limits.max_travel", lim["max_travel"], 0.0, lo_open=True, unit="rad", allow_inf=True
+        n("limits.max_travel"), lim["max_travel"], 0.0, lo_open=True, unit="rad", allow_inf=True
     )
     validation.check_real(
-        "limits.max_velocity", lim["max_velocity"], 0.0, lo_open=True, unit="rad/s", allow_inf=True
+        n("limits.max_velocity"), lim["max_velocity"], 0.0, lo_open=True, unit="rad/s", allow_inf=True
     )
-    validation.check_real("limits.max_torque", lim["max_torque"], 0.0, lo_open=True, unit="N*m")
-    validation.check_choice("limits.on_limit", lim["on_limit"], ON_LIMIT)
+    validation.check_real(n("limits.max_torque"), lim["max_torque"], 0.0, lo_open=True, unit="N*m")
+    validation.check_choice(n("limits.on_limit"), lim["on_limit"], ON_LIMIT)
     vl = c["velocity_loop"]
-    validation.check_real("velocity_loop.p", vl["p"], 0.0, unit="N*m*s/rad")
-    validation.check_real("velocity_loop.i", vl["i"], 0.0, unit="N*m/rad")
+    validation.check_real(n("velocity_loop.p"), vl["p"], 0.0, unit="N*m*s/rad")
+    validation.check_real(n("velocity_loop.i"), vl["i"], 0.0, unit="N*m/rad")
     validation.check_real(
-        "velocity_loop.torque_limit", vl["torque_limit"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
+        n("velocity_loop.torque_limit"), vl["torque_limit"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
-    validation.check_real("velocity_loop.inertia", vl["inertia"], 0.0, unit="kg*m^2")
-    validation.check_real("velocity_loop.damping", vl["damping"], 0.0, unit="N*m*s/rad")
-    validation.check_real("velocity_loop.coulomb", vl["coulomb"], 0.0, unit="N*m")
-    validation.check_bool("velocity_loop.remember_integral", vl["remember_integral"])
+    validation.check_real(n("velocity_loop.inertia"), vl["inertia"], 0.0, unit="kg*m^2")
+    validation.check_real(n("velocity_loop.damping"), vl["damping"], 0.0, unit="N*m*s/rad")
+    validation.check_real(n("velocity_loop.coulomb"), vl["coulomb"], 0.0, unit="N*m")
+    validation.check_bool(n("velocity_loop.remember_integral"), vl["remember_integral"])
     p = c["plateaus"]
-    validation.check_real("plateaus.v_min", p["v_min"], 0.0, lo_open=True, unit="rad/s")
-    validation.check_real("plateaus.v_max", p["v_max"], p["v_min"], unit="rad/s")
-    validation.check_int("plateaus.count", p["count"], 1, 1000)
-    validation.check_real("plateaus.settle", p["settle"], 0.0, 60.0, unit="s")
-    validation.check_real("plateaus.hold", p["hold"], 0.0, 600.0, lo_open=True, unit="s")
-    validation.check_int("plateaus.repeats", p["repeats"], 1, 1000)
-    validation.check_real("plateaus.settle_travel", p["settle_travel"], 0.0, unit="rad")
-    validation.check_real("plateaus.hold_travel", p["hold_travel"], 0.0, unit="rad")
+    validation.check_real(n("plateaus.v_min"), p["v_min"], 0.0, lo_open=True, unit="rad/s")
+    validation.check_real(n("plateaus.v_max"), p["v_max"], p["v_min"], unit="rad/s")
+    validation.check_int(n("plateaus.count"), p["count"], 1, 1000)
+    validation.check_real(n("plateaus.settle"), p["settle"], 0.0, 60.0, unit="s")
+    validation.check_real(n("plateaus.hold"), p["hold"], 0.0, 600.0, lo_open=True, unit="s")
+    validation.check_int(n("plateaus.repeats"), p["repeats"], 1, 1000)
+    validation.check_real(n("plateaus.settle_travel"), p["settle_travel"], 0.0, unit="rad")
+    validation.check_real(n("plateaus.hold_travel"), p["hold_travel"], 0.0, unit="rad")
     if p["v_max"] >= lim["max_velocity"]:
         raise ParameterError(
-            f"plateaus.v_max = {p['v_max']:g} is out of range: must be < limits.max_velocity "
-            f"= {lim['max_velocity']:g} [rad/s]"
+            f"{n('plateaus.v_max')} = {p['v_max']:g} is out of range: must be < "
+            f"{n('limits.max_velocity')} = {lim['max_velocity']:g} [rad/s]"
         )
     b = c["breakaway"]
-    validation.check_real("breakaway.max", b["max"], 0.0, lim["max_torque"], lo_open=True, unit="N*m")
-    validation.check_real("breakaway.start", b["start"], 0.0, b["max"], hi_open=True, unit="N*m")
-    validation.check_real("breakaway.step", b["step"], 0.0, b["max"], lo_open=True, unit="N*m")
-    validation.check_real("breakaway.step_time", b["step_time"], c["dt"], 60.0, unit="s")
-    validation.check_int("breakaway.counts", b["counts"], 1, 10000)
-    validation.check_real("breakaway.resolution", b["resolution"], 0.0, 1.0, lo_open=True, unit="rad")
-    validation.check_real("breakaway.preload_time", b["preload_time"], 0.0, 60.0, unit="s")
-    validation.check_real("breakaway.release", b["release"], 0.0, 60.0, unit="s")
-    validation.check_real("breakaway.detection_lag", b["detection_lag"], 0.0, unit="N*m")
-    validation.check_int("breakaway.repeats", b["repeats"], 1, 1000)
+    validation.check_real(n("breakaway.max"), b["max"], 0.0, lim["max_torque"], lo_open=True, unit="N*m")
+    validation.check_real(n("breakaway.start"), b["start"], 0.0, b["max"], hi_open=True, unit="N*m")
+    validation.check_real(n("breakaway.step"), b["step"], 0.0, b["max"], lo_open=True, unit="N*m")
+    validation.check_real(n("breakaway.step_time"), b["step_time"], c["dt"], 60.0, unit="s")
+    validation.check_int(n("breakaway.counts"), b["counts"], 1, 10000)
+    validation.check_real(n("breakaway.resolution"), b["resolution"], 0.0, 1.0, lo_open=True, unit="rad")
+    validation.check_real(n("breakaway.preload_time"), b["preload_time"], 0.0, 60.0, unit="s")
+    validation.check_real(n("breakaway.release"), b["release"], 0.0, 60.0, unit="s")
+    validation.check_real(n("breakaway.detection_lag"), b["detection_lag"], 0.0, unit="N*m")
+    validation.check_int(n("breakaway.repeats"), b["repeats"], 1, 1000)
     r = c["random"]
-    validation.check_real("random.duration", r["duration"], 0.0, 3600.0, lo_open=True, unit="s")
-    validation.check_real("random.bandwidth", r["bandwidth"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
+    validation.check_real(n("random.duration"), r["duration"], 0.0, 3600.0, lo_open=True, unit="s")
+    validation.check_real(n("random.bandwidth"), r["bandwidth"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
     validation.check_real(
-        "random.amplitude", r["amplitude"], 0.0, lim["max_velocity"], lo_open=True, unit="rad/s"
+        n("random.amplitude"), r["amplitude"], 0.0, lim["max_velocity"], lo_open=True, unit="rad/s"
     )
-    validation.check_real("random.low_level", r["low_level"], 0.0, 1.0)
-    validation.check_real("random.envelope_period", r["envelope_period"], 0.0, 3600.0, lo_open=True, unit="s")
-    validation.check_int("random.seed", r["seed"], 0, 2**32 - 1)
+    validation.check_real(n("random.low_level"), r["low_level"], 0.0, 1.0)
+    validation.check_real(
+        n("random.envelope_period"), r["envelope_period"], 0.0, 3600.0, lo_open=True, unit="s"
+    )
+    validation.check_int(n("random.seed"), r["seed"], 0, 2**32 - 1)
     ch = c["chirp"]
-    validation.check_real("chirp.duration", ch["duration"], 0.0, 3600.0, lo_open=True, unit="s")
-    validation.check_real("chirp.f0", ch["f0"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
-    validation.check_real("chirp.f1", ch["f1"], ch["f0"], 0.45 / c["dt"], unit="Hz")
+    validation.check_real(n("chirp.duration"), ch["duration"], 0.0, 3600.0, lo_open=True, unit="s")
+    validation.check_real(n("chirp.f0"), ch["f0"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
+    validation.check_real(n("chirp.f1"), ch["f1"], ch["f0"], 0.45 / c["dt"], unit="Hz")
     validation.check_real(
-        "chirp.amplitude", ch["amplitude"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
+        n("chirp.amplitude"), ch["amplitude"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
-    validation.check_real("chirp.final_amplitude", ch["final_amplitude"], 0.0, ch["amplitude"], unit="N*m")
+    validation.check_real(n("chirp.final_amplitude"), ch["final_amplitude"], 0.0, ch["amplitude"], unit="N*m")
     ps = c["presliding"]
     amps = ps["amplitudes"]
     if not isinstance(amps, (list, tuple)) or not amps:
-        raise ParameterError(f"presliding.amplitudes = {amps!r} must be a non-empty list of torques [N*m]")
+        raise ParameterError(
+            f"{n('presliding.amplitudes')} = {amps!r} must be a non-empty list of torques [N*m]",
+            n("presliding.amplitudes"),
+        )
     ps["amplitudes"] = [
         validation.check_real(
-            f"presliding.amplitudes[{i}]", a, 0.0, lim["max_torque"], lo_open=True, unit="N*m"
+            f"{n('presliding.amplitudes')}[{i}]", a, 0.0, lim["max_torque"], lo_open=True, unit="N*m"
         )
         for i, a in enumerate(amps)
     ]
     validation.check_real(
-        "presliding.frequency", ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz"
+        n("presliding.frequency"), ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz"
     )
-    validation.check_int("presliding.cycles", ps["cycles"], 1, 10000)
+    validation.check_int(n("presliding.cycles"), ps["cycles"], 1, 10000)
     mc = c["motion_check"]
-    validation.check_real("motion_check.fraction", mc["fraction"], 0.0, 1.0)
-    validation.check_int("motion_check.max_failures", mc["max_failures"], 0, 1000)
-    validation.check_int("motion_check.travel_counts", mc["travel_counts"], 0, 1_000_000)
-    validation.check_int("motion_check.reversals", mc["reversals"], 0, 1000)
+    validation.check_real(n("motion_check.fraction"), mc["fraction"], 0.0, 1.0)
+    validation.check_int(n("motion_check.max_failures"), mc["max_failures"], 0, 1000)
+    validation.check_int(n("motion_check.travel_counts"), mc["travel_counts"], 0, 1_000_000)
+    validation.check_int(n("motion_check.reversals"), mc["reversals"], 0, 1000)

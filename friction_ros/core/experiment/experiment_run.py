@@ -23,8 +23,7 @@ from friction_ros.core.experiment.excitation import EXIT_ABORTED, EXIT_NOT_EXCIT
 from friction_ros.core.experiment.excitation_config import SECTIONS
 from friction_ros.core.input_gate import select_sample
 from friction_ros.core.joint_channel import ERROR, OK, WARN
-from friction_ros.core.joint_config import name_joint_error
-from friction_ros.core.validation import ParameterError
+from friction_ros.core.joint_config import JointNames, joint_errors
 
 WRONG_JOINT_LOG_PERIOD = 10.0  # s between two "joint not in joint_states" lines
 ABORT = 2  # ExperimentEvent.event of an aborted segment
@@ -48,24 +47,17 @@ def program_config(values: dict, node_values: dict) -> dict:
 
 def arm_experiment(joints, joint_values: dict, node_values: dict, layout, overrides: dict) -> ArmExperiment:
     """The experiment of an arm: one program and PD hold per joint (``joint_values[j]``: joint j's
-    values); a bad value raises ParameterError naming the joint's parameter."""
+    values, ``overrides[j]`` its own ones); every message names a joint's parameters as written
+    (:class:`~friction_ros.core.joint_config.JointNames`)."""
     programs, holds = [], []
     for j in joints:
         jv = joint_values[j]
-        try:
-            prog = ExcitationProgram(program_config(jv, node_values))
+        names = JointNames(layout, j, overrides[j])
+        with joint_errors(names):
+            prog = ExcitationProgram(program_config(jv, node_values), names)
             holds.append(hold_gains(prog.config, jv["hold_p"], jv["hold_d"]))
-        except ParameterError as exc:
-            raise ParameterError(name_joint_error(str(exc), layout, j, overrides[j])) from None
         programs.append(prog)
-
-    def describe(joint: str, text: str) -> str:
-        named = name_joint_error(text, layout, joint, overrides[joint])
-        return named if named.startswith(f"joint {joint}: ") else f"joint {joint}: {named}"
-
-    return ArmExperiment(
-        joints, programs, node_values["joint_sequence"], node_values["joint_gap"], holds, describe
-    )
+    return ArmExperiment(joints, programs, node_values["joint_sequence"], node_values["joint_gap"], holds)
 
 
 def event_line(e, joint: str = "") -> str:

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from friction_ros.core.config import Names, names_of
 from friction_ros.core.validation import ParameterError, check_keys
 
 from . import _kernels
@@ -39,8 +40,9 @@ class Asymmetric(FrictionModel):
         base: str = "",
         positive: Mapping[str, Any] | None = None,
         negative: Mapping[str, Any] | None = None,
-        _path: str = "",
+        _path: str | Names = "",
     ) -> None:
+        _path = names_of(_path)("")  # nested sections: named by their path
         self.path = p = _path or self.name
         if base not in BASE_MODEL_CLASSES:
             allowed = ", ".join(BASE_MODEL_CLASSES)

@@ -13,7 +13,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from friction_ros.core.config import Field
+from friction_ros.core.config import Field, Names, names_of
 from friction_ros.core.validation import ParameterError, check_keys, check_real
 
 from . import _kernels
@@ -37,13 +37,13 @@ class FrictionModel:
     #: controller's feedback bound scales down (Dahl ``sigma``, LuGre ``sigma0``, GMS ``k``); None: none
     STIFFNESS: ClassVar[str | None] = None
 
-    def __init__(self, *, _path: str = "", **coefficients: Any) -> None:
-        path = _path or self.name
-        check_keys(path, coefficients, [c.name for c in self.COEFS])
+    def __init__(self, *, _path: str | Names = "", **coefficients: Any) -> None:
+        names = names_of(_path or self.name)
+        check_keys(names(""), coefficients, [c.name for c in self.COEFS])
         self._set(
-            path,
+            names,
             OrderedDict(
-                (c.name, c.check(coefficients.get(c.name, c.default), f"{path}.{c.name}")) for c in self.COEFS
+                (c.name, c.check(coefficients.get(c.name, c.default), names(c.name))) for c in self.COEFS
             ),
         )
 
@@ -60,11 +60,13 @@ class FrictionModel:
         )
         return self
 
-    def _set(self, path: str, values: OrderedDict[str, Any]) -> None:
-        """Take checked coefficient values; the cross-coefficient rules, kernel parameters, state."""
+    def _set(self, path: str | Names, values: OrderedDict[str, Any]) -> None:
+        """Take checked coefficient values; the cross-coefficient rules, kernel parameters, state.
+        ``path``: the section's name, or the :data:`~friction_ros.core.config.Names` of its keys."""
+        self._names = names_of(path)
         #: the parameter name of the model's section in messages (``friction`` in a ROS parameter
         #: file; the model's name by default)
-        self.path = path
+        self.path = self._names("")
         self._c = values
         self._validate()
         self._p = np.ascontiguousarray(self._kernel_params(), dtype=np.float64)
@@ -77,9 +79,14 @@ class FrictionModel:
     def _require_fs_ge_fc(self, fs: str = "fs", fc: str = "fc") -> None:
         if self._c[fs] < self._c[fc]:
             raise ParameterError(
-                f"{self.path}.{fs} = {self._c[fs]:g} is out of range: must be >= {self.path}.{fc} "
-                f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]"
+                f"{self.key(fs)} = {self._c[fs]:g} is out of range: must be >= {self.key(fc)} "
+                f"= {self._c[fc]:g} (static friction below Coulomb friction is not allowed) [N*m]",
+                self.key(fs),
             )
+
+    def key(self, coefficient: str) -> str:
+        """The parameter name of ``coefficient`` in messages (``friction.fc``, ``friction.j2.fc``)."""
+        return self._names(coefficient)
 
     def _kernel_params(self) -> list[float]:
         out: list[float] = []
@@ -104,7 +111,7 @@ class FrictionModel:
         """Return a new model of the same kind with some coefficients replaced (validated)."""
         c = dict(self.coefficients)
         c.update(changes)
-        return type(self)(**c, _path="" if self.path == self.name else self.path)
+        return type(self)(**c, _path=self._names)
 
     @property
     def param_names(self) -> list[str]:
@@ -141,7 +148,7 @@ class FrictionModel:
             else:
                 c[k] = vec[i]
                 i += 1
-        return type(self)(**c, _path="" if self.path == self.name else self.path)
+        return type(self)(**c, _path=self._names)
 
     def _steady(self, v: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         raise NotImplementedError

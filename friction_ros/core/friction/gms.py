@@ -109,12 +109,12 @@ class GMS(DynamicModel):
         k, a = self._c["k"], self._c["alpha"]
         if len(k) != len(a):
             raise ParameterError(
-                f"{self.path}.alpha has {len(a)} elements but {self.path}.k has {len(k)}: "
+                f"{self.key('alpha')} has {len(a)} elements but {self.key('k')} has {len(k)}: "
                 "must have the same element count"
             )
         if abs(sum(a) - 1.0) > ALPHA_SUM_TOL:
             raise ParameterError(
-                f"{self.path}.alpha sums to {sum(a):.9g}: the element weights must sum to 1 "
+                f"{self.key('alpha')} sums to {sum(a):.9g}: the element weights must sum to 1 "
                 f"(+-{ALPHA_SUM_TOL:g})"
             )
 

@@ -6,6 +6,7 @@ import copy
 from collections.abc import Mapping
 from typing import Any
 
+from friction_ros.core.config import Names, names_of
 from friction_ros.core.validation import ParameterError, check_choice
 
 from .asymmetric import Asymmetric
@@ -34,18 +35,22 @@ def register_model(cls: type[FrictionModel]) -> type[FrictionModel]:
     return cls
 
 
-def make_model(name: str, _path: str = "", **coefficients: Any) -> FrictionModel:
+def make_model(name: str, _path: str | Names = "", **coefficients: Any) -> FrictionModel:
     """Build a validated friction model by name (see ``MODEL_NAMES`` and :func:`register_model`);
-    messages name its coefficients ``<_path>.<coefficient>`` (default: the model's name)."""
-    check_choice(f"{_path or 'friction'}.model", name, list(MODEL_CLASSES))
+    messages name its coefficients ``<_path>.<coefficient>`` (default: the model's name), or
+    ``_path(<coefficient>)`` for a :data:`~friction_ros.core.config.Names`."""
+    check_choice(names_of(_path or "friction")("model"), name, list(MODEL_CLASSES))
     return MODEL_CLASSES[name](**coefficients, **({"_path": _path} if _path else {}))
 
 
-def model_from_config(config: Mapping[str, Any] | FrictionModel | None, path: str = "") -> FrictionModel:
+def model_from_config(
+    config: Mapping[str, Any] | FrictionModel | None, path: str | Names = ""
+) -> FrictionModel:
     """Build a model from ``{"model": name, <coefficient>: value, ...}`` (inverse of ``to_config``).
 
     ``None`` or an empty mapping gives the ``none`` model; a model instance is returned unchanged.
-    ``path``: the parameter name of the model's section in messages (default: the model's name).
+    ``path``: the parameter name of the model's section in messages (default: the model's name), or
+    the :data:`~friction_ros.core.config.Names` of its keys.
     """
     if isinstance(config, FrictionModel):
         return config

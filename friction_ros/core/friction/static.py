@@ -436,7 +436,7 @@ class Polynomial(StaticModel):
     def _validate(self):
         if len(self._c["pos"]) != len(self._c["neg"]):
             raise ParameterError(
-                f"{self.path}.neg has {len(self._c['neg'])} elements but {self.path}.pos has "
+                f"{self.key('neg')} has {len(self._c['neg'])} elements but {self.key('pos')} has "
                 f"{len(self._c['pos'])}: must have the same element count"
             )
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from friction_ros.core.joint_config import JointLayout, joint_values, name_joint_error
+from friction_ros.core.joint_config import JointLayout, JointNames, joint_errors, joint_values
 from friction_ros.core.presets import Preset, resolve_preset
 from friction_ros.core.validation import ParameterError
 
@@ -48,7 +48,7 @@ def joint_plant_configs(
         for name in own:
             if name.split(".", 1)[0] not in PRESET_SECTIONS:
                 raise ParameterError(
-                    f"{name.split('.', 1)[0]}.{joint}.{name.split('.', 1)[-1]}: only the plant sections "
+                    f"{JointLayout(joints, ()).joint_name(joint, name)}: only the plant sections "
                     f"({', '.join(PRESET_SECTIONS)}) have per-joint values"
                 )
         sections = joint_values(node_sections, own, _REPLACED_BY)
@@ -61,17 +61,17 @@ def resolve_joint_presets(
 ) -> list[Preset]:
     """The plant preset of every joint, all at the node's ``control_period`` (one joint: the node's
     preset with its sections, as without ``joints``). Errors name the per-joint parameter when the
-    joint has its own value (``plant.j2.gravity``), else say which joint. Pure."""
+    joint has its own value (``plant.j2.gravity``), else the node-level one and the joint
+    (:class:`~friction_ros.core.joint_config.JointNames`). Pure."""
     multi = bool(values.get("joints"))
     layout = JointLayout(joints, PRESET_SECTIONS)
     out = []
     for joint, name, sections in joint_plant_configs(values, joints, overrides):
-        try:
-            out.append(resolve_preset(name, {**sections, "control_period": values["control_period"]}))
-        except ParameterError as exc:
-            if not multi:
-                raise
-            raise ParameterError(
-                name_joint_error(str(exc), layout, joint, overrides.get(joint, {}))
-            ) from None
+        sections = {**sections, "control_period": values["control_period"]}
+        if not multi:
+            out.append(resolve_preset(name, sections))
+            continue
+        names = JointNames(layout, joint, overrides.get(joint, {}), _REPLACED_BY)
+        with joint_errors(names):
+            out.append(resolve_preset(name, sections, names=names))
     return out

@@ -12,10 +12,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, fields
 from typing import Any
 
-from friction_ros.core.config import Field, Schema
+from friction_ros.core.config import Field, Names, Schema, prefixed, within
 from friction_ros.core.friction import model_from_config
 from friction_ros.core.validation import (
     ParameterError,
+    check_keys,
     check_real,
 )
 
@@ -191,13 +192,7 @@ class PlantParams:
     extra: dict = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
-        for name, spec in PLANT_SCHEMA.fields():
-            setattr(self, name, spec.check(getattr(self, name), f"plant.{name}"))
-        if self.backlash > 0 and self.coupling_stiffness == 0:
-            raise ParameterError(
-                f"plant.coupling_stiffness = 0 with plant.backlash = {self.backlash:g}: must be > 0 when "
-                "backlash is modelled (the gap closes on a compliant contact)"
-            )
+        _check_plant(self.__dict__, _PLANT_NAMES)
         self.friction_motor = model_from_config(self.friction_motor)
         self.friction_load = model_from_config(self.friction_load)
 
@@ -228,11 +223,24 @@ class PlantParams:
 
     @classmethod
     def from_config(
-        cls, plant: Mapping[str, Any], friction_motor: Any = None, friction_load: Any = None
+        cls,
+        plant: Mapping[str, Any],
+        friction_motor: Any = None,
+        friction_load: Any = None,
+        names: Names | None = None,
     ) -> PlantParams:
+        """From a ``plant`` section and the friction models' configs; messages name
+        ``names("plant.<key>")``, ``names("friction_motor.<coefficient>")`` ... (default: those names)."""
         plant = dict(plant or {})
-        PLANT_SCHEMA.check_given(plant)
-        return cls(**plant, friction_motor=friction_motor, friction_load=friction_load)
+        if names is None:
+            PLANT_SCHEMA.check_given(plant)
+            return cls(**plant, friction_motor=friction_motor, friction_load=friction_load)
+        check_keys(names("plant"), plant, PLANT_SCHEMA.items)
+        full = {name: plant.get(name, spec.default) for name, spec in PLANT_SCHEMA.fields()}
+        _check_plant(full, within(names, "plant"))
+        fm = model_from_config(friction_motor, within(names, "friction_motor"))
+        fl = model_from_config(friction_load, within(names, "friction_load"))
+        return cls(**plant, friction_motor=fm, friction_load=fl)
 
     def to_config(self) -> dict:
         """``{"plant": {...}, "friction_motor": {...}, "friction_load": {...}}`` (ROS parameter section)."""
@@ -247,9 +255,25 @@ class PlantParams:
             "friction_load": self.friction_load.to_config(),
         }
 
-    def replace(self, **changes: Any) -> PlantParams:
+    def replace(self, names: Names | None = None, **changes: Any) -> PlantParams:
+        """These parameters with ``changes`` (plant keys, whole friction models); ``names`` as in
+        :meth:`from_config`."""
         cfg = self.to_config()
         fm = changes.pop("friction_motor", cfg["friction_motor"])
         fl = changes.pop("friction_load", cfg["friction_load"])
         cfg["plant"].update(changes)
-        return PlantParams.from_config(cfg["plant"], fm, fl)
+        return PlantParams.from_config(cfg["plant"], fm, fl, names)
+
+
+_PLANT_NAMES = prefixed("plant")
+
+
+def _check_plant(values: dict, names: Names) -> None:
+    """Check and normalise the plant keys of ``values`` in place (messages: ``names(key)``)."""
+    for name, spec in PLANT_SCHEMA.fields():
+        values[name] = spec.check(values[name], names(name))
+    if values["backlash"] > 0 and values["coupling_stiffness"] == 0:
+        raise ParameterError(
+            f"{names('coupling_stiffness')} = 0 with {names('backlash')} = {values['backlash']:g}: must "
+            "be > 0 when backlash is modelled (the gap closes on a compliant contact)"
+        )
