@@ -59,7 +59,7 @@ from pathlib import Path
 
 import yaml
 
-from friction_ros.cli.bringup import Bringup, NodeSpec
+from friction_ros.cli.bringup import Bringup, NodeSpec, composed_spec, members
 from friction_ros.cli.experiment_arm import arm_setup
 from friction_ros.cli.experiment_config import (
     nest,
@@ -279,6 +279,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         exp_params = ([params_tmp] if params_tmp else []) + list(args.params)
         specs.append(NodeSpec("identification_experiment", args.namespace, exp_params, exp_over))
+        if preset:  # simulated: plant and experiment in one process (module docstring)
+            specs[1:] = [composed_spec(specs[1:])]
         for s in specs:
             s.command()
     except (ParameterError, ValueError, OSError) as exc:
@@ -318,19 +320,26 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     t0 = time.monotonic()
-    simulated = any(s.node == "plant_simulator" for s in specs)
+    nodes = {m.node: m for s in specs for m in members(s)}
+    simulated = "plant_simulator" in nodes
     state_timeout = args.state_timeout or (30.0 if simulated else 10.0)
     watch = FirstStateWatch(states)
     bring.start()
     t_started = time.monotonic()
-    procs = {s.node: p for s, p in bring.procs}
+    # the process of each node (simulated: plant and experiment share one)
+    procs = {m.node: p for s, p in bring.procs for m in members(s)}
     exp = procs["identification_experiment"]
+    exp_label = nodes["identification_experiment"].label
+    # the labels whose exit is the experiment's own (its node, the nodes composed with it)
+    exp_labels = {
+        lbl for s, p in bring.procs if p is exp for lbl in (s.label, *(m.label for m in members(s)))
+    }
     status = "ok"
     while exp.poll() is None:
         if stop.is_set():
             status = "interrupted"
             break
-        if any(p.poll() is not None for n, p in procs.items() if n != "identification_experiment"):
+        if any(p.poll() is not None for p in procs.values() if p is not exp):
             status = "failed"
             break
         if time.monotonic() - t0 > timeout:
@@ -348,8 +357,7 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     bring.stop()
     wall = time.monotonic() - t0
     rc_exp = exp.returncode
-    exp_label = next(s.label for s, _ in bring.procs if s.node == "identification_experiment")
-    if first is not None and first[0] == exp_label and first[1] in (EXIT_ABORTED, EXIT_NOT_EXCITED):
+    if first is not None and first[0] in exp_labels and first[1] in (EXIT_ABORTED, EXIT_NOT_EXCITED):
         first = None  # the run's own result, reported below with the summary
     error = None
     if first is not None:
@@ -370,8 +378,8 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     elif status == "failed":  # another node ended by itself (exit 0) before the program did
         gone = [
             s.label
-            for s, _ in bring.procs
-            if s.node != "identification_experiment" and bring.ended.get(s.label, math.inf) < bring.stopping
+            for s, p in bring.procs
+            if p is not exp and bring.ended.get(s.label, math.inf) < bring.stopping
         ]
         error = f"{', '.join(gone) or 'a node'} exited before the program ended (after {wall:.1f} s wall)"
     elif rc_exp == EXIT_NOT_EXCITED:

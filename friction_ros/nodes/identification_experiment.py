@@ -81,15 +81,17 @@ from friction_ros.nodes.safe_subscription import safe_subscription
 # publisher discovers and matches them on its own time; with both cores loaded that took longer
 # than 0.5 s once in a CI run (the bag lacked the first state, so the fit of the same run differed)
 MATCH_GRACE = 2.0
-_RESULT = {"code": 0}
 
 
 class IdentificationExperiment(ParameterNode):
     """Thin adapter over :class:`~friction_ros.core.experiment.experiment_run.ExperimentRun`; see
     the module docstring."""
 
-    def __init__(self):
-        super().__init__("identification_experiment")
+    def __init__(self, **kwargs):
+        super().__init__("identification_experiment", **kwargs)
+        #: the process exit code this node asks for (0, 3 or 4: module docstring); run_node and
+        #: composition return it
+        self.exit_code = 0
         profile = profile_of(self)
         reserved = {item.name for item in parameter_schema(profile, arm=True)} | {GAINS, "joints"}
         self.arm_joints = declare_joints(self, reserved)  # [] -> one joint, joint_name
@@ -185,7 +187,7 @@ class IdentificationExperiment(ParameterNode):
             self._done_wall = time.monotonic()
             wall = time.monotonic() - (self._wall0 or time.monotonic())
             log_events(self.get_logger(), self.run.finish(t_ns, wall))
-            _RESULT["code"] = self.run.code
+            self.exit_code = self.run.code
 
     def _publish_event(self, stamp, e, joint: str = "") -> None:
         """``joint`` (an arm): the joint the event is about, in ``header.frame_id`` (events.event_joint_matches)."""
@@ -233,8 +235,7 @@ class IdentificationExperiment(ParameterNode):
 
 
 def main(args=None) -> int:
-    rc = run_node(IdentificationExperiment, args)
-    return rc or _RESULT["code"]
+    return run_node(IdentificationExperiment, args)
 
 
 if __name__ == "__main__":
