@@ -16,10 +16,8 @@ Modes:
               ``use_sim_time`` follow; the whole graph runs as fast as it can and deterministically.
               If no answer arrives within ``resend_period`` (wall) the pending state is published
               again (a subscriber that joined late gets it); duplicate commands are ignored.
-              Every ``ACK_EVERY`` states the plant waits (up to ``ACK_TIMEOUT_S`` wall) until every
-              reliable reader of ``joint_states`` has acknowledged them: a recorder that falls behind
-              (a busy machine) pauses the graph instead of losing states once the publisher's
-              history (RECORDED_QOS, 5000) is full; the run stays the same run.
+              ``joint_states`` is published with LOCKSTEP_RECORDED_QOS (a 60,000-deep history): a
+              recorder may fall a minute of joint time behind the graph before it loses a state.
 
 Several joints (``joints: [j1, j2, ...]``; unset = the one joint ``joint_name``, exactly as before):
 one core plant per joint, all stepped with the same ``control_period``, and one ``joint_states``
@@ -50,7 +48,6 @@ from __future__ import annotations
 import time
 
 from builtin_interfaces.msg import Time
-from rclpy.duration import Duration
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -67,17 +64,11 @@ from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram
 from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.plant_health import PlantHealth
 from friction_ros.nodes.plant_parameters import JOINTS_FIELD, parameter_schema
-from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.qos import COMMAND_QOS, LOCKSTEP_RECORDED_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, log_events, run_node
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 __all__ = ["PlantSimulator", "main", "parameter_schema"]
-
-#: lockstep: states between two waits for the readers' acknowledgements (a fifth of RECORDED_QOS's
-#: 5000: a reader is never more than this behind when the next wait begins)
-ACK_EVERY = 1000
-#: lockstep: longest wait [s wall] for the acknowledgements (a reader that died is not waited for)
-ACK_TIMEOUT_S = 5.0
 
 
 class PlantSimulator(PlantHealth, ParameterNode):
@@ -116,7 +107,8 @@ class PlantSimulator(PlantHealth, ParameterNode):
         # bytes: same wire type, no message objects in the 1 kHz path
         self._encoder = JointStateEncoder(self.joints)
         self._decoder = JointStateDecoder()
-        self.state_pub = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
+        state_qos = LOCKSTEP_RECORDED_QOS if self.lockstep else RECORDED_QOS
+        self.state_pub = self.create_publisher(JointState, "joint_states", state_qos)
         self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
         # several joints: one command per joint may arrive at once (one controller per joint)
         qos = (
@@ -151,8 +143,6 @@ class PlantSimulator(PlantHealth, ParameterNode):
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
         if self.lockstep:
             self._last_publish = 0.0
-            self._ack_at = ACK_EVERY  # the step after which the readers' acknowledgements are awaited
-            self._ack_timeout = Duration(seconds=ACK_TIMEOUT_S)
             self.create_timer(self.p["resend_period"] / 4, self._resend)
             self._publish_pending()
             self.loop = None
@@ -220,9 +210,6 @@ class PlantSimulator(PlantHealth, ParameterNode):
         if self.clock_pub is not None and self.sim.clock_due(self._clock_ns):
             self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
         self.state_pub.publish(self._encoder.pack(sec, nanosec, *self.sim.pending))
-        if self.lockstep and self.sim.steps >= self._ack_at:  # back-pressure (module docstring)
-            self._ack_at = self.sim.steps + ACK_EVERY
-            self.state_pub.wait_for_all_acked(self._ack_timeout)
         self._last_publish = time.monotonic()
 
     def _resend(self) -> None:

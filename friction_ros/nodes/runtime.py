@@ -25,6 +25,10 @@ from friction_ros.nodes.loops import DeadlineLoop
 from friction_ros.nodes.node_help import exit_if_help
 from friction_ros.nodes.stopping import StopRequested, interruptible
 
+#: executor callbacks between two checks of rclpy.ok() in :func:`spin_until_stopped` (a stop
+#: request is checked after every callback)
+OK_CHECK_EVERY = 64
+
 
 def set_realtime_priority(priority: int, logger=None) -> bool:
     """Run every thread of this process (rclpy executor, DDS receive threads) with SCHED_FIFO ``priority``.
@@ -253,7 +257,11 @@ def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> int:
                 while not stop.is_set() and rclpy.ok():
                     loops[0].run_once(executor)
             while not stop.is_set() and rclpy.ok():
-                executor.spin_once(timeout_sec=0.05)
+                # rclpy.ok() takes the context's lock: once per OK_CHECK_EVERY callbacks, not per callback
+                for _ in range(OK_CHECK_EVERY):
+                    executor.spin_once(timeout_sec=0.05)
+                    if stop.is_set():
+                        break
     except (rclpy.executors.ExternalShutdownException, StopRequested):
         pass
     finally:
