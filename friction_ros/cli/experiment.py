@@ -30,11 +30,13 @@ event names its joint, so ``friction-fit BAG --joint j2`` fits j2 from j2's segm
 leaving its limits stops the whole arm (zero torque on every joint, exit 3); the summary is
 printed for every joint.
 
-Starts separate processes (friction-bringup machinery): ``plant_simulator`` (unless ``--no-sim``),
-``bag_recorder`` (joint_states, experiment_events, optionally diagnostics) and
-``identification_experiment``, which waits for the recorder before it begins. When the program is
-over the experiment node exits by itself (zero torque), then the recorder gets SIGINT so the bag
-is finished properly, then the plant. Ctrl-C stops the experiment first (zero torque). Prints the
+Starts (friction-bringup machinery) ``bag_recorder`` (joint_states, experiment_events, optionally
+diagnostics) and ``identification_experiment``, which waits for the recorder before it begins; a
+simulated joint's ``plant_simulator`` runs in the experiment's process (one executor,
+:mod:`friction_ros.nodes.composition`: about half the CPU of two processes, the same bag), a real
+joint's drive (``--no-sim``) is yours. Output lines are labelled with the node they are about.
+When the program is over the experiment node ends its process by itself (zero torque), then the
+recorder gets SIGINT so the bag is finished properly. Ctrl-C stops the experiment first (zero torque). Prints the
 bag location and a summary: segments, aborts, breakaway torques and the plateau map (mean and
 spread of velocity and torque per plateau; with the simulated plant also the preset's true
 steady-state friction). Exit code: 0 completed, 3 stopped by a safety limit, 2 bad arguments or
