@@ -43,6 +43,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from friction_ros.cli.composed_output import LineRouter
 from friction_ros.core.validation import ParameterError
 from friction_ros.core.yaml_files import check_parameter_file, load_yaml
 
@@ -129,6 +130,11 @@ class ComposedSpec(NodeSpec):
         return "composed[" + ",".join(m.label for m in self.members) + "]"
 
 
+def members(spec: NodeSpec) -> list[NodeSpec]:
+    """The nodes a process runs: a composed process's members, else the node itself."""
+    return list(spec.members) if isinstance(spec, ComposedSpec) else [spec]
+
+
 def composed_spec(specs: list[NodeSpec]) -> NodeSpec:
     """One process for ``specs`` (stopped first: it holds the torque commanders)."""
     return ComposedSpec("compensating_controller", members=list(specs))
@@ -158,6 +164,7 @@ class Bringup:
         self.output: dict[str, list[str]] = {}
         self.ended: dict[str, float] = {}  # label -> monotonic time its process ended
         self.stopping: float | None = None  # monotonic time stop() began
+        self.routers: dict[str, LineRouter] = {}  # composed process label -> its lines' nodes
 
     def start(self) -> None:
         for spec in self.specs:
@@ -173,20 +180,37 @@ class Bringup:
             )
             self.procs.append((spec, proc))
             self.output[spec.label] = []
-            threading.Thread(target=self._pump, args=(spec.label, proc), daemon=True).start()
+            labels = [m.label for m in members(spec)]
+            if isinstance(spec, ComposedSpec):
+                self.routers[spec.label] = LineRouter(labels, spec.label)
+                self.output.update({lbl: [] for lbl in labels})
+            threading.Thread(target=self._pump, args=(spec.label, proc, labels), daemon=True).start()
 
-    def _pump(self, label: str, proc: subprocess.Popen) -> None:
+    def _pump(self, label: str, proc: subprocess.Popen, labels: list[str]) -> None:
+        """Forward and keep a process's lines, each under the node it is about (composed: :class:`LineRouter`)."""
+        router = self.routers.get(label)
         for line in proc.stdout:
-            self.output[label].append(line.rstrip())
+            who, text = router.route(line.rstrip()) if router else (label, line.rstrip())
+            self.output[who].append(text)
             if not self.quiet:
-                print(f"[{label}] {line.rstrip()}", flush=True)
+                print(f"[{who}] {text}", flush=True)
         proc.wait()
-        self.ended[label] = time.monotonic()
+        now = time.monotonic()
+        for lbl in {label, *labels}:
+            self.ended[lbl] = now
+
+    def _failed_label(self, spec: NodeSpec) -> str:
+        """The node a process failed for: a composed process's node of the last ``error:`` line,
+        else of its last line; a node's own process: its label."""
+        router = self.routers.get(spec.label)
+        if router is None:
+            return spec.label
+        return router.last_error or router.current
 
     def failed(self) -> list[tuple[str, int]]:
         """Nodes that exited on their own with a non-zero code (e.g. refused to start)."""
         return [
-            (s.label, p.returncode)
+            (self._failed_label(s), p.returncode)
             for s, p in self.procs
             if p.poll() not in (None, 0)
             and (self.stopping is None or self.ended.get(s.label, time.monotonic()) < self.stopping)

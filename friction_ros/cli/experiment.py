@@ -30,11 +30,13 @@ event names its joint, so ``friction-fit BAG --joint j2`` fits j2 from j2's segm
 leaving its limits stops the whole arm (zero torque on every joint, exit 3); the summary is
 printed for every joint.
 
-Starts separate processes (friction-bringup machinery): ``plant_simulator`` (unless ``--no-sim``),
-``bag_recorder`` (joint_states, experiment_events, optionally diagnostics) and
-``identification_experiment``, which waits for the recorder before it begins. When the program is
-over the experiment node exits by itself (zero torque), then the recorder gets SIGINT so the bag
-is finished properly, then the plant. Ctrl-C stops the experiment first (zero torque). Prints the
+Starts (friction-bringup machinery) ``bag_recorder`` (joint_states, experiment_events, optionally
+diagnostics) and ``identification_experiment``, which waits for the recorder before it begins; a
+simulated joint's ``plant_simulator`` runs in the experiment's process (one executor,
+:mod:`friction_ros.nodes.composition`: about half the CPU of two processes, the same bag), a real
+joint's drive (``--no-sim``) is yours. Output lines are labelled with the node they are about.
+When the program is over the experiment node ends its process by itself (zero torque), then the
+recorder gets SIGINT so the bag is finished properly. Ctrl-C stops the experiment first (zero torque). Prints the
 bag location and a summary: segments, aborts, breakaway torques and the plateau map (mean and
 spread of velocity and torque per plateau; with the simulated plant also the preset's true
 steady-state friction). Exit code: 0 completed, 3 stopped by a safety limit, 2 bad arguments or
@@ -59,7 +61,7 @@ from pathlib import Path
 
 import yaml
 
-from friction_ros.cli.bringup import Bringup, NodeSpec
+from friction_ros.cli.bringup import Bringup, NodeSpec, composed_spec, members
 from friction_ros.cli.experiment_arm import arm_setup
 from friction_ros.cli.experiment_config import (
     nest,
@@ -279,6 +281,8 @@ def main(argv: list[str] | None = None) -> int:
             )
         exp_params = ([params_tmp] if params_tmp else []) + list(args.params)
         specs.append(NodeSpec("identification_experiment", args.namespace, exp_params, exp_over))
+        if preset:  # simulated: plant and experiment in one process (module docstring)
+            specs[1:] = [composed_spec(specs[1:])]
         for s in specs:
             s.command()
     except (ParameterError, ValueError, OSError) as exc:
@@ -318,19 +322,26 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     t0 = time.monotonic()
-    simulated = any(s.node == "plant_simulator" for s in specs)
+    nodes = {m.node: m for s in specs for m in members(s)}
+    simulated = "plant_simulator" in nodes
     state_timeout = args.state_timeout or (30.0 if simulated else 10.0)
     watch = FirstStateWatch(states)
     bring.start()
     t_started = time.monotonic()
-    procs = {s.node: p for s, p in bring.procs}
+    # the process of each node (simulated: plant and experiment share one)
+    procs = {m.node: p for s, p in bring.procs for m in members(s)}
     exp = procs["identification_experiment"]
+    exp_label = nodes["identification_experiment"].label
+    # the labels whose exit is the experiment's own (its node, the nodes composed with it)
+    exp_labels = {
+        lbl for s, p in bring.procs if p is exp for lbl in (s.label, *(m.label for m in members(s)))
+    }
     status = "ok"
     while exp.poll() is None:
         if stop.is_set():
             status = "interrupted"
             break
-        if any(p.poll() is not None for n, p in procs.items() if n != "identification_experiment"):
+        if any(p.poll() is not None for p in procs.values() if p is not exp):
             status = "failed"
             break
         if time.monotonic() - t0 > timeout:
@@ -348,8 +359,7 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     bring.stop()
     wall = time.monotonic() - t0
     rc_exp = exp.returncode
-    exp_label = next(s.label for s, _ in bring.procs if s.node == "identification_experiment")
-    if first is not None and first[0] == exp_label and first[1] in (EXIT_ABORTED, EXIT_NOT_EXCITED):
+    if first is not None and first[0] in exp_labels and first[1] in (EXIT_ABORTED, EXIT_NOT_EXCITED):
         first = None  # the run's own result, reported below with the summary
     error = None
     if first is not None:
@@ -370,8 +380,8 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
     elif status == "failed":  # another node ended by itself (exit 0) before the program did
         gone = [
             s.label
-            for s, _ in bring.procs
-            if s.node != "identification_experiment" and bring.ended.get(s.label, math.inf) < bring.stopping
+            for s, p in bring.procs
+            if p is not exp and bring.ended.get(s.label, math.inf) < bring.stopping
         ]
         error = f"{', '.join(gone) or 'a node'} exited before the program ended (after {wall:.1f} s wall)"
     elif rc_exp == EXIT_NOT_EXCITED:

@@ -76,6 +76,8 @@ BATCH_WAIT = 0.002
 class BagRecorder(ParameterNode):
     """Records topics into a :class:`~friction_ros.core.bag.BagWriter` bag."""
 
+    TAKES_MESSAGE_INFO = True  # receive stamps: an executor that gives callbacks the message info
+
     def __init__(self, overrides: dict | None = None, **kwargs):
         super().__init__("bag_recorder", **kwargs)
         p = self.p = declare_config(self, SCHEMA, overrides=overrides)
@@ -233,6 +235,17 @@ class BagRecorder(ParameterNode):
     def summary(self) -> str:
         """The final line: messages, topics, drops (per topic when any)."""
         return self.recording.summary(self.writer.path)
+
+    def on_shutdown(self) -> None:
+        """Composed with other nodes: take what is queued on every topic, then finish the bag."""
+        for topic, sub in list(self.subs.items()):
+            while sub is not None and not self.closed:
+                with sub.handle:
+                    taken = sub.handle.take_message(sub.msg_type, True)
+                if taken is None:
+                    break
+                self._record(topic, *taken)
+        self.close()
 
     def close(self) -> None:
         if not self.closed:

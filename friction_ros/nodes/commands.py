@@ -54,7 +54,10 @@ class ArmCommandPublisher:
         self.last: bytes | None = None
 
     def publish(self, stamp, torques) -> None:
-        self.last = self._encoder.pack(stamp.sec, stamp.nanosec, *(float(x) for x in torques))
+        self.publish_stamp(stamp.sec, stamp.nanosec, torques)
+
+    def publish_stamp(self, sec: int, nanosec: int, torques) -> None:
+        self.last = self._encoder.pack(sec, nanosec, *(float(x) for x in torques))
         self.pub.publish(self.last)
 
     def republish(self) -> bool:

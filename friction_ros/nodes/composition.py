@@ -9,9 +9,11 @@ Messages between the nodes still go through the middleware, but one executor ser
 callback: a plant -> controller -> plant cycle needs no wake-up of another process.
 ``friction-bringup --compose`` and ``compose: true`` in a bring-up file use it.
 
-A node that refuses its parameters ends the process with its one line and exit code 2. On
-SIGINT/SIGTERM every node's ``on_shutdown()`` runs, torque commanders first (zero torque), then
-the others.
+A node that refuses its parameters ends the process with its one line ``error: NODE: reason``
+and exit code 2. On SIGINT/SIGTERM every node's ``on_shutdown()`` runs, torque commanders first
+(zero torque), then the others. A node can end the process itself (identification_experiment when
+its program is over): the process exit code is then that node's (0, 3 stopped by a safety limit,
+4 joint not excited).
 """
 
 from __future__ import annotations
@@ -32,9 +34,10 @@ NODE_CLASSES = {
     "friction_estimator": "FrictionEstimatorNode",
     "drive_interface": "DriveInterface",
     "bag_recorder": "BagRecorder",
+    "identification_experiment": "IdentificationExperiment",
 }
 #: torque commanders stop first
-STOP_FIRST = ("compensating_controller",)
+STOP_FIRST = ("identification_experiment", "compensating_controller")
 
 
 def split_sections(argv: list[str]) -> list[tuple[str, list[str]]]:
@@ -83,18 +86,31 @@ def main(argv: list[str] | None = None) -> int:
     if stop is None:
         return 2
     nodes = []
+    module, args = sections[0]
     try:
         for module, args in sections:
             nodes.append((module, node_class(module)(cli_args=args, use_global_arguments=False)))
     except (ParameterError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"error: {node_label(module, args)}: {exc}", file=sys.stderr)
         for _, n in nodes:
             n.destroy_node()
         rclpy.try_shutdown()
         return 2
     order = sorted(nodes, key=lambda mn: mn[0] not in STOP_FIRST)  # torque commanders stop first
-    spin_until_stopped([n for _, n in order], stop)
-    return 0
+    return spin_until_stopped([n for _, n in order], stop)
+
+
+def node_label(module: str, args: list[str]) -> str:
+    """The node of a section as friction-bringup labels it: ``[namespace/]name`` from the
+    section's ``-r __ns:=`` / ``-r __node:=`` (default: the module)."""
+    remap = {}
+    for i, a in enumerate(args[:-1]):
+        if a in ("-r", "--remap") and ":=" in args[i + 1]:
+            k, v = args[i + 1].split(":=", 1)
+            remap[k] = v
+    name = remap.get("__node", module)
+    ns = remap.get("__ns", "").strip("/")
+    return f"{ns}/{name}" if ns else name
 
 
 if __name__ == "__main__":

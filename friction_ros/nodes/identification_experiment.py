@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 import time
 
+from builtin_interfaces.msg import Time
 from friction_msgs.msg import ExperimentEvent
 from sensor_msgs.msg import JointState
 
@@ -64,7 +65,8 @@ from friction_ros.core.experiment.experiment_run import (
     program_config,
 )
 from friction_ros.core.joint_config import GAINS
-from friction_ros.nodes.commands import ArmCommandPublisher, CommandPublisher, stamp_to_ns
+from friction_ros.core.wire import DecodedJointState, JointStateDecoder
+from friction_ros.nodes.commands import ArmCommandPublisher, CommandPublisher
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.experiment_parameters import (  # noqa: F401 (the node's API)
     PER_JOINT_PLAIN_KEYS,
@@ -81,15 +83,17 @@ from friction_ros.nodes.safe_subscription import safe_subscription
 # publisher discovers and matches them on its own time; with both cores loaded that took longer
 # than 0.5 s once in a CI run (the bag lacked the first state, so the fit of the same run differed)
 MATCH_GRACE = 2.0
-_RESULT = {"code": 0}
 
 
 class IdentificationExperiment(ParameterNode):
     """Thin adapter over :class:`~friction_ros.core.experiment.experiment_run.ExperimentRun`; see
     the module docstring."""
 
-    def __init__(self):
-        super().__init__("identification_experiment")
+    def __init__(self, **kwargs):
+        super().__init__("identification_experiment", **kwargs)
+        #: the process exit code this node asks for (0, 3 or 4: module docstring); run_node and
+        #: composition return it
+        self.exit_code = 0
         profile = profile_of(self)
         reserved = {item.name for item in parameter_schema(profile, arm=True)} | {GAINS, "joints"}
         self.arm_joints = declare_joints(self, reserved)  # [] -> one joint, joint_name
@@ -114,7 +118,11 @@ class IdentificationExperiment(ParameterNode):
         self.run = ExperimentRun(self.program, self.joint, self.arm_joints, self.values["end_tail"])
         self.counts = self.run.counts
         self.event_pub = self.create_publisher(ExperimentEvent, "experiment_events", RECORDED_QOS)
-        safe_subscription(self, JointState, "joint_states", self._on_state, STATE_QOS)
+        # joint states decoded by the wire module (no rclpy message object per period)
+        self._decoder = JointStateDecoder()
+        safe_subscription(
+            self, JointState, "joint_states", self._on_state, STATE_QOS, decode=self._decoder.decode
+        )
         self.diag = DiagnosticsPublisher(self, "identification_experiment", self.joint)
         self.create_timer(self.values["diagnostics_period"], self._publish_diagnostics)
         self.create_timer(0.05, self._check_exit)
@@ -158,7 +166,7 @@ class IdentificationExperiment(ParameterNode):
             self._seen_since = now
         return now - self._seen_since >= MATCH_GRACE
 
-    def _on_state(self, msg: JointState) -> None:
+    def _on_state(self, msg: DecodedJointState) -> None:
         samples, lines = self.run.select(msg, time.monotonic())
         log_events(self.get_logger(), lines)
         if samples is None:
@@ -168,7 +176,7 @@ class IdentificationExperiment(ParameterNode):
                 return  # not answered: lockstep plant waits and re-sends, realtime plant times out to 0
             self._ready = True
             self.get_logger().info("subscribers present: starting the program")
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = msg.stamp_ns
         action, command, events, _ = self.run.step(t_ns, samples, self.commands.last is not None)
         if action == RESEND:
             self.commands.republish()  # lockstep re-send: same answer, no recompute
@@ -176,16 +184,16 @@ class IdentificationExperiment(ParameterNode):
             return
         if self._wall0 is None:
             self._wall0 = time.monotonic()
-        self._last_stamp = msg.header.stamp
+        self._last_stamp = (msg.sec, msg.nanosec)
         for joint, e in events:
-            self._publish_event(msg.header.stamp, e, joint)
-        self.commands.publish(msg.header.stamp, command)
+            self._publish_event(Time(sec=msg.sec, nanosec=msg.nanosec), e, joint)
+        self.commands.publish_stamp(msg.sec, msg.nanosec, command)
         self._report_progress()
         if self.program.done and self._done_wall is None:
             self._done_wall = time.monotonic()
             wall = time.monotonic() - (self._wall0 or time.monotonic())
             log_events(self.get_logger(), self.run.finish(t_ns, wall))
-            _RESULT["code"] = self.run.code
+            self.exit_code = self.run.code
 
     def _publish_event(self, stamp, e, joint: str = "") -> None:
         """``joint`` (an arm): the joint the event is about, in ``header.frame_id`` (events.event_joint_matches)."""
@@ -226,15 +234,20 @@ class IdentificationExperiment(ParameterNode):
 
     def on_shutdown(self) -> None:
         """Leave the joint(s) safe: answer the newest state (or now) with zero torque."""
-        stamp = self._last_stamp if self._last_stamp is not None else self.get_clock().now().to_msg()
+        if self._last_stamp is not None:
+            sec, nanosec = self._last_stamp
+        else:
+            now = self.get_clock().now().to_msg()
+            sec, nanosec = now.sec, now.nanosec
         for _ in range(3):
-            self.commands.publish(stamp, [0.0] * len(self.arm_joints) if self.arm_joints else 0.0)
+            self.commands.publish_stamp(
+                sec, nanosec, [0.0] * len(self.arm_joints) if self.arm_joints else 0.0
+            )
             time.sleep(0.01)
 
 
 def main(args=None) -> int:
-    rc = run_node(IdentificationExperiment, args)
-    return rc or _RESULT["code"]
+    return run_node(IdentificationExperiment, args)
 
 
 if __name__ == "__main__":

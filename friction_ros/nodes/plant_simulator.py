@@ -16,6 +16,8 @@ Modes:
               ``use_sim_time`` follow; the whole graph runs as fast as it can and deterministically.
               If no answer arrives within ``resend_period`` (wall) the pending state is published
               again (a subscriber that joined late gets it); duplicate commands are ignored.
+              ``joint_states`` is published with LOCKSTEP_RECORDED_QOS (a 60,000-deep history): a
+              recorder may fall a minute of joint time behind the graph before it loses a state.
 
 Several joints (``joints: [j1, j2, ...]``; unset = the one joint ``joint_name``, exactly as before):
 one core plant per joint, all stepped with the same ``control_period``, and one ``joint_states``
@@ -62,7 +64,7 @@ from friction_ros.nodes.loops import DeadlineLoop, LatencyHistogram
 from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.plant_health import PlantHealth
 from friction_ros.nodes.plant_parameters import JOINTS_FIELD, parameter_schema
-from friction_ros.nodes.qos import COMMAND_QOS, RECORDED_QOS, STATE_QOS
+from friction_ros.nodes.qos import COMMAND_QOS, LOCKSTEP_RECORDED_QOS, RECORDED_QOS, STATE_QOS
 from friction_ros.nodes.runtime import apply_scheduling, log_events, run_node
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
@@ -105,7 +107,8 @@ class PlantSimulator(PlantHealth, ParameterNode):
         # bytes: same wire type, no message objects in the 1 kHz path
         self._encoder = JointStateEncoder(self.joints)
         self._decoder = JointStateDecoder()
-        self.state_pub = self.create_publisher(JointState, "joint_states", RECORDED_QOS)
+        state_qos = LOCKSTEP_RECORDED_QOS if self.lockstep else RECORDED_QOS
+        self.state_pub = self.create_publisher(JointState, "joint_states", state_qos)
         self.clock_pub = self.create_publisher(Clock, "/clock", STATE_QOS) if self.lockstep else None
         # several joints: one command per joint may arrive at once (one controller per joint)
         qos = (

@@ -25,6 +25,10 @@ from friction_ros.nodes.loops import DeadlineLoop
 from friction_ros.nodes.node_help import exit_if_help
 from friction_ros.nodes.stopping import StopRequested, interruptible
 
+#: executor callbacks between two checks of rclpy.ok() in :func:`spin_until_stopped` (a stop
+#: request is checked after every callback)
+OK_CHECK_EVERY = 64
+
 
 def set_realtime_priority(priority: int, logger=None) -> bool:
     """Run every thread of this process (rclpy executor, DDS receive threads) with SCHED_FIFO ``priority``.
@@ -217,20 +221,33 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         rclpy.try_shutdown()
         return 2
-    spin_until_stopped([node], stop)
-    return 0
+    return spin_until_stopped([node], stop)
 
 
-def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
+def exit_code_of(nodes: list[Node]) -> int:
+    """The process exit code the nodes ask for: the first non-zero ``exit_code`` attribute (a node
+    whose run has a result, e.g. identification_experiment's 3 or 4), else 0."""
+    return next((c for c in (getattr(n, "exit_code", 0) for n in nodes) if c), 0)
+
+
+def needs_message_info(nodes: list[Node]) -> bool:
+    """Whether a node's callbacks take the middleware's message info (class attribute
+    ``TAKES_MESSAGE_INFO``, e.g. bag_recorder's receive stamps): rclpy's EventsExecutor cannot
+    serve them (SystemError for a two-argument callback, rclpy 7.1)."""
+    return any(getattr(n, "TAKES_MESSAGE_INFO", False) for n in nodes)
+
+
+def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> int:
     """Spin ``nodes`` on one executor until ``stop`` (a real-time plant's deadline loop paces it),
     then call each node's ``on_shutdown()`` in the given order (torque commanders first) and destroy
     them; rclpy is shut down at the end. A callback still running :data:`.stopping.ESCALATE_S`
-    after the stop signal is interrupted; ``on_shutdown()`` runs all the same."""
+    after the stop signal is interrupted; ``on_shutdown()`` runs all the same. Returns
+    :func:`exit_code_of` the nodes."""
     # Everything built so far (modules, nodes, core objects) lives for the whole run: keep it out of
     # the cyclic collector so a full collection does not scan it (multi-ms pauses in the loop).
     gc.collect()
     gc.freeze()
-    executor = make_executor()
+    executor = rclpy.executors.SingleThreadedExecutor() if needs_message_info(nodes) else make_executor()
     for node in nodes:
         executor.add_node(node)
     loops = [n.loop for n in nodes if isinstance(getattr(n, "loop", None), DeadlineLoop)]
@@ -240,7 +257,11 @@ def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
                 while not stop.is_set() and rclpy.ok():
                     loops[0].run_once(executor)
             while not stop.is_set() and rclpy.ok():
-                executor.spin_once(timeout_sec=0.05)
+                # rclpy.ok() takes the context's lock: once per OK_CHECK_EVERY callbacks, not per callback
+                for _ in range(OK_CHECK_EVERY):
+                    executor.spin_once(timeout_sec=0.05)
+                    if stop.is_set():
+                        break
     except (rclpy.executors.ExternalShutdownException, StopRequested):
         pass
     finally:
@@ -255,6 +276,7 @@ def spin_until_stopped(nodes: list[Node], stop: threading.Event) -> None:
             executor.remove_node(node)
             node.destroy_node()
         rclpy.try_shutdown()
+    return exit_code_of(nodes)
 
 
 def log_events(logger, events) -> None:
