@@ -6,6 +6,7 @@ joint_states history (LOCKSTEP_RECORDED_QOS) holds what the recorder has not tak
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -45,3 +46,46 @@ def test_a_stalled_recorder_loses_no_state(tmp_path):
     stamps = np.unique(f["header.stamp.sec"].astype(np.int64) * 10**9 + f["header.stamp.nanosec"])
     assert stamps[0] == 0 and np.all(np.diff(stamps) == 1_000_000)  # every period, none missing
     assert len(stamps) == 31_164  # the whole run: the same states as an unstalled run
+
+
+def test_a_recorder_stalled_through_the_end_still_gets_every_state_and_event(tmp_path):
+    """The recorder takes nothing from late in the program until after the composed plant and
+    experiment have finished: the plant and the experiment wait for the recorder to confirm their
+    last messages before their process exits, so the bag is complete all the same."""
+    from friction_ros.core.bag import read_bag
+
+    out = tmp_path / "stalled_end"
+    cmd = [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", "--preset",
+           "seed004_dc_motor", "--mode", "lockstep", "-o", str(out), "--timeout", "120"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    lines, recorder, stopped = [], None, False
+    for line in proc.stdout:
+        lines.append(line)
+        if recorder is None and "[bag_recorder]" in line:
+            found = subprocess.run(
+                ["pgrep", "-f", f"bag_recorder.*output:={out}"], capture_output=True, text=True
+            )
+            recorder = int(found.stdout.split()[0])
+        pct = re.search(r"\[\s*(\d+)%\]", line)
+        if pct and int(pct.group(1)) >= 70 and recorder is not None and not stopped:
+            # from here (the last third of the run) to after its end, the recorder takes nothing; a
+            # stall shorter than the middleware's liveliness lease (20 s), which would unmatch it
+            os.kill(recorder, signal.SIGSTOP)
+            stopped = True
+        if stopped and "complete:" in line:
+            break
+    assert stopped, "".join(lines)
+    time.sleep(1.5)  # the program is over: the composed process now waits for the recorder
+    os.kill(recorder, signal.SIGCONT)
+    rest, _ = proc.communicate(timeout=150)
+    text = "".join(lines) + rest
+    assert proc.returncode == 0, text[-3000:]
+    bag = read_bag(out)
+    assert bag.metadata["friction_ros_recording"]["dropped"] == "0", text[-3000:]
+    f = bag["/joint_states"].fields
+    stamps = np.unique(f["header.stamp.sec"].astype(np.int64) * 10**9 + f["header.stamp.nanosec"])
+    assert len(stamps) == 31_164 and np.all(np.diff(stamps) == 1_000_000), text[-3000:]
+    events = bag["/experiment_events"].fields["event"]
+    # every segment's START has its END (START 0, END 1, ABORT 2), the last one included
+    assert (events == 0).sum() > 0 and (events == 0).sum() == (events == 1).sum(), text[-3000:]
+    assert events[-1] == 1, text[-3000:]

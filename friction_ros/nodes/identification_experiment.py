@@ -76,7 +76,7 @@ from friction_ros.nodes.experiment_parameters import (  # noqa: F401 (the node's
 from friction_ros.nodes.joint_parameters import declare_joint_config, declare_joints, values_of_joint
 from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.qos import RECORDED_QOS, STATE_QOS
-from friction_ros.nodes.runtime import log_events, request_stop, run_node
+from friction_ros.nodes.runtime import log_events, request_stop, run_node, wait_delivered
 from friction_ros.nodes.safe_subscription import safe_subscription
 
 # s of wall time the recorders must stay matched before the program starts: the plant's state
@@ -233,7 +233,8 @@ class IdentificationExperiment(ParameterNode):
         self.diag.publish(*self.run.diagnostics())
 
     def on_shutdown(self) -> None:
-        """Leave the joint(s) safe: answer the newest state (or now) with zero torque."""
+        """Leave the joint(s) safe: answer the newest state (or now) with zero torque; then let the
+        recorder confirm the last events."""
         if self._last_stamp is not None:
             sec, nanosec = self._last_stamp
         else:
@@ -244,6 +245,7 @@ class IdentificationExperiment(ParameterNode):
                 sec, nanosec, [0.0] * len(self.arm_joints) if self.arm_joints else 0.0
             )
             time.sleep(0.01)
+        wait_delivered(self.event_pub, "experiment_events", self.get_logger())
 
 
 def main(args=None) -> int:

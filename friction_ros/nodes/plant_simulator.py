@@ -65,7 +65,7 @@ from friction_ros.nodes.parameters import ParameterNode, declare_config
 from friction_ros.nodes.plant_health import PlantHealth
 from friction_ros.nodes.plant_parameters import JOINTS_FIELD, parameter_schema
 from friction_ros.nodes.qos import COMMAND_QOS, LOCKSTEP_RECORDED_QOS, RECORDED_QOS, STATE_QOS
-from friction_ros.nodes.runtime import apply_scheduling, log_events, run_node
+from friction_ros.nodes.runtime import apply_scheduling, log_events, run_node, wait_delivered
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
 __all__ = ["PlantSimulator", "main", "parameter_schema"]
@@ -223,6 +223,8 @@ class PlantSimulator(PlantHealth, ParameterNode):
     def on_shutdown(self) -> None:
         if self.loop is not None:
             self.loop.stop()
+        if self.lockstep:  # a lockstep run ran ahead of its recorder: let it take the last states
+            wait_delivered(self.state_pub, "joint_states", self.get_logger())
         if self.p["stats_file"]:
             import json
 

@@ -224,6 +224,29 @@ def run_node(factory: Callable[[], Node], args: list[str] | None = None) -> int:
     return spin_until_stopped([node], stop)
 
 
+#: how long a node that ends waits for its recorded topics' readers to confirm every message
+DELIVERY_TIMEOUT_S = 15.0
+
+
+def wait_delivered(publisher, what: str, logger, timeout_s: float = DELIVERY_TIMEOUT_S) -> bool:
+    """Before a node that published a recorded stream exits: wait until every matched reader (the
+    bag recorder) has confirmed every message (reliable QoS), so a reader that fell behind on a busy
+    machine still gets the run's last messages from this writer's history. Fast DDS confirms on its
+    periodic heartbeat, so this takes ~2-3 s with a reader in another process. Not confirmed in time:
+    one warning naming the topic (the recording may miss its last messages), never silence."""
+    from rclpy.duration import Duration
+
+    if publisher.get_subscription_count() == 0:
+        return True
+    if publisher.wait_for_all_acked(Duration(seconds=timeout_s)):
+        return True
+    logger.warning(
+        f"{what}: a reader had not confirmed the last messages after {timeout_s:g} s: a recording of "
+        f"{what} may miss the end of the run"
+    )
+    return False
+
+
 def exit_code_of(nodes: list[Node]) -> int:
     """The process exit code the nodes ask for: the first non-zero ``exit_code`` attribute (a node
     whose run has a result, e.g. identification_experiment's 3 or 4), else 0."""
