@@ -30,7 +30,7 @@ SITE=$("$VPY" -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')
 uv_install() {
   local pin args=() key value
   pin=$(grep -ixE 'uv==[0-9.]+' requirements.txt) || return 1
-  "$VPY" -m pip install --disable-pip-version-check -q "$pin" || return 1
+  "$VPY" -m pip install --disable-pip-version-check -q --retries 1 --timeout 20 "$pin" || return 1
   while IFS='=' read -r key value; do
     value=${value#\'}; value=${value%\'}
     case "$key" in
