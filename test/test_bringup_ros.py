@@ -30,7 +30,7 @@ def test_the_arm_bringup_prints_its_plan_and_each_controllers_last_status():
             "--config",
             str(ROOT / "params" / "bringup_arm7.yaml"),
         ]
-        + ["--duration", "15", "--quiet"],
+        + ["--duration", "25", "--quiet"],  # start-up on a busy machine + diagnostics
         capture_output=True,
         text=True,
         timeout=120,

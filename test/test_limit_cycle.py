@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
@@ -127,25 +126,19 @@ def test_the_detector_fires_on_an_oscillating_loop_but_only_watches_a_feedback_p
     assert not ff.compensation_fallback
 
 
-def test_the_detector_costs_microseconds_per_sample():
+def test_a_small_oscillation_below_the_thresholds_never_fires():
+    """20 s of a 3 Hz, 1 mrad error with a 0.5 N*m command through the abb_m19s encoder: below the
+    detector's thresholds, so it never fires (its CPU per sample, 1.3 us, is bench/limit_cycle.py's)."""
     det = LimitCycleDetector()
     n = 20000
     t = np.arange(n) * 1e-3
-    e = (1e-3 * np.sin(2 * np.pi * 3.0 * t)).tolist()
-    u = (0.5 * np.sin(2 * np.pi * 3.0 * t + 0.3)).tolist()
-    v = (0.02 * np.cos(2 * np.pi * 3.0 * t)).tolist()
+    e = 1e-3 * np.sin(2 * np.pi * 3.0 * t)
+    u = 0.5 * np.sin(2 * np.pi * 3.0 * t + 0.3)
+    v = 0.02 * np.cos(2 * np.pi * 3.0 * t)
     p = np.round(np.sin(2 * np.pi * 3.0 * t) / COUNT) * COUNT
-    p = p.tolist()
-    tl = t.tolist()
-    best = math.inf
-    for _ in range(3):
-        det.reset()
-        t0 = time.perf_counter()
-        for k in range(n):
-            det.update(tl[k], e[k], u[k], v[k], p[k], 1e-3)
-        best = min(best, (time.perf_counter() - t0) / n)
-    assert not det.fired
-    assert best < 5e-6, f"{best * 1e6:.2f} us per sample"  # measured ~1.5 us on the dev VM
+    for k in range(n):
+        det.update(float(t[k]), float(e[k]), float(u[k]), float(v[k]), float(p[k]), 1e-3)
+        assert not det.fired, k
 
 
 def test_detector_parameters_are_validated_and_reconfiguring_clears_the_latch(unbounded):
