@@ -39,7 +39,7 @@ def test_an_alias_bomb_is_refused_at_once_with_the_limit(tmp_path):
     t0 = time.perf_counter()
     with pytest.raises(YamlLimitError) as err:
         check_parameter_file(path)
-    assert time.perf_counter() - t0 < 0.5  # ... that expands to 4^29 nodes is refused, not expanded
+    assert time.perf_counter() - t0 < 5.0  # ... that expands to 4^29 nodes is refused, not expanded (years)
     text = str(err.value)
     assert str(path) in text and f"limit of {MAX_ALIAS_EXPANSION}" in text and "\n" not in text
     size = 7  # nodes of n0 = {node: {ros__parameters: {x: 1}}}
@@ -113,7 +113,7 @@ def test_bag_metadata_and_qos_strings_use_the_same_limits(tmp_path):
     (bag / "x_0.mcap").write_bytes(b"")
     t0 = time.perf_counter()
     _, files = bag_files(bag)  # unusable metadata: the .mcap files of the directory are used instead
-    assert files == [bag / "x_0.mcap"] and time.perf_counter() - t0 < 0.5
+    assert files == [bag / "x_0.mcap"] and time.perf_counter() - t0 < 5.0
 
 
 def test_the_python_parser_is_used_without_libyaml(monkeypatch):
