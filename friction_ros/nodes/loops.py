@@ -88,8 +88,11 @@ class DeadlineLoop:
 
     ``wake_on_events=False``: the thread sleeps to each deadline instead of waiting in the executor,
     so a message arriving mid-period does not wake it; what arrived is handled just before the tick
-    (up to :data:`READY_BEFORE_TICK` callbacks per period, the rest at the following ticks), which
-    is when a node that applies commands at its tick uses them anyway. Measured reason
+    (up to :data:`READY_BEFORE_TICK` callbacks per period), which is when a node that applies
+    commands at its tick uses them anyway. One period in :data:`EVENT_WAIT_EVERY` waits in the
+    executor as before and so drains whatever queued meanwhile (rclpy's executor queues one event
+    per message, even for a keep-last-1 topic: a publisher faster than READY_BEFORE_TICK messages a
+    period would otherwise grow the queue without end and delay every later request). Measured reason
     (drive_interface, 1 drive at 1 kHz, ``bench/can_protocols.py``'s set-up): a command that
     arrived before the deadline cost a wake-up plus a second wait, ~80 us of CPU, in 56-87 % of
     the periods depending on the controller's timing (CiA 402 more often than ODrive: its drive
@@ -110,6 +113,8 @@ class DeadlineLoop:
 
     #: callbacks already waiting that are run before a tick (see :meth:`run_once`)
     READY_BEFORE_TICK = 2
+    #: without ``wake_on_events``, one period in this many still waits in the executor (drains a queue)
+    EVENT_WAIT_EVERY = 10
 
     def run_once(self, executor, max_wait: float = 0.05) -> None:
         """Process callbacks (or sleep, see ``wake_on_events``) until the next deadline (at most
@@ -125,7 +130,7 @@ class DeadlineLoop:
             self._next = now
         remaining = self._next - now
         if remaining > 0:
-            if self.wake_on_events:
+            if self.wake_on_events or self.stats.cycles % self.EVENT_WAIT_EVERY == 0:
                 executor.spin_once(timeout_sec=min(remaining, max_wait))
             else:
                 time.sleep(min(remaining, max_wait))
