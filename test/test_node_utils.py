@@ -86,6 +86,60 @@ def test_deadline_loop_runs_waiting_callbacks_before_a_late_tick():
     assert ex.queue and loop.stats.cycles == 3
 
 
+def test_deadline_loop_without_wake_on_events_handles_messages_just_before_the_tick():
+    """wake_on_events=False: a message that arrives mid-period does not wake the loop (the executor
+    is never asked to wait); it is handled right before the next tick, and ticks keep the period."""
+    events = []
+
+    class Executor:  # spin_once runs one waiting callback; a wait (timeout > 0) is recorded
+        queue: list = []
+        waits = 0
+
+        def spin_once(self, timeout_sec):
+            if timeout_sec > 0:
+                self.waits += 1
+            if self.queue:
+                self.queue.pop(0)()
+            elif timeout_sec > 0:
+                time.sleep(timeout_sec)
+
+    ex = Executor()
+    loop = DeadlineLoop(0.01, lambda: events.append(("tick", time.monotonic())), wake_on_events=False)
+    loop.EVENT_WAIT_EVERY = 1000  # no draining period in this window
+    loop.run_once(ex)  # first tick at once
+    first = events[0][1]
+    ex.queue.append(lambda: events.append(("command", time.monotonic())))
+    while loop.stats.cycles < 3:
+        loop.run_once(ex)
+    assert ex.waits == 0
+    assert [e[0] for e in events] == ["tick", "command", "tick", "tick"]
+    assert events[1][1] >= first + 0.01 - 1e-4  # handled at the deadline, not when it arrived
+    assert events[2][1] - events[1][1] < 0.005  # and the tick follows it at once
+    assert events[3][1] - events[2][1] == pytest.approx(0.01, abs=0.004)
+
+
+def test_deadline_loop_without_wake_on_events_drains_a_fast_publishers_queue():
+    """Three messages a period (more than READY_BEFORE_TICK): the periods that wait in the executor
+    keep its queue bounded; without them it would hold ~2 x the periods run."""
+
+    class Executor:  # one callback per spin_once; a wait returns at once when something is queued
+        queue: list = []
+
+        def spin_once(self, timeout_sec):
+            if self.queue:
+                self.queue.pop(0)()
+            elif timeout_sec > 0:
+                time.sleep(timeout_sec)
+
+    ex = Executor()
+    loop = DeadlineLoop(0.002, lambda: ex.queue.extend([lambda: None] * 3), wake_on_events=False)
+    longest = 0
+    while loop.stats.cycles < 60:
+        loop.run_once(ex)
+        longest = max(longest, len(ex.queue))
+    assert longest <= (3 - DeadlineLoop.READY_BEFORE_TICK) * DeadlineLoop.EVENT_WAIT_EVERY + 3
+
+
 def test_scheduling_parameters_pin_and_raise_every_thread_of_a_node(tmp_path):
     """drive_interface started with cpu_affinity / realtime_priority: all its threads (executor and
     the middleware's) end up on that CPU, with SCHED_FIFO where the machine permits it."""

@@ -40,9 +40,11 @@ messages for none of the node's joints or with mismatched arrays are ignored, co
 (``commands_foreign``, ``commands_malformed``) and logged at most once a second per kind.
 
 Threads and wake-ups (< 25 % of a core per axis at 1 kHz): the control period runs in the
-executor thread (:class:`~friction_ros.nodes.loops.DeadlineLoop`, driven by ``run_node``) and reads
-the bus itself (:class:`~friction_ros.nodes.can_bus.CanBusLink`: no Notifier, no reader thread),
-then supervises, sends the command and publishes. ``loop_spin`` > 0 (busy-wait for timing
+executor thread (:class:`~friction_ros.nodes.loops.DeadlineLoop`, driven by ``run_node``), which
+sleeps to each deadline: commands and service requests that arrived meanwhile are handled just
+before the period (one wake-up per period). The period reads the bus itself
+(:class:`~friction_ros.nodes.can_bus.CanBusLink`: no Notifier, no reader thread), then
+supervises, sends the command and publishes. ``loop_spin`` > 0 (busy-wait for timing
 accuracy) runs the period on its own thread instead (:class:`~friction_ros.nodes.loops.FixedRateLoop`).
 """
 
@@ -106,7 +108,7 @@ class DriveInterface(ParameterNode):
             self.loop = FixedRateLoop(period, self._cycle, name="drive_interface_loop", spin=v["loop_spin"])
             self.loop.start()
         else:  # run_node drives it in the executor thread (see the module docstring)
-            self.loop = DeadlineLoop(period, self._cycle)
+            self.loop = DeadlineLoop(period, self._cycle, wake_on_events=False)
         s = "s" if len(self.joints) > 1 else ""
         self.get_logger().info(
             f"{v['protocol']} on {v['interface']}:{v['channel']} at {1.0 / period:g} Hz, "
