@@ -276,7 +276,8 @@ def main(argv: list[str] | None = None) -> int:
                     "plant_simulator",
                     args.namespace,
                     list(args.params),
-                    {"preset": preset, "mode": args.mode, **plant_joints},
+                    # a recorder that fell behind the lockstep run gets its last states before the exit
+                    {"preset": preset, "mode": args.mode, "exit_wait_for_readers": 15.0, **plant_joints},
                 )
             )
         exp_params = ([params_tmp] if params_tmp else []) + list(args.params)

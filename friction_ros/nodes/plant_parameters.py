@@ -82,6 +82,16 @@ NODE_FIELDS = [
         read_only=True,
     ),
     Field(
+        "exit_wait_for_readers",
+        0.0,
+        "lockstep: on exit, wait up to this long for every reader of joint_states (a recorder that "
+        "fell behind) to confirm the last states (0: do not wait; friction-experiment sets it)",
+        lo=0.0,
+        hi=600.0,
+        unit="s",
+        read_only=True,
+    ),
+    Field(
         "stats_file",
         "",
         "write loop/latency statistics as JSON here on shutdown (benchmarks)",

@@ -223,8 +223,8 @@ class PlantSimulator(PlantHealth, ParameterNode):
     def on_shutdown(self) -> None:
         if self.loop is not None:
             self.loop.stop()
-        if self.lockstep:  # a lockstep run ran ahead of its recorder: let it take the last states
-            wait_delivered(self.state_pub, "joint_states", self.get_logger())
+        if self.lockstep and self.p["exit_wait_for_readers"] > 0:  # a recorder may be behind the run
+            wait_delivered(self.state_pub, "joint_states", self.get_logger(), self.p["exit_wait_for_readers"])
         if self.p["stats_file"]:
             import json
 
