@@ -5,9 +5,9 @@
 # domain (test/conftest.py), so the ROS graphs of two workers never see each other, and one CPU
 # (every process it starts inherits it: a lockstep graph's messages never cross cores;
 # FRICTION_TEST_PIN=0 turns that off); worker i is on CPU i mod n.
-#   1. every test not marked `realtime`: TEST_WORKERS workers, default one per CPU (at most 16). Two
-#      per CPU took 593 s here against ~470 s: every wait of a test and of its graphs lasts twice as
-#      long on a shared CPU, and their polling costs CPU all that time (1,483 CPU-s against ~1,070).
+#   1. every test not marked `realtime`: TEST_WORKERS workers, default two per CPU (at most 16), so
+#      that one computes while the other waits for a graph's discovery or a timed run (on 2 CPUs this
+#      phase took 593 s with four workers, 646-666 s with two, on the same day).
 #   2. the tests marked `realtime` (1 kHz loops on the wall clock, which a shared CPU breaks): one
 #      worker per CPU (REALTIME_WORKERS), after phase 1.
 # TEST_WORKERS=0 runs everything in one process. A test file runs whole on one worker (its module
@@ -26,7 +26,7 @@ echo "[test] ruff check + format check"
 .venv/bin/ruff check . || { kill $warm 2>/dev/null; exit 1; }
 .venv/bin/ruff format --check . || { echo "[test] run 'make format' to fix formatting"; kill $warm 2>/dev/null; exit 1; }
 cpus=$(nproc)
-workers=${TEST_WORKERS:-$(( cpus > 16 ? 16 : cpus ))}
+workers=${TEST_WORKERS:-$(( 2 * cpus > 16 ? 16 : 2 * cpus ))}
 rt_workers=${REALTIME_WORKERS:-$(( cpus > 16 ? 16 : cpus ))}
 for w in "$workers" "$rt_workers"; do
   if ! [[ "$w" =~ ^[0-9]+$ ]]; then
