@@ -15,28 +15,22 @@ import time
 import numpy as np
 
 
-def test_a_stalled_recorder_loses_no_state(tmp_path):
-    from friction_ros.core.bag import read_bag
-
-    out = tmp_path / "stalled"
+def _start(out):
+    """friction-experiment (quick, seed004, lockstep) writing to ``out``; its output is read line by line."""
     cmd = [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", "--preset",
            "seed004_dc_motor", "--mode", "lockstep", "-o", str(out), "--timeout", "120"]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    lines, recorder = [], None
-    for line in proc.stdout:
-        lines.append(line)
-        if recorder is None and "[bag_recorder]" in line:
-            found = subprocess.run(
-                ["pgrep", "-f", f"bag_recorder.*output:={out}"], capture_output=True, text=True
-            )
-            recorder = int(found.stdout.split()[0])
-        if "starting the program" in line:
-            break
-    assert recorder is not None, "".join(lines)
-    time.sleep(0.3)
-    os.kill(recorder, signal.SIGSTOP)  # the recorder takes nothing for 1.5 s; the graph runs on
-    time.sleep(1.5)
-    os.kill(recorder, signal.SIGCONT)
+    return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _recorder_pid(out) -> int:
+    found = subprocess.run(["pgrep", "-f", f"bag_recorder.*output:={out}"], capture_output=True, text=True)
+    return int(found.stdout.split()[0])
+
+
+def _finish(proc, lines: list[str], out):
+    """Wait for the run; its exit code 0 and no drop counted; returns (bag, unique state stamps [ns], text)."""
+    from friction_ros.core.bag import read_bag
+
     rest, _ = proc.communicate(timeout=150)
     text = "".join(lines) + rest
     assert proc.returncode == 0, text[-3000:]
@@ -44,6 +38,25 @@ def test_a_stalled_recorder_loses_no_state(tmp_path):
     assert bag.metadata["friction_ros_recording"]["dropped"] == "0", text[-3000:]
     f = bag["/joint_states"].fields
     stamps = np.unique(f["header.stamp.sec"].astype(np.int64) * 10**9 + f["header.stamp.nanosec"])
+    return bag, stamps, text
+
+
+def test_a_stalled_recorder_loses_no_state(tmp_path):
+    out = tmp_path / "stalled"
+    proc = _start(out)
+    lines, recorder = [], None
+    for line in proc.stdout:
+        lines.append(line)
+        if recorder is None and "[bag_recorder]" in line:
+            recorder = _recorder_pid(out)
+        if "starting the program" in line:
+            break
+    assert recorder is not None, "".join(lines)
+    time.sleep(0.3)
+    os.kill(recorder, signal.SIGSTOP)  # the recorder takes nothing for 1.5 s; the graph runs on
+    time.sleep(1.5)
+    os.kill(recorder, signal.SIGCONT)
+    _, stamps, _ = _finish(proc, lines, out)
     assert stamps[0] == 0 and np.all(np.diff(stamps) == 1_000_000)  # every period, none missing
     assert len(stamps) == 31_164  # the whole run: the same states as an unstalled run
 
@@ -52,20 +65,13 @@ def test_a_recorder_stalled_through_the_end_still_gets_every_state_and_event(tmp
     """The recorder takes nothing from late in the program until after the composed plant and
     experiment have finished: the plant and the experiment wait for the recorder to confirm their
     last messages before their process exits, so the bag is complete all the same."""
-    from friction_ros.core.bag import read_bag
-
     out = tmp_path / "stalled_end"
-    cmd = [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", "--preset",
-           "seed004_dc_motor", "--mode", "lockstep", "-o", str(out), "--timeout", "120"]  # fmt: skip
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    proc = _start(out)
     lines, recorder, stopped = [], None, False
     for line in proc.stdout:
         lines.append(line)
         if recorder is None and "[bag_recorder]" in line:
-            found = subprocess.run(
-                ["pgrep", "-f", f"bag_recorder.*output:={out}"], capture_output=True, text=True
-            )
-            recorder = int(found.stdout.split()[0])
+            recorder = _recorder_pid(out)
         pct = re.search(r"\[\s*(\d+)%\]", line)
         if pct and int(pct.group(1)) >= 70 and recorder is not None and not stopped:
             # from here (the last third of the run) to after its end, the recorder takes nothing; a
@@ -77,13 +83,7 @@ def test_a_recorder_stalled_through_the_end_still_gets_every_state_and_event(tmp
     assert stopped, "".join(lines)
     time.sleep(1.5)  # the program is over: the composed process now waits for the recorder
     os.kill(recorder, signal.SIGCONT)
-    rest, _ = proc.communicate(timeout=150)
-    text = "".join(lines) + rest
-    assert proc.returncode == 0, text[-3000:]
-    bag = read_bag(out)
-    assert bag.metadata["friction_ros_recording"]["dropped"] == "0", text[-3000:]
-    f = bag["/joint_states"].fields
-    stamps = np.unique(f["header.stamp.sec"].astype(np.int64) * 10**9 + f["header.stamp.nanosec"])
+    bag, stamps, text = _finish(proc, lines, out)
     assert len(stamps) == 31_164 and np.all(np.diff(stamps) == 1_000_000), text[-3000:]
     events = bag["/experiment_events"].fields["event"]
     # every segment's START has its END (START 0, END 1, ABORT 2), the last one included
