@@ -101,4 +101,14 @@ if ! stamp_ok package "$pkg_hash"; then
   for exe in "$VENV"/lib/friction_ros/*; do [ -f "$exe" ] && ln -sf "$exe" "$VENV/bin/$(basename "$exe")"; done
   stamp_set package "$pkg_hash"
 fi
+# Byte-compile the dependencies once and this package on every run: uv installs no .pyc files, and
+# where PYTHONDONTWRITEBYTECODE is set Python never writes them, so every process (each node, each
+# test's graph) compiled scipy, numba and rclpy from source again: imports took 2.2 s instead of
+# 1.1 s and a lockstep tracking run twice the CPU. 9 s once, about 1 s when up to date.
+if ! stamp_ok bytecode "$req_hash $msg_hash"; then
+  say "byte-compiling the dependencies (once)"
+  "$VPY" -m compileall -q -j 0 "$SITE" > build/compileall.log 2>&1 || true
+  stamp_set bytecode "$req_hash $msg_hash"
+fi
+"$VPY" -m compileall -q -j 0 "$ROOT/friction_ros" > /dev/null 2>&1 || true
 say "ready: $VENV"
