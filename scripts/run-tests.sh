@@ -5,9 +5,9 @@
 # domain (test/conftest.py), so the ROS graphs of two workers never see each other, and one CPU
 # (every process it starts inherits it: a lockstep graph's messages never cross cores;
 # FRICTION_TEST_PIN=0 turns that off); worker i is on CPU i mod n.
-#   1. every test not marked `realtime`: TEST_WORKERS workers, default one per CPU (at most 16). Four
-#      workers on 2 CPUs took this phase to 593 s (two: 646-666 s the same day), but then a timed node
-#      stop (1.53 s against 1.5 s) and a thread-scheduling check failed in one run of two.
+#   1. every test not marked `realtime`: TEST_WORKERS workers, default two per CPU (at most 16): a
+#      ROS test waits for its graph's discovery or messages part of its time, and the second worker
+#      on the CPU computes meanwhile.
 #   2. the tests marked `realtime` (1 kHz loops on the wall clock, which a shared CPU breaks): one
 #      worker per CPU (REALTIME_WORKERS), after phase 1.
 # TEST_WORKERS=0 runs everything in one process. A test file runs whole on one worker (its module
@@ -26,7 +26,7 @@ echo "[test] ruff check + format check"
 .venv/bin/ruff check . || { kill $warm 2>/dev/null; exit 1; }
 .venv/bin/ruff format --check . || { echo "[test] run 'make format' to fix formatting"; kill $warm 2>/dev/null; exit 1; }
 cpus=$(nproc)
-workers=${TEST_WORKERS:-$(( cpus > 16 ? 16 : cpus ))}
+workers=${TEST_WORKERS:-$(( 2 * cpus > 16 ? 16 : 2 * cpus ))}
 rt_workers=${REALTIME_WORKERS:-$(( cpus > 16 ? 16 : cpus ))}
 for w in "$workers" "$rt_workers"; do
   if ! [[ "$w" =~ ^[0-9]+$ ]]; then

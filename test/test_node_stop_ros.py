@@ -16,7 +16,8 @@ from ros_graph import Listener, write_params
 
 from friction_ros.cli.bringup import NodeSpec, composed_spec
 
-pytestmark = pytest.mark.ros
+# a wall-clock bound on seven nodes at once: a CPU of its own, after the other tests
+pytestmark = [pytest.mark.ros, pytest.mark.realtime]
 
 LIMIT_S = 1.5  # the promise is 1 s (stopping.STOP_WITHIN_S); slack for two loaded cores
 
