@@ -16,15 +16,19 @@
 set -uo pipefail
 cd "$(dirname "$0")/.."
 ./scripts/bootstrap.sh --deps || exit 1
-# one process compiles the numba kernels into their on-disk cache (the workers and nodes load it),
-# while the messages are built and the package installed: it needs only the dependencies
+# two processes compile the numba kernels into their on-disk cache (the workers and nodes load it),
+# the plants' and the fit's, while the messages are built and the package installed: they need only
+# the dependencies
 mkdir -p build
-.venv/bin/python scripts/warm-numba-cache.py > build/warm-numba-cache.log 2>&1 &
-warm=$!
-./scripts/bootstrap.sh || { kill $warm 2>/dev/null; exit 1; }
+.venv/bin/python scripts/warm-numba-cache.py plants > build/warm-numba-plants.log 2>&1 &
+warm_plants=$!
+.venv/bin/python scripts/warm-numba-cache.py fit > build/warm-numba-fit.log 2>&1 &
+warm_fit=$!
+stop_warm() { kill $warm_plants $warm_fit 2>/dev/null; }
+./scripts/bootstrap.sh || { stop_warm; exit 1; }
 echo "[test] ruff check + format check"
-.venv/bin/ruff check . || { kill $warm 2>/dev/null; exit 1; }
-.venv/bin/ruff format --check . || { echo "[test] run 'make format' to fix formatting"; kill $warm 2>/dev/null; exit 1; }
+.venv/bin/ruff check . || { stop_warm; exit 1; }
+.venv/bin/ruff format --check . || { echo "[test] run 'make format' to fix formatting"; stop_warm; exit 1; }
 cpus=$(nproc)
 workers=${TEST_WORKERS:-$(( 2 * cpus > 16 ? 16 : 2 * cpus ))}
 rt_workers=${REALTIME_WORKERS:-$(( cpus > 16 ? 16 : cpus ))}
@@ -43,8 +47,14 @@ phase() { .venv/bin/python -m pytest "$@"; local rc=$?; [ $rc -eq 5 ] && return 
 # environment would stop it
 unset PYTHONDONTWRITEBYTECODE
 start=$(date +%s)
-wait $warm || { cat build/warm-numba-cache.log; echo "[test] the numba kernels did not compile" >&2; exit 1; }
-cat build/warm-numba-cache.log
+# while the fit's kernels compile (one CPU): one collection writes that cache, so the workers of
+# both phases read it instead of each rewriting every module at once
+.venv/bin/python -m pytest --collect-only -q -p no:cacheprovider "$@" > build/collect.log 2>&1
+for part in plants fit; do
+  pid=$warm_plants; [ $part = fit ] && pid=$warm_fit
+  wait "$pid" || { cat "build/warm-numba-$part.log"; echo "[test] the numba kernels did not compile" >&2; exit 1; }
+  cat "build/warm-numba-$part.log"
+done
 # the workers share the cores: each one (and the node processes it starts) gets its share of the
 # compiled kernels' threads, not a full set each (2 workers x 2 threads on 2 cores fought for them)
 threads=$(( cpus / (workers > 0 ? workers : 1) ))
