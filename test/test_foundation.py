@@ -247,3 +247,19 @@ def test_colcon_build_of_fresh_clone(tmp_path):
     for t in MSG_TYPES:
         snake = re.sub(r"(?<!^)(?=[A-Z])", "_", t).lower()
         assert (generated / f"_{snake}.py").is_file(), t
+
+
+def test_the_set_up_leaves_the_dependencies_and_the_package_byte_compiled():
+    """Every process (node, graph, CLI) imports scipy, numba and rclpy: without their .pyc files
+    (an install that writes none, and PYTHONDONTWRITEBYTECODE set) each start compiles them from
+    source again, twice the CPU of an import. scripts/bootstrap.sh compiles every module of them,
+    also the many no test imports (so this fails if it stops, whatever the tests wrote)."""
+    import importlib
+    import importlib.util
+
+    for name in ("scipy", "numba", "rclpy", "friction_msgs"):
+        root = Path(importlib.import_module(name).__file__).parent
+        sources = list(root.rglob("*.py"))
+        missing = [str(p) for p in sources if not os.path.exists(importlib.util.cache_from_source(str(p)))]
+        assert sources and not missing, f"{len(missing)} of {len(sources)} {name} modules not byte-compiled " \
+            f"(run scripts/bootstrap.sh), e.g. {missing[:3]}"  # fmt: skip
