@@ -65,7 +65,7 @@ def _plateau_run(name: str, speeds: int = 2):
     plant = preset.make_plant()
     plant.reset()
     cs = plant.command_scale
-    dt, t, m = c["dt"], 0.0, plant.step(0.0, c["dt"])
+    dt, t, m = c["control_period"], 0.0, plant.step(0.0, c["control_period"])
     rows, events = [], []
     while not prog.done:
         tau, ev = prog.update(t, m.position, m.velocity)

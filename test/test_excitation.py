@@ -22,7 +22,7 @@ def run(config, *, max_time=None, plant=None):
     plant = plant or preset.make_plant()
     scale = plant.command_scale
     prog = make_program(config)
-    dt = prog.config["dt"]
+    dt = prog.config["control_period"]
     t, pos, vel = 0.0, 0.0, 0.0
     rows, events, progress = [], [], []
     limit = (max_time or prog.total_duration) + 1.0
@@ -95,7 +95,7 @@ def test_breakaway_without_motion_aborts_at_max_torque():
 def test_random_velocity_is_band_limited_under_the_rectangular_envelope():
     cfg = make_program({"program": "random"}).config
     v = random_velocity(cfg)
-    dt = cfg["dt"]
+    dt = cfg["control_period"]
     assert v.size == 50000  # ABB M19-S paper: 50 s at 1 kHz
     spec = np.abs(np.fft.rfft(v)) ** 2
     f = np.fft.rfftfreq(v.size, dt)
@@ -215,7 +215,7 @@ def test_duplicate_time_returns_cached_torque():
         ({"presliding": {"amplitudes": []}}, ["presliding.amplitudes"]),
         ({"chirp": {"f1": 0.5}}, ["chirp.f1", ">= 2"]),
         ({"velocity_loop": {"p": "fast"}}, ["velocity_loop.p", "number"]),
-        ({"dt": 0.0}, ["dt", ">= 1e-05"]),
+        ({"control_period": 0.0}, ["control_period", ">= 1e-05"]),
     ],
 )
 def test_validation_errors_name_key_and_range(config, words):

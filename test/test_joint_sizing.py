@@ -216,7 +216,7 @@ def test_a_user_written_preset_is_sized_too():
     sec["friction_motor"] = {"model": "stribeck", "fc": 0.02, "fs": 0.03, "vs": 1.0, "delta": 2.0, "fv": 1e-4}
     preset = preset_from_config(doc, "user")
     scale, cfg, prog, events, v = run_program(preset)
-    assert scale.period == 0.002 and cfg["dt"] == 0.002
+    assert scale.period == 0.002 and cfg["control_period"] == 0.002
     eta = preset.params.gear_efficiency
     assert scale.breakaway == pytest.approx(50.0 * eta * 0.03, rel=0.05)  # reflected through the gear
     assert cfg["plateaus"]["v_min"] < scale.stribeck_velocity

@@ -41,9 +41,11 @@ def test_the_speed_limit_bounds_the_fastest_plateau_and_the_random_peak():
 def test_the_random_excursion_fits_the_travel():
     cfg = resolve_config({"program": "random", "limits": {"max_travel": 0.5}})
     fitted = fit_to_limits(cfg)
-    x = np.cumsum(random_velocity(fitted)) * fitted["dt"]
+    x = np.cumsum(random_velocity(fitted)) * fitted["control_period"]
     assert np.max(np.abs(x)) == pytest.approx(0.25, rel=1e-6)
-    assert np.max(np.abs(np.cumsum(random_velocity(cfg)) * cfg["dt"])) > 0.25  # it did not fit before
+    assert (
+        np.max(np.abs(np.cumsum(random_velocity(cfg)) * cfg["control_period"])) > 0.25
+    )  # it did not fit before
 
 
 def test_defaults_are_left_as_they_are():

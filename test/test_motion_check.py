@@ -15,7 +15,7 @@ from friction_ros.core.presets import load_preset
 def run_stuck(config, position=lambda t: 0.0, limit=200.0):
     """Feed the program a joint whose position is ``position(t)`` whatever the torque."""
     prog = make_program(config)
-    dt = prog.config["dt"]
+    dt = prog.config["control_period"]
     events, torques, t, last = [], [], 0.0, None
     while not prog.done and t < limit:
         pos = position(t)
@@ -33,7 +33,7 @@ def run_plant(config, preset="abb_m19s"):
     plant = p.make_plant()
     scale = plant.command_scale
     prog = make_program(config)
-    dt = prog.config["dt"]
+    dt = prog.config["control_period"]
     t, pos, vel, events = 0.0, 0.0, 0.0, []
     while not prog.done and t < prog.total_duration + 1.0:
         tau, ev = prog.update(t, pos, vel)

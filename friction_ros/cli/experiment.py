@@ -203,7 +203,9 @@ def main(argv: list[str] | None = None) -> int:
                 preset_obj = load_preset(preset or args.drive_preset)
             sized = sized_config(args, preset_obj, sets)
             sized_flat = typed_like_defaults(flatten(sized, keep_none=True), args.profile)
-            sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
+            sized_flat = {
+                k: v for k, v in sized_flat.items() if k not in ("program", "profile", "control_period")
+            }
             core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets})}
             # speeds re-derived within the limits (what the user set is kept, or refused if it cannot fit)
             program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets)))

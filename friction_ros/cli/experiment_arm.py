@@ -161,7 +161,9 @@ def arm_setup(args, sets: dict[str, Any]) -> ArmSetup | None:
             load = start_load(pobj, q0) if pobj is not None else None
             sized = sized_config(args, pobj, sets_j, load=load)
             sized_flat = typed_like_defaults(flatten(sized, keep_none=True), args.profile)
-            sized_flat = {k: v for k, v in sized_flat.items() if k not in ("program", "profile", "dt")}
+            sized_flat = {
+                k: v for k, v in sized_flat.items() if k not in ("program", "profile", "control_period")
+            }
             core = {"program": args.program, "profile": args.profile, **nest({**sized_flat, **sets_j})}
             program = ExcitationProgram(fit_to_limits(resolve_config(core), keep=set(sets_j)))
         except ParameterError as exc:

@@ -316,7 +316,7 @@ class ExcitationProgram:
         t = float(t)
         if self._t_prev is not None and t <= self._t_prev:
             return self._last_torque, events  # duplicate/stale sample: same answer, no recompute
-        dt = self.config["dt"] if self._t_prev is None else t - self._t_prev
+        dt = self.config["control_period"] if self._t_prev is None else t - self._t_prev
         self._t_prev = t
         if self._t0 is None:
             self._t0 = t

@@ -21,7 +21,7 @@ ON_LIMIT = ("stop", "skip")
 #: The default profile (ABB M19-S scale). Every key is documented in the excitation module docstring.
 DEFAULTS: dict[str, Any] = {
     "program": "sequence",
-    "dt": 0.001,
+    "control_period": 0.001,
     "sequence": ["breakaway", "plateaus", "presliding", "random", "chirp"],
     "gap": 0.5,
     "bias": 0.0,
@@ -134,7 +134,7 @@ def resolve_config(config: Mapping[str, Any] | None = None, names: Names = NAMES
 
 def _validate(c: dict, n: Names) -> None:
     validation.check_choice(n("program"), c["program"], PROGRAM_NAMES)
-    validation.check_real(n("dt"), c["dt"], 1e-5, 0.1, unit="s")
+    validation.check_real(n("control_period"), c["control_period"], 1e-5, 0.1, unit="s")
     seq = c["sequence"]
     if isinstance(seq, str):
         seq = [s.strip() for s in seq.split(",") if s.strip()]
@@ -184,7 +184,7 @@ def _validate(c: dict, n: Names) -> None:
     validation.check_real(n("breakaway.max"), b["max"], 0.0, lim["max_torque"], lo_open=True, unit="N*m")
     validation.check_real(n("breakaway.start"), b["start"], 0.0, b["max"], hi_open=True, unit="N*m")
     validation.check_real(n("breakaway.step"), b["step"], 0.0, b["max"], lo_open=True, unit="N*m")
-    validation.check_real(n("breakaway.step_time"), b["step_time"], c["dt"], 60.0, unit="s")
+    validation.check_real(n("breakaway.step_time"), b["step_time"], c["control_period"], 60.0, unit="s")
     validation.check_int(n("breakaway.counts"), b["counts"], 1, 10000)
     validation.check_real(n("breakaway.resolution"), b["resolution"], 0.0, 1.0, lo_open=True, unit="rad")
     validation.check_real(n("breakaway.preload_time"), b["preload_time"], 0.0, 60.0, unit="s")
@@ -193,7 +193,9 @@ def _validate(c: dict, n: Names) -> None:
     validation.check_int(n("breakaway.repeats"), b["repeats"], 1, 1000)
     r = c["random"]
     validation.check_real(n("random.duration"), r["duration"], 0.0, 3600.0, lo_open=True, unit="s")
-    validation.check_real(n("random.bandwidth"), r["bandwidth"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
+    validation.check_real(
+        n("random.bandwidth"), r["bandwidth"], 0.0, 0.45 / c["control_period"], lo_open=True, unit="Hz"
+    )
     validation.check_real(
         n("random.amplitude"), r["amplitude"], 0.0, lim["max_velocity"], lo_open=True, unit="rad/s"
     )
@@ -204,8 +206,8 @@ def _validate(c: dict, n: Names) -> None:
     validation.check_int(n("random.seed"), r["seed"], 0, 2**32 - 1)
     ch = c["chirp"]
     validation.check_real(n("chirp.duration"), ch["duration"], 0.0, 3600.0, lo_open=True, unit="s")
-    validation.check_real(n("chirp.f0"), ch["f0"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz")
-    validation.check_real(n("chirp.f1"), ch["f1"], ch["f0"], 0.45 / c["dt"], unit="Hz")
+    validation.check_real(n("chirp.f0"), ch["f0"], 0.0, 0.45 / c["control_period"], lo_open=True, unit="Hz")
+    validation.check_real(n("chirp.f1"), ch["f1"], ch["f0"], 0.45 / c["control_period"], unit="Hz")
     validation.check_real(
         n("chirp.amplitude"), ch["amplitude"], 0.0, lim["max_torque"], lo_open=True, unit="N*m"
     )
@@ -224,7 +226,7 @@ def _validate(c: dict, n: Names) -> None:
         for i, a in enumerate(amps)
     ]
     validation.check_real(
-        n("presliding.frequency"), ps["frequency"], 0.0, 0.45 / c["dt"], lo_open=True, unit="Hz"
+        n("presliding.frequency"), ps["frequency"], 0.0, 0.45 / c["control_period"], lo_open=True, unit="Hz"
     )
     validation.check_int(n("presliding.cycles"), ps["cycles"], 1, 10000)
     mc = c["motion_check"]

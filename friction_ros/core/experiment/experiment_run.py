@@ -40,7 +40,7 @@ def program_config(values: dict, node_values: dict) -> dict:
         sequence=list(values["sequence"]),
         gap=values["gap"],
         bias=values["bias"],
-        dt=node_values["control_period"],
+        control_period=node_values["control_period"],
     )
     return cfg
 

@@ -147,7 +147,7 @@ def experiment_config(scale: JointScale, profile: str = "quick") -> dict[str, An
     v_cap = min(0.4 * scale.speed_limit, 0.5 * t_avail / (B + 2.0 * J / settle))
     # ramps to 3x breakaway (4x ceiling), plus what accelerates the inertia to the fastest plateau
     t_max = min(scale.torque_limit, 4.0 * Fb + abs(load) + 2.0 * J * v_cap / settle + 1.5 * B * v_cap)
-    c["dt"] = scale.period
+    c["control_period"] = scale.period
     c["velocity_loop"].update(p=kv, i=ki, torque_limit=float(t_max - abs(load)), inertia=float(J))
     if soft < 1.0:
         fc = scale.coulomb if math.isfinite(scale.coulomb) else Fb
@@ -281,7 +281,7 @@ def fit_to_limits(config: dict[str, Any], keep: set[str] | frozenset[str] = froz
     if "random" in names:
         r = c["random"]
         unit = random_velocity({**c, "random": {**r, "amplitude": 1.0}})
-        excursion = float(np.max(np.abs(np.cumsum(unit)))) * c["dt"]
+        excursion = float(np.max(np.abs(np.cumsum(unit)))) * c["control_period"]
         peak = float(np.max(np.abs(unit)))
         fit = min(r["amplitude"], travel / max(excursion, 1e-300), speed / max(peak, 1e-300))
         if fit < r["amplitude"]:

@@ -112,7 +112,7 @@ def random_velocity(c: dict) -> np.ndarray:
     """ABB M19-S paper excitation: 4 Hz band-limited noise times the 3-term rectangular envelope [rad/s]."""
     from scipy.signal import butter, sosfiltfilt
 
-    r, dt = c["random"], c["dt"]
+    r, dt = c["random"], c["control_period"]
     n = int(round(r["duration"] / dt))
     rng = np.random.default_rng(r["seed"])
     sos = butter(4, r["bandwidth"], fs=1.0 / dt, output="sos")
@@ -132,4 +132,4 @@ def random_velocity(c: dict) -> np.ndarray:
 
 def random_segments(c: dict) -> list[Segment]:
     v = random_velocity(c)
-    return [VelocityProfile("random", "random", 0, v, c["dt"], c["random"]["amplitude"])]
+    return [VelocityProfile("random", "random", 0, v, c["control_period"], c["random"]["amplitude"])]
