@@ -50,11 +50,11 @@ start=$(date +%s)
 # while the fit's kernels compile (one CPU): one collection writes that cache, so the workers of
 # both phases read it instead of each rewriting every module at once
 .venv/bin/python -m pytest --collect-only -q -p no:cacheprovider "$@" > build/collect.log 2>&1
-for part in plants fit; do
-  pid=$warm_plants; [ $part = fit ] && pid=$warm_fit
-  wait "$pid" || { cat "build/warm-numba-$part.log"; echo "[test] the numba kernels did not compile" >&2; exit 1; }
-  cat "build/warm-numba-$part.log"
-done
+warm_rc=0
+wait $warm_plants || warm_rc=1
+wait $warm_fit || warm_rc=1
+cat build/warm-numba-plants.log build/warm-numba-fit.log
+[ $warm_rc -eq 0 ] || { echo "[test] the numba kernels did not compile" >&2; exit 1; }
 # the workers share the cores: each one (and the node processes it starts) gets its share of the
 # compiled kernels' threads, not a full set each (2 workers x 2 threads on 2 cores fought for them)
 threads=$(( cpus / (workers > 0 ? workers : 1) ))
