@@ -51,6 +51,14 @@ def claim_domain(base: int, index: int, stride: int) -> int:
     raise RuntimeError(f"no free ROS domain id in 1..{DOMAIN_MAX}: {_LOCK_DIR} holds a lock on each")
 
 
+def release_domain(domain: int) -> None:
+    """Give back a domain id :func:`claim_domain` locked for this process."""
+    for f in list(_held):
+        if f.name == str(_LOCK_DIR / f"{domain}.lock"):
+            _held.remove(f)
+            f.close()
+
+
 def pytest_configure(config) -> None:
     if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
         return  # the xdist controller runs no test: its workers claim their own domains

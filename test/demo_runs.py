@@ -1,14 +1,21 @@
 """The demo test modules' shared runs and checks: ``friction-demo --quick --presets ...`` over real
 ROS 2 processes, the presets split in groups (one test module each) so parallel test workers run
-them at the same time; together the groups are every preset (``GROUPS``), as ``--all-presets``."""
+them at the same time; together the groups are every preset (``GROUPS``), as ``--all-presets``.
+Each group's experiments and tracking runs run again at the same time on a saturated CPU
+(``rerun_loaded``): the lockstep graph must give the same bytes under any load."""
 
 from __future__ import annotations
 
 import json
+import multiprocessing
+import os
 import re
+import shutil
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from friction_ros.core.presets import PRESET_NAMES
@@ -32,11 +39,183 @@ def demo(args: list[str], out: Path, timeout: float = 1500) -> subprocess.Comple
     )
 
 
-def run_group(tmp_path_factory, group: str) -> tuple[subprocess.CompletedProcess, Path, float]:
-    out = tmp_path_factory.mktemp(f"demo_{group}") / "results"
-    t0 = time.monotonic()
-    proc = demo(["--presets", *GROUPS[group]], out)
-    return proc, out, time.monotonic() - t0
+@dataclass
+class GroupRun:
+    """A group's demo run and its runs again under load (:func:`run_group`)."""
+
+    proc: subprocess.CompletedProcess  # friction-demo --presets <the group>
+    out: Path  # its results folder
+    seconds: float
+    reruns: dict[str, dict] = field(default_factory=dict)  # preset -> :func:`_rerun_jobs` entry
+    twin: subprocess.CompletedProcess | None = None  # the whole demo again (``twin=True``)
+    twin_out: Path | None = None
+
+
+def run_group(tmp_path_factory, group: str, twin: bool = False) -> GroupRun:
+    """``friction-demo --quick --presets <group>`` and, at the same time on the same CPU, every preset's
+    identification experiment again; once the demo is done, each preset's tracking run of its best
+    mode again (``none`` when no mode is enabled), all at once. ``twin``: the whole demo of the group
+    again instead, started with it. Meanwhile a busy process of the lowest priority on every CPU of
+    this test keeps them saturated (the runs take the CPU from it whenever they can run: they compete
+    with each other and with the other tests' workers). Each graph has its own ROS domain."""
+    tmp = tmp_path_factory.mktemp(f"demo_{group}")
+    out, names = tmp / "results", GROUPS[group]
+    demo_cmd = [sys.executable, "-m", "friction_ros.cli.demo", "--quick", "--presets", *names]
+    jobs = (
+        [_Job("twin", "demo", [*demo_cmd, "--results", str(tmp / "twin")], tmp / "twin.log")] if twin else []
+    )
+    reruns = {} if twin else {name: {"dir": tmp / "rerun" / name} for name in names}
+    for name, r in reruns.items():
+        r["dir"].mkdir(parents=True)
+        exp = ["-m", "friction_ros.cli.experiment", "--profile", "quick", "-o", str(r["dir"] / "bag")]
+        exp += ["--overwrite", "--joint", "joint1", "--preset", name, "--mode", "lockstep"]
+        jobs.append(_Job(name, "experiment", [sys.executable, *exp], r["dir"] / "experiment.log"))
+    with own_domains(len(jobs) + len(reruns)) as domains, cpus_saturated():
+        t0 = time.monotonic()
+        group_run = subprocess.Popen(
+            [*demo_cmd, "--results", str(out)],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=ROOT,
+        )
+        for job in jobs:
+            job.start(domains.pop())
+        stdout, stderr = group_run.communicate(timeout=1500)
+        seconds = time.monotonic() - t0
+        for name, r in reruns.items():  # the tracking runs again, from the group run's controller files
+            summary = out / name / "demo_summary.json"
+            if summary.is_file():
+                job = _tracking_job(name, json.loads(summary.read_text()), out / name, r)
+                jobs.append(job)
+                job.start(domains.pop())
+        for job in jobs:
+            job.wait()
+    proc = subprocess.CompletedProcess(group_run.args, group_run.returncode, stdout, stderr)
+    run = GroupRun(proc, out, seconds, reruns)
+    for job in jobs:
+        if job.who == "twin":
+            run.twin, run.twin_out = job.completed(), tmp / "twin"
+        elif job.code != 0:
+            reruns[job.who].setdefault("failed", [job.what, job.code, job.log.read_text()[-3000:]])
+    return run
+
+
+@dataclass
+class _Job:
+    """One run again: its command, output file and ROS domain."""
+
+    who: str  # the preset (or "twin")
+    what: str
+    cmd: list[str]
+    log: Path
+    proc: subprocess.Popen | None = None
+    code: int | None = None
+
+    def start(self, domain: int) -> None:
+        with open(self.log, "w") as fh:
+            env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+            self.proc = subprocess.Popen(self.cmd, stdout=fh, stderr=subprocess.STDOUT, cwd=ROOT, env=env)
+
+    def wait(self) -> None:
+        self.code = self.proc.wait(timeout=1500)
+
+    def completed(self) -> subprocess.CompletedProcess:
+        text = self.log.read_text()
+        return subprocess.CompletedProcess(self.cmd, self.code, text, text)
+
+
+#: a tracking run again, as the demo runs it (``demo_steps.track``): preset, controller file, seconds, label
+_TRACK = (
+    "import sys; from pathlib import Path; from friction_ros.cli.demo_steps import track; "
+    "track(sys.argv[1], Path(sys.argv[2]), float(sys.argv[3]), sys.argv[4])"
+)
+
+
+def _tracking_job(name: str, summary: dict, results: Path, r: dict) -> _Job:
+    label = r["label"] = summary["best"]
+    r["duration"] = (summary["runs"][label]["samples"] - 1) * summary["control_period"]
+    shutil.copy(results / f"controller_{label}.yaml", r["dir"])  # its terms file lands beside it
+    r["terms"] = (results / f"terms_{label}.csv", r["dir"] / f"terms_{label}.csv")
+    cmd = [
+        sys.executable,
+        "-c",
+        _TRACK,
+        name,
+        str(r["dir"] / f"controller_{label}.yaml"),
+        repr(r["duration"]),
+        label,
+    ]
+    return _Job(name, "tracking", cmd, r["dir"] / "tracking.log")
+
+
+def _busy(stop_at: float) -> None:
+    os.nice(19)  # the lowest priority: it takes only the CPU no run wants
+    x = 0
+    while time.time() < stop_at:
+        x += 1
+
+
+@contextmanager
+def own_domains(n: int):
+    """``n`` more ROS domain ids for this process's concurrent graphs (each graph its own, as each
+    test worker has its own: ``conftest.claim_domain``), released when the block ends."""
+    from conftest import DOMAIN_MAX, claim_domain, release_domain
+
+    mine = int(os.environ["ROS_DOMAIN_ID"])
+    ids = [claim_domain(mine % DOMAIN_MAX + 1, 0, 1) for _ in range(n)]
+    try:
+        yield ids
+    finally:
+        for d in ids:
+            release_domain(d)
+
+
+@contextmanager
+def cpus_saturated():
+    """A busy process of the lowest priority on every CPU this test may use, until the block ends."""
+    ctx = multiprocessing.get_context("spawn")
+    hogs = [
+        ctx.Process(target=_busy, args=(time.time() + 1800,), daemon=True) for _ in os.sched_getaffinity(0)
+    ]
+    for h in hogs:
+        h.start()
+    try:
+        yield
+    finally:
+        for h in hogs:
+            h.terminate()
+            h.join()
+
+
+def check_reruns_identical(run: GroupRun) -> None:
+    """Under load, every preset's experiment gave the group run's bag (the same messages: digest of
+    ``/joint_states`` and ``/experiment_events``) and its tracking run the same rows, byte for byte."""
+    from friction_ros.core.bag import content_digest
+
+    assert sorted(run.reruns) == sorted(json.loads((run.out / "demo_summary.json").read_text())["presets"])
+    for name, r in run.reruns.items():
+        assert r.get("failed") is None, (name, r["failed"])
+        s = json.loads((run.out / name / "demo_summary.json").read_text())
+        digest = content_digest(r["dir"] / "bag", ["/joint_states", "/experiment_events"])[0]
+        assert digest == s["bag_digest"], name
+        group, rerun = (_run_rows(f, r["duration"]) for f in r["terms"])
+        assert len(group) == round(r["duration"] / s["control_period"]) + 1, (name, len(group))
+        assert group == rerun, (name, r["label"])
+
+
+def _run_rows(terms: Path, duration: float) -> list[bytes]:
+    """The terms file's rows of the run's periods, as written (the first row of each period stamp up to
+    ``duration``): what the demo's figures are computed from. The rows after it depend on when the
+    run was stopped, on the wall clock."""
+    rows: dict[int, bytes] = {}
+    with open(terms, "rb") as fh:
+        fh.readline()
+        for line in fh:
+            ns = int(line.split(b",", 1)[0])
+            if ns <= round(duration * 1e9):
+                rows.setdefault(ns, line)
+    return [rows[k] for k in sorted(rows)]
 
 
 def check_every_preset_completes(proc, out: Path, names: tuple[str, ...]) -> None:

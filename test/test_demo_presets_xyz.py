@@ -1,11 +1,18 @@
 """The main job end to end (quick) on the presets of group ``xyz`` (``demo_runs.GROUPS``): one
 ``friction-demo --presets ...`` run shared by the module; every mode enabled or refused with its
-reason, and compensation helps where friction matters or the demo says why not."""
+reason, and compensation helps where friction matters or the demo says why not; each preset's
+experiment and tracking run again on a saturated CPU give the same bytes."""
 
 from __future__ import annotations
 
 import pytest
-from demo_runs import GROUPS, check_compensation_helps, check_every_preset_completes, run_group
+from demo_runs import (
+    GROUPS,
+    check_compensation_helps,
+    check_every_preset_completes,
+    check_reruns_identical,
+    run_group,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 GROUP = "xyz"
@@ -17,10 +24,12 @@ def group_run(tmp_path_factory):
 
 
 def test_every_preset_completes_with_every_mode_enabled_or_refused(group_run):
-    proc, out, _ = group_run
-    check_every_preset_completes(proc, out, GROUPS[GROUP])
+    check_every_preset_completes(group_run.proc, group_run.out, GROUPS[GROUP])
 
 
 def test_compensation_helps_where_friction_matters_and_is_reported_where_not(group_run):
-    _, out, _ = group_run
-    check_compensation_helps(out, GROUPS[GROUP])
+    check_compensation_helps(group_run.out, GROUPS[GROUP])
+
+
+def test_every_presets_experiment_and_tracking_run_again_under_load_give_the_same_bytes(group_run):
+    check_reruns_identical(group_run)

@@ -77,6 +77,20 @@ def _resolution(preset_obj) -> float:
     return per_rev / p.ratio if p.encoder_location == "motor" else per_rev
 
 
+def new_bag_dir(parent: Path, name: str) -> Path:
+    """``parent/name``, created empty for this run (``name_2``, ``name_3`` ... when taken): two demos
+    started in the same second never write one bag."""
+    parent.mkdir(parents=True, exist_ok=True)
+    for n in range(1, 1000):
+        path = parent / (name if n == 1 else f"{name}_{n}")
+        try:
+            path.mkdir()
+            return path
+        except FileExistsError:
+            continue
+    raise RuntimeError(f"no free bag name {name}_N in {parent}: remove old demo bags")
+
+
 def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
     """Steps 1-4 for one preset; raises RuntimeError/ParameterError naming what failed."""
     from friction_ros.core.experiment.joint_scale import JointScale
@@ -102,7 +116,7 @@ def run_preset(args, preset_name: str, results_dir: Path) -> DemoResult:
         scale = replace(scale, delay=scale.delay + EXTRA_DELAY_PERIODS * GRAPH_PERIOD)
     results_dir.mkdir(parents=True, exist_ok=True)
     stamp = time.strftime("%Y%m%d_%H%M%S")
-    bag = Path(args.bag) if args.bag else ROOT / "bags" / f"demo_{preset_name}_{stamp}"
+    bag = Path(args.bag) if args.bag else new_bag_dir(ROOT / "bags", f"demo_{preset_name}_{stamp}")
     t_all = time.monotonic()
     if not args.bag:
         say(f"1/4 identification experiment on {preset_name} ({args.profile} profile, {timing}) -> {bag}")
