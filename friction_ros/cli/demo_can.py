@@ -32,6 +32,9 @@ NODE_ID = 1
 EXTRA_DELAY_PERIODS = 2
 #: longest wait for the drive to come up enabled (NMT + SDO configuration + state machine for CiA 402)
 ENABLE_TIMEOUT = 30.0
+#: poll period of the start-up waits (the emulator's first line, the drive enabled): a step waits
+#: on average half of it per wait beyond the event itself
+POLL = 0.01
 
 
 @dataclass
@@ -206,7 +209,7 @@ class CanStack:
             while not any("drive_emulator:" in ln for ln in self._output()):  # its plant is built
                 if self._failure() or time.monotonic() > end:
                     raise RuntimeError(f"{self.step}: drive_emulator did not start: {self._failure()}")
-                time.sleep(0.05)
+                time.sleep(POLL)
             self.bring.start()
             while not self.watch.enabled:
                 failure = self._failure()
@@ -214,7 +217,7 @@ class CanStack:
                     lines = self._output()[-10:]
                     why = failure or f"the drive did not report itself enabled within {ENABLE_TIMEOUT:g} s"
                     raise RuntimeError(f"{self.step}: {self.cj.protocol} drive: {why}\n" + "\n".join(lines))
-                time.sleep(0.05)
+                time.sleep(POLL)
         except BaseException:
             self.__exit__(None, None, None)
             raise
