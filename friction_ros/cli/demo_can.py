@@ -32,6 +32,9 @@ NODE_ID = 1
 EXTRA_DELAY_PERIODS = 2
 #: longest wait for the drive to come up enabled (NMT + SDO configuration + state machine for CiA 402)
 ENABLE_TIMEOUT = 30.0
+#: poll period of the start-up waits (the emulator's first line, the drive enabled): a step waits
+#: on average half of it per wait beyond the event itself
+POLL = 0.01
 
 
 @dataclass
@@ -111,9 +114,9 @@ class DriveWatch:
     def __init__(self, joint: str):
         import rclpy
         from friction_msgs.msg import DriveState
-        from rclpy.executors import SingleThreadedExecutor
 
         from friction_ros.nodes.qos import SENSOR_QOS
+        from friction_ros.nodes.runtime import make_executor
 
         if not rclpy.ok():
             rclpy.init()
@@ -124,7 +127,9 @@ class DriveWatch:
         self.t0 = time.monotonic()
         self.node = rclpy.create_node(f"friction_demo_drive_watch_{uuid.uuid4().hex[:6]}")
         self.sub = self.node.create_subscription(DriveState, "drive_state", self._on_state, SENSOR_QOS)
-        self.ex = SingleThreadedExecutor()
+        # the EventsExecutor: drive_state comes once per control period (1 kHz), every message is
+        # read (a one-period fault flag counts), and the demo's processes share the CPU with this one
+        self.ex = make_executor()
         self.ex.add_node(self.node)
         self._stop = threading.Event()
         self._th = threading.Thread(target=self._spin, daemon=True)
@@ -204,7 +209,7 @@ class CanStack:
             while not any("drive_emulator:" in ln for ln in self._output()):  # its plant is built
                 if self._failure() or time.monotonic() > end:
                     raise RuntimeError(f"{self.step}: drive_emulator did not start: {self._failure()}")
-                time.sleep(0.05)
+                time.sleep(POLL)
             self.bring.start()
             while not self.watch.enabled:
                 failure = self._failure()
@@ -212,7 +217,7 @@ class CanStack:
                     lines = self._output()[-10:]
                     why = failure or f"the drive did not report itself enabled within {ENABLE_TIMEOUT:g} s"
                     raise RuntimeError(f"{self.step}: {self.cj.protocol} drive: {why}\n" + "\n".join(lines))
-                time.sleep(0.05)
+                time.sleep(POLL)
         except BaseException:
             self.__exit__(None, None, None)
             raise
@@ -284,7 +289,11 @@ def track_realtime(cj: CanJoint, params_file, duration: float, label: str, perio
         first: list[float] = []
         node = stack.watch.node
         sub = node.create_subscription(
-            ControllerState, "controller_state", lambda _m: first or first.append(time.monotonic()), STATE_QOS
+            ControllerState,
+            "controller_state",
+            lambda _m: first or first.append(time.monotonic()),
+            STATE_QOS,
+            raw=True,  # only its arrival counts: no message object per period
         )
         bring = Bringup([spec], quiet=True)
         t0 = time.monotonic()

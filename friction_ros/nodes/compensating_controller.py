@@ -291,4 +291,6 @@ def main(args=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    from friction_ros.nodes.process_exit import exit_now
+
+    exit_now(main())  # everything is closed: no interpreter teardown (see process_exit)
