@@ -89,15 +89,21 @@ def default_dir() -> Path:
 
 def pack_frame(msg: can.Message) -> bytes:
     """python-can Message -> SocketCAN ``struct can_frame`` bytes."""
-    if msg.is_extended_id:
-        cid = (msg.arbitration_id & CAN_EFF_MASK) | CAN_EFF_FLAG
-    else:
-        cid = msg.arbitration_id & 0x7FF
-    if msg.is_remote_frame:
-        cid |= CAN_RTR_FLAG
+    cid = raw_can_id(msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame)
     if msg.is_error_frame:
         cid |= CAN_ERR_FLAG
     return _FRAME.pack(cid, msg.dlc, msg.data)  # bytes or bytearray: no copy
+
+
+def raw_can_id(arbitration_id: int, extended: bool, remote: bool) -> int:
+    """SocketCAN ``can_id``: the 11/29-bit id with the EFF and RTR flags."""
+    cid = (arbitration_id & CAN_EFF_MASK) | CAN_EFF_FLAG if extended else arbitration_id & 0x7FF
+    return cid | CAN_RTR_FLAG if remote else cid
+
+
+def pack_raw(cid: int, dlc: int, data: bytes) -> bytes:
+    """``struct can_frame`` bytes of a raw ``can_id`` (:func:`raw_can_id`), length and payload."""
+    return _FRAME.pack(cid, dlc, data)
 
 
 def unpack_frame(raw: bytes, timestamp: float, channel: str) -> can.Message | None:
@@ -215,12 +221,15 @@ class LocalBus(can.BusABC):
         (``frames_dropped``) and counts as congested for :attr:`CONGESTED_HOLD`: frames for it are
         dropped at once meanwhile, so a member that does not read cannot stall the bus.
         """
+        self.send_raw(pack_frame(msg), timeout)
+
+    def send_raw(self, raw: bytes, timeout: float | None = None) -> None:
+        """:meth:`send` of a frame already packed as ``struct can_frame`` (:func:`pack_raw`)."""
         if self._closed:
             raise can.CanOperationError("friction_local bus is shut down")
         now = time.monotonic()
         if now - self._refreshed > self._refresh_period:
             self._refresh(now)
-        raw = pack_frame(msg)
         deadline = None
         congested = self._congested
         for peer, sock in self._targets:
@@ -276,6 +285,26 @@ class LocalBus(can.BusABC):
             msg = unpack_frame(raw, time.time(), self.channel)
             if msg is not None:
                 return msg, True
+
+    def recv_raw(self) -> tuple[int, bytes] | None:
+        """The next received frame that passes the filters as (raw ``can_id`` with the EFF/RTR/ERR
+        flags, payload), or None when none is waiting; never waits and builds no Message.
+
+        What the node's bus link drains each period (it takes the drain time as the receive time:
+        ``recv`` stamps a frame with the time it was read, which is the same)."""
+        if self._closed:
+            raise can.CanOperationError("friction_local bus is shut down")
+        recv, f = self._sock.recv, self._filter
+        while True:
+            try:
+                raw = recv(64)
+            except BlockingIOError:
+                return None
+            if len(raw) != 16:
+                continue  # not a frame
+            cid, dlc, data = _FRAME.unpack(raw)
+            if dlc <= 8 and f.passes(cid):
+                return cid, b"" if cid & CAN_RTR_FLAG else data[:dlc]
 
     def fileno(self) -> int:
         return self._sock.fileno()
