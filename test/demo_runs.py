@@ -46,34 +46,38 @@ class GroupRun:
     proc: subprocess.CompletedProcess  # friction-demo --presets <the group>
     out: Path  # its results folder
     seconds: float
-    reruns: dict[str, dict] = field(default_factory=dict)  # preset -> :func:`_rerun_jobs` entry
-    twin: subprocess.CompletedProcess | None = None  # the whole demo again (``twin=True``)
-    twin_out: Path | None = None
+    #: preset -> {"dir": its folder, "labels": the tracking runs again, "duration": s, "failed": ...}
+    reruns: dict[str, dict] = field(default_factory=dict)
 
 
-def run_group(tmp_path_factory, group: str, twin: bool = False) -> GroupRun:
+def run_group(tmp_path_factory, group: str, tracking: tuple[str, ...] = ()) -> GroupRun:
     """``friction-demo --quick --presets <group>`` and, at the same time on the same CPU, every preset's
-    identification experiment again; once the demo is done, each preset's tracking run of its best
-    mode again (``none`` when no mode is enabled), all at once. ``twin``: the whole demo of the group
-    again instead, started with it. Meanwhile a busy process of the lowest priority on every CPU of
-    this test keeps them saturated (the runs take the CPU from it whenever they can run: they compete
-    with each other and with the other tests' workers). Each graph has its own ROS domain."""
+    identification experiment again (the step whose bag depends on a recorder keeping up); once the
+    demo is done, the tracking runs of ``tracking`` (modes) again from its controller files, all at
+    once. Meanwhile a busy process of the lowest priority on every CPU of this test keeps them
+    saturated: the runs compete with each other and with the other tests' workers, and the CPU is
+    never idle. Each graph has its own ROS domain."""
     tmp = tmp_path_factory.mktemp(f"demo_{group}")
     out, names = tmp / "results", GROUPS[group]
-    demo_cmd = [sys.executable, "-m", "friction_ros.cli.demo", "--quick", "--presets", *names]
-    jobs = (
-        [_Job("twin", "demo", [*demo_cmd, "--results", str(tmp / "twin")], tmp / "twin.log")] if twin else []
-    )
-    reruns = {} if twin else {name: {"dir": tmp / "rerun" / name} for name in names}
+    jobs, reruns = [], {name: {"dir": tmp / "rerun" / name, "labels": tracking} for name in names}
     for name, r in reruns.items():
         r["dir"].mkdir(parents=True)
         exp = ["-m", "friction_ros.cli.experiment", "--profile", "quick", "-o", str(r["dir"] / "bag")]
         exp += ["--overwrite", "--joint", "joint1", "--preset", name, "--mode", "lockstep"]
         jobs.append(_Job(name, "experiment", [sys.executable, *exp], r["dir"] / "experiment.log"))
-    with own_domains(len(jobs) + len(reruns)) as domains, cpus_saturated():
+    with own_domains(len(names) * (1 + len(tracking))) as domains, cpus_saturated():
         t0 = time.monotonic()
         group_run = subprocess.Popen(
-            [*demo_cmd, "--results", str(out)],
+            [
+                sys.executable,
+                "-m",
+                "friction_ros.cli.demo",
+                "--quick",
+                "--results",
+                str(out),
+                "--presets",
+                *names,
+            ],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -85,27 +89,26 @@ def run_group(tmp_path_factory, group: str, twin: bool = False) -> GroupRun:
         seconds = time.monotonic() - t0
         for name, r in reruns.items():  # the tracking runs again, from the group run's controller files
             summary = out / name / "demo_summary.json"
-            if summary.is_file():
-                job = _tracking_job(name, json.loads(summary.read_text()), out / name, r)
-                jobs.append(job)
-                job.start(domains.pop())
+            if tracking and summary.is_file():
+                s = json.loads(summary.read_text())
+                r["duration"] = (s["runs"]["none"]["samples"] - 1) * s["control_period"]
+                for label in tracking:
+                    jobs.append(_tracking_job(name, label, r["duration"], out / name, r["dir"]))
+                    jobs[-1].start(domains.pop())
         for job in jobs:
             job.wait()
-    proc = subprocess.CompletedProcess(group_run.args, group_run.returncode, stdout, stderr)
-    run = GroupRun(proc, out, seconds, reruns)
     for job in jobs:
-        if job.who == "twin":
-            run.twin, run.twin_out = job.completed(), tmp / "twin"
-        elif job.code != 0:
+        if job.code != 0:
             reruns[job.who].setdefault("failed", [job.what, job.code, job.log.read_text()[-3000:]])
-    return run
+    proc = subprocess.CompletedProcess(group_run.args, group_run.returncode, stdout, stderr)
+    return GroupRun(proc, out, seconds, reruns)
 
 
 @dataclass
 class _Job:
     """One run again: its command, output file and ROS domain."""
 
-    who: str  # the preset (or "twin")
+    who: str  # the preset
     what: str
     cmd: list[str]
     log: Path
@@ -120,10 +123,6 @@ class _Job:
     def wait(self) -> None:
         self.code = self.proc.wait(timeout=1500)
 
-    def completed(self) -> subprocess.CompletedProcess:
-        text = self.log.read_text()
-        return subprocess.CompletedProcess(self.cmd, self.code, text, text)
-
 
 #: a tracking run again, as the demo runs it (``demo_steps.track``): preset, controller file, seconds, label
 _TRACK = (
@@ -132,21 +131,12 @@ _TRACK = (
 )
 
 
-def _tracking_job(name: str, summary: dict, results: Path, r: dict) -> _Job:
-    label = r["label"] = summary["best"]
-    r["duration"] = (summary["runs"][label]["samples"] - 1) * summary["control_period"]
-    shutil.copy(results / f"controller_{label}.yaml", r["dir"])  # its terms file lands beside it
-    r["terms"] = (results / f"terms_{label}.csv", r["dir"] / f"terms_{label}.csv")
-    cmd = [
-        sys.executable,
-        "-c",
-        _TRACK,
-        name,
-        str(r["dir"] / f"controller_{label}.yaml"),
-        repr(r["duration"]),
-        label,
-    ]
-    return _Job(name, "tracking", cmd, r["dir"] / "tracking.log")
+def _tracking_job(name: str, label: str, duration: float, results: Path, rerun: Path) -> _Job:
+    d = rerun / label  # the run's terms file lands beside its copy of the controller file
+    d.mkdir()
+    shutil.copy(results / f"controller_{label}.yaml", d)
+    cmd = [sys.executable, "-c", _TRACK, name, str(d / f"controller_{label}.yaml"), repr(duration), label]
+    return _Job(name, f"tracking {label}", cmd, d / "tracking.log")
 
 
 def _busy(stop_at: float) -> None:
@@ -190,7 +180,8 @@ def cpus_saturated():
 
 def check_reruns_identical(run: GroupRun) -> None:
     """Under load, every preset's experiment gave the group run's bag (the same messages: digest of
-    ``/joint_states`` and ``/experiment_events``) and its tracking run the same rows, byte for byte."""
+    ``/joint_states`` and ``/experiment_events``), and each tracking run again the same rows of the
+    controller's terms file as the group run's, byte for byte."""
     from friction_ros.core.bag import content_digest
 
     assert sorted(run.reruns) == sorted(json.loads((run.out / "demo_summary.json").read_text())["presets"])
@@ -199,9 +190,11 @@ def check_reruns_identical(run: GroupRun) -> None:
         s = json.loads((run.out / name / "demo_summary.json").read_text())
         digest = content_digest(r["dir"] / "bag", ["/joint_states", "/experiment_events"])[0]
         assert digest == s["bag_digest"], name
-        group, rerun = (_run_rows(f, r["duration"]) for f in r["terms"])
-        assert len(group) == round(r["duration"] / s["control_period"]) + 1, (name, len(group))
-        assert group == rerun, (name, r["label"])
+        for label in r["labels"]:
+            group = _run_rows(run.out / name / f"terms_{label}.csv", r["duration"])
+            again = _run_rows(r["dir"] / label / f"terms_{label}.csv", r["duration"])
+            assert len(group) == s["runs"][label]["samples"], (name, label, len(group))
+            assert group == again, (name, label)
 
 
 def _run_rows(terms: Path, duration: float) -> list[bytes]:

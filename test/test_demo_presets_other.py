@@ -1,7 +1,7 @@
 """The main job end to end (quick) on the presets of group ``other`` (``demo_runs.GROUPS``): one
 ``friction-demo --presets ...`` run shared by the module; every mode enabled or refused with its
 reason, and compensation helps where friction matters or the demo says why not; each preset's
-experiment and tracking run again on a saturated CPU give the same bytes."""
+experiment again beside it, on a saturated CPU, gives the same bag."""
 
 from __future__ import annotations
 
@@ -31,5 +31,5 @@ def test_compensation_helps_where_friction_matters_and_is_reported_where_not(gro
     check_compensation_helps(group_run.out, GROUPS[GROUP])
 
 
-def test_every_presets_experiment_and_tracking_run_again_under_load_give_the_same_bytes(group_run):
+def test_every_presets_experiment_again_under_load_gives_the_same_bag(group_run):
     check_reruns_identical(group_run)
