@@ -34,7 +34,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
 @pytest.fixture(scope="module")
 def abb(tmp_path_factory):
-    return run_group(tmp_path_factory, "abb", tracking=("none", *MODES))
+    return run_group(tmp_path_factory, "abb", rerun=("abb_m19s",), tracking=("none", *MODES))
 
 
 @pytest.fixture(scope="module")
