@@ -14,7 +14,7 @@ import shutil
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -27,9 +27,6 @@ _NAMED = {"abb": ("abb_m19s",), "xyz": ("seed002_x", "seed002_y", "seed002_z")}
 GROUPS = {**_NAMED, "other": tuple(n for n in PRESET_NAMES if all(n not in g for g in _NAMED.values()))}
 #: the preset whose friction barely matters next to its 60-count joint encoder (see the check below)
 ENCODER_CAPPED = "seed000_gearhead"
-#: the preset with the longest quick experiment (~111 s simulated, about three times any other
-#: preset's): its recorder has the most to keep up with
-LONGEST_EXPERIMENT = "seed000_gearhead"
 
 
 def demo(args: list[str], out: Path, timeout: float = 1500) -> subprocess.CompletedProcess:
@@ -70,7 +67,10 @@ def run_group(
         exp = ["-m", "friction_ros.cli.experiment", "--profile", "quick", "-o", str(r["dir"] / "bag")]
         exp += ["--overwrite", "--joint", "joint1", "--preset", name, "--mode", "lockstep"]
         jobs.append(_Job(name, "experiment", [sys.executable, *exp], r["dir"] / "experiment.log"))
-    with own_domains(len(rerun) * (1 + len(tracking))) as domains, cpus_saturated():
+    with (
+        own_domains(len(rerun) * (1 + len(tracking))) as domains,
+        cpus_saturated() if rerun else nullcontext(),
+    ):
         t0 = time.monotonic()
         group_run = subprocess.Popen(
             [
