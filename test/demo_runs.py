@@ -56,9 +56,9 @@ def run_group(
     """``friction-demo --quick --presets <group>`` and, at the same time on the same CPU, the
     identification experiment of the presets ``rerun`` again (the step whose bag depends on a recorder
     keeping up); once the demo is done, their tracking runs of ``tracking`` (modes) again from its
-    controller files, all at once. Meanwhile a busy process of the lowest priority on every CPU of this test keeps them
-    saturated: the runs compete with each other and with the other tests' workers, and the CPU is
-    never idle. Each graph has its own ROS domain."""
+    controller files, all at once. Meanwhile (when there are reruns) a busy process of the lowest
+    priority on every CPU of this test keeps them saturated: the runs compete with each other and with
+    the other tests' workers, and the CPU is never idle. Each graph has its own ROS domain."""
     tmp = tmp_path_factory.mktemp(f"demo_{group}")
     out, names = tmp / "results", GROUPS[group]
     jobs, reruns = [], {name: {"dir": tmp / "rerun" / name, "labels": tracking} for name in rerun}
