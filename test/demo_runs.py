@@ -29,9 +29,13 @@ GROUPS = {**_NAMED, "other": tuple(n for n in PRESET_NAMES if all(n not in g for
 ENCODER_CAPPED = "seed000_gearhead"
 
 
+def demo_command(args: list[str], out: Path) -> list[str]:
+    return [sys.executable, "-m", "friction_ros.cli.demo", "--quick", "--results", str(out), *args]
+
+
 def demo(args: list[str], out: Path, timeout: float = 1500) -> subprocess.CompletedProcess:
     return subprocess.run(
-        [sys.executable, "-m", "friction_ros.cli.demo", "--quick", "--results", str(out), *args],
+        demo_command(args, out),
         capture_output=True,
         text=True,
         timeout=timeout,
@@ -45,7 +49,6 @@ class GroupRun:
 
     proc: subprocess.CompletedProcess  # friction-demo --presets <the group>
     out: Path  # its results folder
-    seconds: float
     #: preset -> {"dir": its folder, "labels": the tracking runs again, "duration": s, "failed": ...}
     reruns: dict[str, dict] = field(default_factory=dict)
 
@@ -64,25 +67,14 @@ def run_group(
     jobs, reruns = [], {name: {"dir": tmp / "rerun" / name, "labels": tracking} for name in rerun}
     for name, r in reruns.items():
         r["dir"].mkdir(parents=True)
-        exp = ["-m", "friction_ros.cli.experiment", "--profile", "quick", "-o", str(r["dir"] / "bag")]
-        exp += ["--overwrite", "--joint", "joint1", "--preset", name, "--mode", "lockstep"]
-        jobs.append(_Job(name, "experiment", [sys.executable, *exp], r["dir"] / "experiment.log"))
+        cmd = [sys.executable, "-c", _EXPERIMENT, name, str(r["dir"] / "bag")]
+        jobs.append(_Job(name, "experiment", cmd, r["dir"] / "experiment.log"))
     with (
         own_domains(len(rerun) * (1 + len(tracking))) as domains,
         cpus_saturated() if rerun else nullcontext(),
     ):
-        t0 = time.monotonic()
         group_run = subprocess.Popen(
-            [
-                sys.executable,
-                "-m",
-                "friction_ros.cli.demo",
-                "--quick",
-                "--results",
-                str(out),
-                "--presets",
-                *names,
-            ],
+            demo_command(["--presets", *names], out),
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
@@ -91,7 +83,6 @@ def run_group(
         for job in jobs:
             job.start(domains.pop())
         stdout, stderr = group_run.communicate(timeout=1500)
-        seconds = time.monotonic() - t0
         for name, r in reruns.items():  # the tracking runs again, from the group run's controller files
             summary = out / name / "demo_summary.json"
             if tracking and summary.is_file():
@@ -106,7 +97,7 @@ def run_group(
         if job.code != 0:
             reruns[job.who].setdefault("failed", [job.what, job.code, job.log.read_text()[-3000:]])
     proc = subprocess.CompletedProcess(group_run.args, group_run.returncode, stdout, stderr)
-    return GroupRun(proc, out, seconds, reruns)
+    return GroupRun(proc, out, reruns)
 
 
 @dataclass
@@ -129,6 +120,11 @@ class _Job:
         self.code = self.proc.wait(timeout=1500)
 
 
+#: the experiment again, as the demo runs it (``demo_steps.run_experiment``, its default profile): preset, bag
+_EXPERIMENT = (
+    "import sys; from pathlib import Path; from friction_ros.cli.demo_steps import run_experiment; "
+    "run_experiment(sys.argv[1], 'quick', Path(sys.argv[2]), 'joint1')"
+)
 #: a tracking run again, as the demo runs it (``demo_steps.track``): preset, controller file, seconds, label
 _TRACK = (
     "import sys; from pathlib import Path; from friction_ros.cli.demo_steps import track; "

@@ -37,18 +37,13 @@ def abb(tmp_path_factory):
     return run_group(tmp_path_factory, "abb", rerun=("abb_m19s",), tracking=("none", *MODES))
 
 
-@pytest.fixture(scope="module")
-def all_presets(abb):
-    return abb.proc, abb.out, abb.seconds
-
-
-def test_every_preset_completes_with_every_mode_enabled_or_refused(all_presets):
-    proc, out, _ = all_presets
+def test_every_preset_completes_with_every_mode_enabled_or_refused(abb):
+    proc, out = abb.proc, abb.out
     check_every_preset_completes(proc, out, GROUPS["abb"])
 
 
-def test_compensation_helps_where_friction_matters_and_is_reported_where_not(all_presets):
-    _, out, _ = all_presets
+def test_compensation_helps_where_friction_matters_and_is_reported_where_not(abb):
+    out = abb.out
     check_compensation_helps(out, GROUPS["abb"])
     s = json.loads((out / "demo_summary.json").read_text())
     assert s["presets"]["abb_m19s"]["reduction_percent"][s["presets"]["abb_m19s"]["best"]] >= 80.0
@@ -62,8 +57,8 @@ def test_the_demo_groups_are_every_preset_once():
         assert (Path(__file__).parent / mod).is_file(), mod
 
 
-def test_the_summary_keeps_its_keys_and_the_files_exist(all_presets):
-    _, out, _ = all_presets
+def test_the_summary_keeps_its_keys_and_the_files_exist(abb):
+    out = abb.out
     p = json.loads((out / "abb_m19s" / "demo_summary.json").read_text())
     for key in (
         "preset",
@@ -80,8 +75,8 @@ def test_the_summary_keeps_its_keys_and_the_files_exist(all_presets):
         assert (out / "abb_m19s" / f).is_file() and (out / "abb_m19s" / f).stat().st_size > 500, f
 
 
-def test_the_bag_is_valid_for_an_independent_reader(all_presets):
-    _, out, _ = all_presets
+def test_the_bag_is_valid_for_an_independent_reader(abb):
+    out = abb.out
     s = json.loads((out / "abb_m19s" / "demo_summary.json").read_text())
     with AnyReader([Path(s["bag"])]) as reader:
         topics = {c.topic: c.msgtype for c in reader.connections}
@@ -98,11 +93,11 @@ def test_a_run_under_cpu_contention_gives_identical_results(abb):
     assert sorted(abb.reruns["abb_m19s"]["labels"]) == sorted(("none", *MODES))
 
 
-def test_the_fitted_parameter_file_starts_the_controller_node(all_presets):
+def test_the_fitted_parameter_file_starts_the_controller_node(abb):
     """The parameter file the demo wrote starts compensating_controller as it is, with an enabled mode."""
     from friction_msgs.msg import ControllerState
 
-    _, out, _ = all_presets
+    out = abb.out
     s = json.loads((out / "abb_m19s" / "demo_summary.json").read_text())
     params = s["params_file"]
     specs = [

@@ -5,12 +5,7 @@ reason, and compensation helps where friction matters or the demo says why not."
 from __future__ import annotations
 
 import pytest
-from demo_runs import (
-    GROUPS,
-    check_compensation_helps,
-    check_every_preset_completes,
-    run_group,
-)
+from demo_runs import GROUPS, check_compensation_helps, check_every_preset_completes, run_group
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 GROUP = "other"
