@@ -14,6 +14,7 @@ from friction_ros.core.validation import (
     check_real,
 )
 
+from .butterworth import butter_lowpass_sos, sosfilt
 from .reference_base import Reference, _pwl_velocity
 
 #: GA friction thesis 2002 App. C Table C.1: (dt [s], dA [rad], end time [s]); dt = dA = 0 is a hold.
@@ -68,8 +69,6 @@ class BandLimitedRandom(Reference):
         sample_time: float = 1e-3,
         **kw,
     ):
-        from scipy import signal
-
         super().__init__(**kw)
         n = "reference.band_limited_random"
         self.amplitude = check_real(f"{n}.amplitude", amplitude, 0.0, lo_open=True, unit="rad")
@@ -82,8 +81,8 @@ class BandLimitedRandom(Reference):
         self.seed = check_int(f"{n}.seed", seed, 0)
         N = int(round(self.duration / self.sample_time)) + 1
         rng = np.random.default_rng(self.seed)
-        sos = signal.butter(self.order, self.cutoff, fs=1.0 / self.sample_time, output="sos")
-        x = signal.sosfilt(sos, rng.standard_normal(N))
+        sos = butter_lowpass_sos(self.order, self.cutoff, 1.0 / self.sample_time)
+        x = sosfilt(sos, rng.standard_normal(N))
         x *= self.amplitude / max(np.max(np.abs(x)), 1e-300)
         self._t = np.arange(N) * self.sample_time
         self._p = x

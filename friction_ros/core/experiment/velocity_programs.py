@@ -9,6 +9,7 @@ import math
 
 import numpy as np
 
+from friction_ros.core.experiment.butterworth import butter_lowpass_sos, sosfiltfilt
 from friction_ros.core.experiment.segments import Segment, saturation_note
 
 
@@ -110,12 +111,10 @@ def plateau_segments(c: dict) -> list[Segment]:
 
 def random_velocity(c: dict) -> np.ndarray:
     """ABB M19-S paper excitation: 4 Hz band-limited noise times the 3-term rectangular envelope [rad/s]."""
-    from scipy.signal import butter, sosfiltfilt
-
     r, dt = c["random"], c["control_period"]
     n = int(round(r["duration"] / dt))
     rng = np.random.default_rng(r["seed"])
-    sos = butter(4, r["bandwidth"], fs=1.0 / dt, output="sos")
+    sos = butter_lowpass_sos(4, r["bandwidth"], 1.0 / dt)
     x = sosfiltfilt(sos, rng.standard_normal(n + 2000))[1000 : 1000 + n]
     x /= np.sqrt(np.mean(x * x))
     t = np.arange(n) * dt
