@@ -1,11 +1,18 @@
 """The main job end to end (quick) on the presets of group ``xyz`` (``demo_runs.GROUPS``): one
 ``friction-demo --presets ...`` run shared by the module; every mode enabled or refused with its
-reason, and compensation helps where friction matters or the demo says why not."""
+reason, compensation helps where friction matters or the demo says why not, and each preset's
+experiment run again at the same time on a saturated CPU gives the same bag."""
 
 from __future__ import annotations
 
 import pytest
-from demo_runs import GROUPS, check_compensation_helps, check_every_preset_completes, run_group
+from demo_runs import (
+    GROUPS,
+    check_compensation_helps,
+    check_every_preset_completes,
+    check_reruns_identical,
+    run_group,
+)
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 GROUP = "xyz"
@@ -13,7 +20,8 @@ GROUP = "xyz"
 
 @pytest.fixture(scope="module")
 def group_run(tmp_path_factory):
-    return run_group(tmp_path_factory, GROUP)
+    # every preset's identification experiment again beside the demo, on a saturated CPU
+    return run_group(tmp_path_factory, GROUP, rerun=GROUPS[GROUP])
 
 
 def test_every_preset_completes_with_every_mode_enabled_or_refused(group_run):
@@ -22,3 +30,7 @@ def test_every_preset_completes_with_every_mode_enabled_or_refused(group_run):
 
 def test_compensation_helps_where_friction_matters_and_is_reported_where_not(group_run):
     check_compensation_helps(group_run.out, GROUPS[GROUP])
+
+
+def test_every_presets_experiment_gives_the_same_bag_under_load(group_run):
+    check_reruns_identical(group_run)

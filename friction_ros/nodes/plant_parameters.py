@@ -82,6 +82,16 @@ NODE_FIELDS = [
         read_only=True,
     ),
     Field(
+        "wait_for_subscribers",
+        0,
+        "lockstep: publish the first state only once joint_states has this many subscribers (the "
+        "controllers, a recorder, a monitor), so that each of them gets the run from its first "
+        "period whatever the discovery takes (0: at once)",
+        lo=0,
+        hi=1000,
+        read_only=True,
+    ),
+    Field(
         "exit_wait_for_readers",
         0.0,
         "lockstep: on exit, wait up to this long for every reader of joint_states (a recorder that "

@@ -15,7 +15,9 @@ Modes:
               the stamp of the state it answers, publishes ``/clock`` then the new state. Nodes with
               ``use_sim_time`` follow; the whole graph runs as fast as it can and deterministically.
               If no answer arrives within ``resend_period`` (wall) the pending state is published
-              again (a subscriber that joined late gets it); duplicate commands are ignored.
+              again (a subscriber that joined late gets it); duplicate commands are ignored. With
+              ``wait_for_subscribers`` N the first state goes out once ``joint_states`` has N
+              subscribers: every one of them (a monitor too) sees the run from its first period.
               ``joint_states`` is published with LOCKSTEP_RECORDED_QOS (a 60,000-deep history): a
               recorder may fall a minute of joint time behind the graph before it loses a state.
 
@@ -141,6 +143,7 @@ class PlantSimulator(PlantHealth, ParameterNode):
         self._stats_sim0 = 0.0
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
+        self._subscribers_ready = not self.lockstep or self.p["wait_for_subscribers"] == 0
         if self.lockstep:
             self._last_publish = 0.0
             self.create_timer(self.p["resend_period"] / 4, self._resend)
@@ -206,11 +209,20 @@ class PlantSimulator(PlantHealth, ParameterNode):
 
     # -- stepping -------------------------------------------------------------------------------------
     def _publish_pending(self) -> None:
+        if self._waiting_for_subscribers():
+            return  # the resend timer tries again
         sec, nanosec = divmod(self.sim.t_ns, 1_000_000_000)
         if self.clock_pub is not None and self.sim.clock_due(self._clock_ns):
             self.clock_pub.publish(Clock(clock=Time(sec=sec, nanosec=nanosec)))
         self.state_pub.publish(self._encoder.pack(sec, nanosec, *self.sim.pending))
         self._last_publish = time.monotonic()
+
+    def _waiting_for_subscribers(self) -> bool:
+        """Lockstep, before the first state: fewer than ``wait_for_subscribers`` subscribers yet."""
+        if self._subscribers_ready:
+            return False
+        self._subscribers_ready = self.state_pub.get_subscription_count() >= self.p["wait_for_subscribers"]
+        return not self._subscribers_ready
 
     def _resend(self) -> None:
         if time.monotonic() - self._last_publish >= self.p["resend_period"]:
