@@ -22,6 +22,8 @@ from friction_ros.core.presets import PRESET_NAMES
 
 ROOT = Path(__file__).resolve().parents[1]
 MODES = ("feedforward", "feedback", "blended")
+#: in ``run_group(tracking=...)``: the preset's best mode in the demo's summary
+BEST = "best"
 #: test module -> its presets; "other" is every preset no group names (a new preset lands there)
 _NAMED = {"abb": ("abb_m19s",), "xyz": ("seed002_x", "seed002_y", "seed002_z")}
 GROUPS = {**_NAMED, "other": tuple(n for n in PRESET_NAMES if all(n not in g for g in _NAMED.values()))}
@@ -58,10 +60,11 @@ def run_group(
 ) -> GroupRun:
     """``friction-demo --quick --presets <group>`` and, at the same time on the same CPU, the
     identification experiment of the presets ``rerun`` again (the step whose bag depends on a recorder
-    keeping up); once the demo is done, their tracking runs of ``tracking`` (modes) again from its
-    controller files, all at once. Meanwhile (when there are reruns) a busy process of the lowest
-    priority on every CPU of this test keeps them saturated: the runs compete with each other and with
-    the other tests' workers, and the CPU is never idle. Each graph has its own ROS domain."""
+    keeping up); once the demo is done, their tracking runs of ``tracking`` (modes, or ``BEST``: each
+    preset's best) again from its controller files, all at once. Meanwhile (when there are reruns) a
+    busy process of the lowest priority on every CPU of this test keeps them saturated: the runs
+    compete with each other and with the other tests' workers, and the CPU is never idle. Each graph
+    has its own ROS domain."""
     tmp = tmp_path_factory.mktemp(f"demo_{group}")
     out, names = tmp / "results", GROUPS[group]
     jobs, reruns = [], {name: {"dir": tmp / "rerun" / name, "labels": tracking} for name in rerun}
@@ -88,7 +91,9 @@ def run_group(
             if tracking and summary.is_file():
                 s = json.loads(summary.read_text())
                 r["duration"] = (s["runs"]["none"]["samples"] - 1) * s["control_period"]
-                for label in tracking:
+                # "best": the mode the demo found best for this preset
+                r["labels"] = tuple(dict.fromkeys(s["best"] if m == BEST else m for m in tracking))
+                for label in r["labels"]:
                     jobs.append(_tracking_job(name, label, r["duration"], out / name, r["dir"]))
                     jobs[-1].start(domains.pop())
         for job in jobs:
