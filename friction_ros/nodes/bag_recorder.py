@@ -44,13 +44,11 @@ import time
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from friction_ros.core.bag import BagWriter, DiskFullError, run_metadata
 from friction_ros.core.bag.recording import (
     RECORDING_METADATA_NAME,
     RecordingStats,
-    subscription_qos,
     wanted_topic,
 )
 from friction_ros.nodes.bag_common import (
@@ -61,6 +59,7 @@ from friction_ros.nodes.bag_common import (
 from friction_ros.nodes.bag_recorder_options import SCHEMA, build_parser, parse_cli
 from friction_ros.nodes.diagnostics import DiagnosticsPublisher
 from friction_ros.nodes.parameters import ParameterNode, declare_config
+from friction_ros.nodes.qos import recording_qos
 from friction_ros.nodes.runtime import log_events, start_process
 from friction_ros.nodes.safe_subscription import BYTES, safe_subscription
 
@@ -135,24 +134,7 @@ class BagRecorder(ParameterNode):
                 self.get_logger().error(f"topic {name} not recorded: {exc}")
                 self.subs[name] = None
                 continue
-            q = subscription_qos(
-                [
-                    (
-                        i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT,
-                        i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
-                    )
-                    for i in pubs
-                ],
-                self.p["qos_depth"],
-            )
-            qos = QoSProfile(
-                history=HistoryPolicy.KEEP_ALL if q["keep_all"] else HistoryPolicy.KEEP_LAST,
-                depth=q["depth"],
-                reliability=ReliabilityPolicy.RELIABLE if q["reliable"] else ReliabilityPolicy.BEST_EFFORT,
-                durability=DurabilityPolicy.TRANSIENT_LOCAL
-                if q["transient_local"]
-                else DurabilityPolicy.VOLATILE,
-            )
+            qos = recording_qos(pubs, self.p["qos_depth"])
             st = self.recording.add(name, len(pubs))
 
             def lost(info, st=st) -> None:
@@ -174,15 +156,19 @@ class BagRecorder(ParameterNode):
         wake-up per batch instead of one per message (the executor's wait-set round costs about
         200 us a message in Python, several times the writing; see ``BATCH_WAIT``)."""
         self._record(topic, data, info)
+        self._take_queued(topic, DRAIN_MAX)
+
+    def _take_queued(self, topic: str, limit: int | None) -> None:
+        """Record what is queued on ``topic``'s subscription (at most ``limit`` messages; None: all)."""
         sub = self.subs.get(topic)
-        for _ in range(DRAIN_MAX):
-            if self.closed or sub is None:
-                return
+        n = 0
+        while sub is not None and not self.closed and (limit is None or n < limit):
             with sub.handle:
                 taken = sub.handle.take_message(sub.msg_type, True)
             if taken is None:
                 return
             self._record(topic, *taken)
+            n += 1
 
     def _record(self, topic: str, data: bytes, info) -> None:
         if self.closed:
@@ -238,13 +224,8 @@ class BagRecorder(ParameterNode):
 
     def on_shutdown(self) -> None:
         """Composed with other nodes: take what is queued on every topic, then finish the bag."""
-        for topic, sub in list(self.subs.items()):
-            while sub is not None and not self.closed:
-                with sub.handle:
-                    taken = sub.handle.take_message(sub.msg_type, True)
-                if taken is None:
-                    break
-                self._record(topic, *taken)
+        for topic in list(self.subs):
+            self._take_queued(topic, None)
         self.close()
 
     def close(self) -> None:

@@ -61,3 +61,24 @@ LATCHED_QOS = QoSProfile(
     reliability=ReliabilityPolicy.RELIABLE,
     durability=DurabilityPolicy.TRANSIENT_LOCAL,
 )
+
+
+def recording_qos(publishers, depth: int) -> QoSProfile:
+    """A recorder's subscription QoS for a topic's publishers (``get_publishers_info_by_topic``):
+    :func:`friction_ros.core.bag.recording.subscription_qos` of what they offer, as an rclpy profile."""
+    from friction_ros.core.bag.recording import subscription_qos
+
+    offered = [
+        (
+            i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT,
+            i.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL,
+        )
+        for i in publishers
+    ]
+    q = subscription_qos(offered, depth)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_ALL if q["keep_all"] else HistoryPolicy.KEEP_LAST,
+        depth=q["depth"],
+        reliability=ReliabilityPolicy.RELIABLE if q["reliable"] else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if q["transient_local"] else DurabilityPolicy.VOLATILE,
+    )
