@@ -9,8 +9,8 @@ Get_Encoder_Estimates + Get_Iq in (+ a 10 Hz heartbeat). A 1 Mbit/s bus carries 
 standard frames/s (~125 bit each with stuffing), i.e. at most ~2,660 such cycles/s.
 
 Node CPU = CPU time (user + system, from /proc/self/task/*/stat) of every thread of the child
-process except the emulator's thread, over the measurement window (after a 2 s warm-up), divided by
-wall time. So it includes the executor/control thread, the middleware's (Fast DDS) threads and any
+process except the emulator's thread, over the measurement window (it starts ``WARM_UP_S`` after
+every drive is enabled and the loop runs, so no start-up work is in it), divided by wall time. So it includes the executor/control thread, the middleware's (Fast DDS) threads and any
 python-can thread, and also the node's side of the virtual bus: its ``send`` (python-can deep-copies
 every frame into each receiver's queue, in the sender's thread; SocketCAN would spend a syscall there
 instead) and its ``recv`` calls. The emulator's own sends are charged to the emulator thread. Not
@@ -96,6 +96,8 @@ def codec_costs() -> list[list]:
 
 # ---- child: the node (+ the emulator, on the virtual bus) --------------------------------------------
 PROTOCOL = os.environ.get("FRICTION_BENCH_PROTOCOL", "odrive_cansimple")  # bench/can_protocols.py sets it
+#: seconds of running drives before the measurement window (after they are enabled and cycling)
+WARM_UP_S = float(os.environ.get("FRICTION_BENCH_WARM_UP", "1.0"))
 
 
 def child(
@@ -167,7 +169,16 @@ def child(
         return (int(f[11]) + int(f[12])) / os.sysconf("SC_CLK_TCK")
 
     def measure():
-        time.sleep(2.0)  # warm-up (numba, discovery)
+        # warm-up: until every drive is enabled and the loop runs (imports, discovery, the drive's
+        # start-up: CiA 402's SDO configuration and state machine), then WARM_UP_S more
+        end = time.monotonic() + 60.0
+        while time.monotonic() < end:
+            node = holder.get("node")
+            loop = getattr(node, "loop", None)
+            if loop is not None and loop.stats.cycles > 0 and all(a.enabled for a in node.axes):
+                break
+            time.sleep(0.05)
+        time.sleep(WARM_UP_S)
         node = holder["node"]
         c0, t0 = task_cpu(), time.monotonic()
         e0 = proc_cpu(emu_proc.pid) if emu_proc else 0.0
