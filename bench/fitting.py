@@ -57,7 +57,7 @@ def _table23_rms(friction: dict, inertia: float, amplitude: float, duration: flo
 
 def round_trip_damped() -> dict:
     """Fit gms4 and gms4d to a 16 s record of TRUTH003 and compare their feed-forward on Tables 2/3."""
-    rec = plant_runs.seed003_experiment(
+    rec = plant_runs.abb_m19s_excitation_experiment(
         16.0, low=0.05, high=5.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
     )
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
@@ -97,7 +97,9 @@ def main() -> None:
     figures: dict = {"duration_s": duration, "rate_hz": 1000}
 
     t0 = time.perf_counter()
-    rec = plant_runs.seed003_experiment(duration, low=0.05, overrides={"current_noise_std": 0.005})
+    rec = plant_runs.abb_m19s_excitation_experiment(
+        duration, low=0.05, overrides={"current_noise_std": 0.005}
+    )
     figures["simulate_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)

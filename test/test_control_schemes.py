@@ -14,7 +14,7 @@ from friction_ros.core.control import (
     describing_damping,
     describing_stiffness,
     maxwell_virgin_curve,
-    seed000_relay,
+    sliding_mode_relay,
 )
 from friction_ros.core.validation import ParameterError
 
@@ -108,7 +108,7 @@ def test_sliding_mode_and_relay():
     b = SlidingMode.from_dict({"lambda": 10.0, "gain": 2.0, "boundary_layer": 0.2})
     assert b.compute(0.01, 0.0, (0, 0, 0), (0, 0), 1e-3).friction_feedback == pytest.approx(1.0)
     # Chatterjee et al. 2017 A-T7
-    assert list(seed000_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]
+    assert list(sliding_mode_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]
 
 
 def test_compensator_sources_gain_smoothing():

@@ -26,7 +26,7 @@ def gms_fit(tmp_path_factory):
     With the default 1 rad/s (peaks 2.6 rad/s) the viscous coefficient was extrapolated ~6x and
     alone cost the large-stroke round trip a factor 2-4."""
     d = tmp_path_factory.mktemp("gms")
-    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
+    rec = plant_runs.abb_m19s_excitation_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
     bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
@@ -213,7 +213,7 @@ def damped_fit(tmp_path_factory):
     with the damped GMS-4 (``gms4d``); the parameter file carries sigma1."""
     d = tmp_path_factory.mktemp("gms_damped")
     truth = _benchmark_truth003()
-    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
+    rec = plant_runs.abb_m19s_excitation_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
     bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
@@ -317,7 +317,7 @@ def test_lugre_sigma_recovery_within_15_percent():
         "vs": 0.05,
         "delta": 2.0,
     }
-    rec = plant_runs.seed003_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
+    rec = plant_runs.abb_m19s_excitation_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(
         d, ["lugre"], identifiability_check=False, train_window="first"
