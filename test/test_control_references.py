@@ -25,7 +25,7 @@ def test_parabola_reproduces_table_c1_and_is_c1():
     assert np.max(np.abs(v)) == pytest.approx(2.0 / 0.7, rel=1e-3)
 
 
-def test_chirp_first_peak_seed001():
+def test_chirp_first_peak_ga_thesis():
     r = reference_from_config({"type": "chirp"})
     t = np.arange(0.0, 10.0, 1e-3)
     p, v, a = r.arrays(t)
@@ -47,7 +47,7 @@ def test_random_steps_hold_two_seconds():
     assert len(np.unique(p)) == 10
 
 
-def test_band_limited_random_seed003():
+def test_band_limited_random_abb_m19s():
     r = reference_from_config(
         {"type": "band_limited_random", "amplitude": 0.005, "duration": 20.0, "seed": 1}
     )
