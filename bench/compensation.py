@@ -33,7 +33,7 @@ Setups (documented choices, not in the source documents):
   own model (explicit F(v), sgn(0) = 0, plant override ``stick_logic = False``; GA friction thesis 2002 section 9.4 finds it
   the closer match to the identification record) and the preset's GKF stick logic. With exact
   sticking the backward difference is exactly 0 whenever the shaft stops, F_hat(0) = 0, and the
-  compensator cannot help it break away (ratio 0.90); see SEED001_PLANTS.
+  compensator cannot help it break away (ratio 0.90); see GA_THESIS_PLANTS.
 * Tilakaratna et al. 2004: ``seed002_x`` (C_r = 0.15, 3 ms delay, 5.4 ms current lag) with the tuned Coulomb level
   (11.31 N = 0.01 N*m) or Stribeck stiction (fs = 16 N > fc = 11.31 N, [ASSUMED]); P gain 3.5e5 N/m
   = 0.25 N*m/rad at the motor (Tilakaratna et al. 2004 B-T6: 25-count dead band) or 2e6 N/m. Under P-only control no
@@ -72,15 +72,15 @@ from friction_ros.core.presets import load_preset, make_plant  # noqa: E402
 # the ABB M19-S preset's GMS-4 truth (params/abb_m19s.yaml), read from the preset so the two cannot drift
 GMS = load_preset("abb_m19s").friction.to_config()
 SIGMA1 = 0.86  # presliding micro-damping of the ABB M19-S paper truth (see the module docstring)
-TRUTH003 = dict(GMS, sigma1=SIGMA1)
+ABB_M19S_DAMPED_TRUTH = dict(GMS, sigma1=SIGMA1)
 LUGRE = dict(model="lugre", sigma0=617.5, sigma1=SIGMA1, fv=0.01, fc=0.8, fs=0.95, vs=0.05, delta=2.0)
 COULOMB = dict(model="coulomb", fc=0.8)
-J003 = 0.0012
-PD003 = {"p": 200.0, "d": 0.15}
+ABB_M19S_INERTIA = 0.0012
+ABB_M19S_PD_GAINS = {"p": 200.0, "d": 0.15}
 SENSING = {
-    "preset": {"friction_motor": TRUTH003, "current_time_constant": 1e-4},
+    "preset": {"friction_motor": ABB_M19S_DAMPED_TRUTH, "current_time_constant": 1e-4},
     "ideal": {
-        "friction_motor": TRUTH003,
+        "friction_motor": ABB_M19S_DAMPED_TRUTH,
         "current_time_constant": 1e-4,
         "encoder_cpr": 0,
         "current_noise_std": 0.0,
@@ -94,8 +94,8 @@ FF_CASES = [
     ("none", None, {}),
     ("Coulomb", COULOMB, {"smoothing": "linear", "smoothing_velocity": 0.02}),
     ("LuGre", LUGRE, {}),
-    ("GMS", TRUTH003, {}),
-    ("ours: GMS FF 95% + FB 5%", TRUTH003, {"source": "blended", "blend": 0.95}),
+    ("GMS", ABB_M19S_DAMPED_TRUTH, {}),
+    ("ours: GMS FF 95% + FB 5%", ABB_M19S_DAMPED_TRUTH, {"source": "blended", "blend": 0.95}),
 ]
 PAPER_T2 = [1.20, 1.10, 0.34, 0.13, None]
 PAPER_T3 = [21.1, 11.5, 9.40, 9.20, None]
@@ -108,13 +108,20 @@ PAPER_T4_PD = {
 PAPER_T4_RED = {0.1: "53.5 / 62.8 %", 0.5: "57.8 / 61.1 %", 1.0: "56.5 / 55.4 %", 10.0: "38.8 / 36.6 %"}
 
 
-def seed003_ff_table(amplitude: float, duration: float, sensing: str = "preset", seed: int = 1) -> list[dict]:
+def abb_m19s_feedforward_table(
+    amplitude: float, duration: float, sensing: str = "preset", seed: int = 1
+) -> list[dict]:
     """Table 2 / Table 3 analogue: RMS tracking error of each feed-forward on a random reference."""
     plant = make_plant("abb_m19s", **SENSING[sensing])
     ref = {"type": "band_limited_random", "amplitude": amplitude, "duration": duration, "seed": seed}
     rows = []
     for name, model, extra in FF_CASES:
-        ctrl = {"mode": "pid", "pid": PD003, "inertia": J003, "friction": {"model": model, **extra}}
+        ctrl = {
+            "mode": "pid",
+            "pid": ABB_M19S_PD_GAINS,
+            "inertia": ABB_M19S_INERTIA,
+            "friction": {"model": model, **extra},
+        }
         r = run_closed_loop(plant, ctrl, ref, duration)
         rows.append({"case": name, **r.metrics})
     base = rows[0]["rms_error"]
@@ -138,7 +145,7 @@ def settle_time(r, tol: float = 1e-4) -> float:
 KD_PTP = 0.4
 _GS = {"model": GMS, "coulomb_source": "reference", "standstill_velocity": 0.12, "kd": KD_PTP}
 PTP_CASES = {
-    "PD (paper gains)": {"mode": "pid", "pid": PD003},
+    "PD (paper gains)": {"mode": "pid", "pid": ABB_M19S_PD_GAINS},
     "PD + Coulomb (mode 1 only)": {"mode": "gain_scheduling", "gain_scheduling": {**_GS, "q_h": 1e-12}},
     "gain scheduling": {"mode": "gain_scheduling", "gain_scheduling": _GS},
     "gain scheduling, stiffness schedule": {
@@ -163,12 +170,12 @@ PAPER_PTP = {
 }
 
 
-def seed003_ptp(duration: float = 2.0, sensing: str = "preset") -> list[dict]:
+def abb_m19s_point_to_point(duration: float = 2.0, sensing: str = "preset") -> list[dict]:
     """0.4 rad point-to-point: time to stay within 1e-4 rad, final error, hunting."""
     plant = make_plant("abb_m19s", **PTP_SENSING[sensing])
     rows = []
     for name, c in PTP_CASES.items():
-        ctrl = {"inertia": J003, "u_clamp_max": 4.9, "u_clamp_min": -4.9, **c}
+        ctrl = {"inertia": ABB_M19S_INERTIA, "u_clamp_max": 4.9, "u_clamp_min": -4.9, **c}
         r = run_closed_loop(plant, ctrl, {"type": "step", "amplitude": 0.4}, duration, initial_position=0.0)
         e = np.abs(r.error)
         inside = np.nonzero(e < 1e-4)[0]
@@ -190,7 +197,7 @@ def seed003_ptp(duration: float = 2.0, sensing: str = "preset") -> list[dict]:
 PTP_SWEEP_AMPLITUDES = (0.05, 0.1, 0.2, 0.3, 0.4, 0.6, 0.8, 1.2)
 
 
-def seed003_ptp_sweep(
+def abb_m19s_point_to_point_sweep(
     amplitudes=PTP_SWEEP_AMPLITUDES, cases=tuple(PTP_CASES), duration: float = 1.5, sensing: str = "preset"
 ) -> list[dict]:
     """Point-to-point steps of +-each amplitude (the single 0.4 rad step can land inside 1e-4 rad by
@@ -201,7 +208,12 @@ def seed003_ptp_sweep(
         for amp in amplitudes:
             for sign in (1.0, -1.0):
                 plant = make_plant("abb_m19s", **PTP_SENSING[sensing])
-                ctrl = {"inertia": J003, "u_clamp_max": 4.9, "u_clamp_min": -4.9, **PTP_CASES[name]}
+                ctrl = {
+                    "inertia": ABB_M19S_INERTIA,
+                    "u_clamp_max": 4.9,
+                    "u_clamp_min": -4.9,
+                    **PTP_CASES[name],
+                }
                 ref = {"type": "step", "amplitude": sign * amp}
                 r = run_closed_loop(plant, ctrl, ref, duration, initial_position=0.0)
                 settle.append(settle_time(r))
@@ -240,22 +252,22 @@ def _linear_reference(t, u, J, B):
 # exactly while |input| <= F_ST): the backward-difference velocity is then exactly 0, F_hat(0) = 0,
 # so the measured-velocity compensator switches off whenever the shaft stops and the loop
 # stick-slips at |e| ~ F_ST = 1.53 with or without compensation.
-SEED001_PLANTS = {"thesis model": {"stick_logic": False}, "GKF stick logic (preset)": {}}
+GA_THESIS_PLANTS = {"thesis model": {"stick_logic": False}, "GKF stick logic (preset)": {}}
 # Fig. 5.4 software elements: lost-bit hold and DAC saturation; the thesis gives neither value.
 # [ASSUMED] 0.1 rad jump limit (> 4x the largest per-sample motion on the parabola, 0.023 rad) and
 # +-5 command units (a +-5 V DAC); neither is reached on these inputs.
-SEED001_LOOP = {"position_jump_limit": 0.1, "u_clamp_max": 5.0, "u_clamp_min": -5.0}
-SEED001_RANDOM = {"type": "random_steps", "low": -1.0, "high": 1.0, "hold": 2.0, "seed": 1}
+GA_THESIS_LOOP_LIMITS = {"position_jump_limit": 0.1, "u_clamp_max": 5.0, "u_clamp_min": -5.0}
+GA_THESIS_RANDOM_STEPS = {"type": "random_steps", "low": -1.0, "high": 1.0, "hold": 2.0, "seed": 1}
 
 
-def _seed001_deviation(plant, model, gain: float, ref: dict, dur: float) -> dict:
+def _ga_thesis_deviation(plant, model, gain: float, ref: dict, dur: float) -> dict:
     """RMS / max deviation of the true output from the linear reference T(s) = 1/(J s^2 + B s + 1)."""
     ctrl = {
         "mode": "pid",
         "pid": {"p": 1.0},
         "velocity_source": "differentiated",
         "friction": {"model": model, "source": "feedback", "gain": gain},
-        **SEED001_LOOP,
+        **GA_THESIS_LOOP_LIMITS,
     }
     r = run_closed_loop(plant, ctrl, ref, dur, dt=0.01)
     t = np.concatenate([[0.0], r.t])
@@ -269,7 +281,7 @@ def _seed001_deviation(plant, model, gain: float, ref: dict, dur: float) -> dict
     }
 
 
-def _seed001_self_motion(plant) -> dict:
+def _ga_thesis_self_motion(plant) -> dict:
     def scaled(m, s):
         d = dict(m)
         for k in ("fs", "fc", "sigma"):
@@ -293,7 +305,9 @@ def _seed001_self_motion(plant) -> dict:
     return motion
 
 
-def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: bool = True) -> dict:
+def ga_thesis_compensation(
+    quick: bool = False, plants=tuple(GA_THESIS_PLANTS), random_steps: bool = True
+) -> dict:
     """Item 7 (parabola; ratio of RMS deviations from T(s)), item 8 (random steps), item 9 (self-motion).
 
     Loop (GA friction thesis 2002 section 6.1): c = sat((u - theta) + k_c F_hat(omega_hat)), omega_hat = backward
@@ -303,16 +317,18 @@ def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: boo
     dur = 40.0 if quick else 141.0
     out: dict = {"item7": {}, "item8": {}, "item9": {}}
     for variant in plants:
-        plant = make_plant("seed001_harmonic_drive", **SEED001_PLANTS[variant])
+        plant = make_plant("seed001_harmonic_drive", **GA_THESIS_PLANTS[variant])
         cases = [("uncompensated", None, 1.0), ("compensated k_c=0.95", F, 0.95)]
-        res = {name: _seed001_deviation(plant, m, g, {"type": "parabola"}, dur) for name, m, g in cases}
+        res = {name: _ga_thesis_deviation(plant, m, g, {"type": "parabola"}, dur) for name, m, g in cases}
         res["ratio"] = res["compensated k_c=0.95"]["rms_deviation"] / res["uncompensated"]["rms_deviation"]
         out["item7"][variant] = res
         if random_steps:
-            rs = {name: _seed001_deviation(plant, m, g, SEED001_RANDOM, 40.0) for name, m, g in cases}
+            rs = {
+                name: _ga_thesis_deviation(plant, m, g, GA_THESIS_RANDOM_STEPS, 40.0) for name, m, g in cases
+            }
             rs["ratio"] = rs["compensated k_c=0.95"]["rms_deviation"] / rs["uncompensated"]["rms_deviation"]
             out["item8"][variant] = rs
-        out["item9"][variant] = _seed001_self_motion(plant)
+        out["item9"][variant] = _ga_thesis_self_motion(plant)
     first = plants[0]
     out["ratio"] = out["item7"][first]["ratio"]
     # the preset's plant (GKF stick logic): item 9 as asserted since the first version of the test
@@ -320,63 +336,69 @@ def seed001(quick: bool = False, plants=tuple(SEED001_PLANTS), random_steps: boo
     return out
 
 
-SEED002_COUNT = 1.25e-6  # m per encoder count (Tilakaratna et al. 2004 B-T4)
-SEED002_COULOMB = {"model": "coulomb", "fc": 11.31}  # tuned 0.01 N*m at the motor [PAPER]
-SEED002_STICTION = {"model": "stribeck", "fc": 11.31, "fs": 16.0, "vs": 2e-4, "delta": 2.0, "fv": 0.0}
+TILAKARATNA_METRES_PER_COUNT = 1.25e-6  # m per encoder count (Tilakaratna et al. 2004 B-T4)
+TILAKARATNA_COULOMB = {"model": "coulomb", "fc": 11.31}  # tuned 0.01 N*m at the motor [PAPER]
+TILAKARATNA_STICTION = {"model": "stribeck", "fc": 11.31, "fs": 16.0, "vs": 2e-4, "delta": 2.0, "fv": 0.0}
 # Chatterjee et al. 2017 A.5.1 sliding-mode compensator on the paper's P stiffness: k_s lambda = 3.5e5 N/m, relay
 # M = the stiction level 16 N, boundary layer 1e-4 m/s (|e| < phi / lambda = 2e-6 m = 1.6 counts)
-SEED002_SMC = {"lambda": 50.0, "k_s": 3.5e5 / 50.0, "gain": 16.0, "boundary_layer": 1e-4}
+TILAKARATNA_SLIDING_MODE = {"lambda": 50.0, "k_s": 3.5e5 / 50.0, "gain": 16.0, "boundary_layer": 1e-4}
 # Kp = 3.5e5 N/m = 0.246 N*m/rad at the motor (Kp_joint / (r^2 eta)): Tilakaratna et al. 2004 B-T6's 25-count dead band.
-SEED002_CASES = (
+TILAKARATNA_CASES = (
     # name, plant overrides, P/PI gains [N/m, N/(m*s)], compensation model, paper / goal
     (
         "P, Coulomb, Kp_eff 0.25",
-        {"friction_load": SEED002_COULOMB},
+        {"friction_load": TILAKARATNA_COULOMB},
         {"p": 3.5e5},
         None,
         "SSE 25 counts, 1000 ms",
     ),
-    ("P, stiction 16 N", {"friction_load": SEED002_STICTION}, {"p": 3.5e5}, None, "limit cycle (Fig. 5)"),
-    ("P, stiction, Kp 2e6", {"friction_load": SEED002_STICTION}, {"p": 2e6}, None, "limit cycle (Fig. 5)"),
+    ("P, stiction 16 N", {"friction_load": TILAKARATNA_STICTION}, {"p": 3.5e5}, None, "limit cycle (Fig. 5)"),
+    (
+        "P, stiction, Kp 2e6",
+        {"friction_load": TILAKARATNA_STICTION},
+        {"p": 2e6},
+        None,
+        "limit cycle (Fig. 5)",
+    ),
     (
         "P, stiction, Kp 2e6, C_r 0.01",
-        {"friction_load": SEED002_STICTION, "motor_damping": 0.01},
+        {"friction_load": TILAKARATNA_STICTION, "motor_damping": 0.01},
         {"p": 2e6},
         None,
         "limit cycle (Fig. 5)",
     ),
     (
         "P + comp. (blended)",
-        {"friction_load": SEED002_STICTION},
+        {"friction_load": TILAKARATNA_STICTION},
         {"p": 2e6},
-        SEED002_STICTION,
+        TILAKARATNA_STICTION,
         "goal: few counts",
     ),
     (
         "P + Chatterjee et al. 2017 SMC relay (F_s estimate)",
-        {"friction_load": SEED002_STICTION},
-        {"mode": "sliding_mode", "sliding_mode": SEED002_SMC},
+        {"friction_load": TILAKARATNA_STICTION},
+        {"mode": "sliding_mode", "sliding_mode": TILAKARATNA_SLIDING_MODE},
         None,
         "goal: few counts",
     ),
     (
         "PI, stiction",
-        {"friction_load": SEED002_STICTION},
+        {"friction_load": TILAKARATNA_STICTION},
         {"p": 3.5e5, "i": 3.5e6},
         None,
         "- (Tilakaratna et al. 2004 B-T8: hunts)",
     ),
     (
         "PI + comp. (blended)",
-        {"friction_load": SEED002_STICTION},
+        {"friction_load": TILAKARATNA_STICTION},
         {"p": 3.5e5, "i": 3.5e6},
-        SEED002_STICTION,
+        TILAKARATNA_STICTION,
         "goal: no hunting",
     ),
 )
 
 
-def seed002(duration: float = 20.0, cases=None) -> list[dict]:
+def tilakaratna_step_hunting(duration: float = 20.0, cases=None) -> list[dict]:
     """x axis, 200-count step from rest (Tilakaratna et al. 2004 B-T7/B-T8): dead band, hunting, compensation.
 
     Preset ``seed002_x`` (C_r = 0.15 N*m*s/rad, 5.4 ms current lag, 3 ms measurement delay, 4000-count
@@ -385,9 +407,9 @@ def seed002(duration: float = 20.0, cases=None) -> list[dict]:
     Compensation: the truth's stiction model, 50 % from the reference velocity + 50 % from the
     measured velocity.
     """
-    cnt = SEED002_COUNT
+    cnt = TILAKARATNA_METRES_PER_COUNT
     rows = []
-    for name, ov, pid, model, paper in cases or SEED002_CASES:
+    for name, ov, pid, model, paper in cases or TILAKARATNA_CASES:
         plant = make_plant("seed002_x", **ov)
         if "mode" in pid:  # a whole controller configuration
             ctrl = dict(pid)
@@ -419,7 +441,7 @@ def seed002(duration: float = 20.0, cases=None) -> list[dict]:
     return rows
 
 
-def seed004(duration: float = 3.0, amplitudes=(0.1, 0.5, 1.0, 10.0)) -> list[dict]:
+def ai_chapter_sinusoids(duration: float = 3.0, amplitudes=(0.1, 0.5, 1.0, 10.0)) -> list[dict]:
     """1 Hz sinusoids: RMSE of PD vs PD + model compensation (feed-forward and feedback)."""
     F = load_preset("seed004_dc_motor").friction_motor.to_config()
     rows = []
@@ -459,8 +481,8 @@ def main() -> None:
     figures: dict = {}
     for label, amp, paper in (("table2", 0.005, PAPER_T2), ("table3", np.pi, PAPER_T3)):
         for sensing in ("preset", "ideal"):
-            rows = seed003_ff_table(amp, dur, sensing)
-            figures[f"seed003_{label}_{sensing}"] = rows
+            rows = abb_m19s_feedforward_table(amp, dur, sensing)
+            figures[f"abb_m19s_{label}_{sensing}"] = rows
             print_table(
                 f"ABB M19-S paper {label} analogue (band-limited random, max stroke {amp:.4g} rad, {dur:g} s, "
                 f"{sensing} sensing); RMS in mrad",
@@ -478,8 +500,8 @@ def main() -> None:
                 ],
             )
     for sensing in ("preset", "ideal"):
-        rows = seed003_ptp(2.0, sensing)
-        figures[f"seed003_ptp_{sensing}"] = rows
+        rows = abb_m19s_point_to_point(2.0, sensing)
+        figures[f"abb_m19s_point_to_point_{sensing}"] = rows
         print_table(
             f"ABB M19-S paper 0.4 rad point-to-point ({sensing} sensing); errors in mrad, settle = stays within 1e-4 rad",
             [
@@ -508,8 +530,8 @@ def main() -> None:
                 for r in rows
             ],
         )
-    rows = seed003_ptp_sweep()
-    figures["seed003_ptp_sweep"] = rows
+    rows = abb_m19s_point_to_point_sweep()
+    figures["abb_m19s_point_to_point_sweep"] = rows
     print_table(
         "ABB M19-S paper point-to-point sweep: steps of +-"
         + "/".join(f"{a:g}" for a in PTP_SWEEP_AMPLITUDES)
@@ -536,8 +558,8 @@ def main() -> None:
             for r in rows
         ],
     )
-    s1 = seed001(q)
-    figures["seed001"] = s1
+    s1 = ga_thesis_compensation(q)
+    figures["ga_thesis"] = s1
     paper7 = {
         "uncompensated": "0.797 / 1.30 (GA friction thesis 2002 section 9.7 [D])",
         "compensated k_c=0.95": "0.138 / 1.03",
@@ -577,8 +599,8 @@ def main() -> None:
             for k, v in m.items()
         ],
     )
-    s2 = seed002(10.0 if q else 20.0)
-    figures["seed002"] = s2
+    s2 = tilakaratna_step_hunting(10.0 if q else 20.0)
+    figures["tilakaratna"] = s2
     print_table(
         f"Tilakaratna et al. 2004 x axis: 200-count step, 3 ms delay, 5.4 ms current lag ({10 if q else 20} s; "
         "hunting over the second half); errors in counts (1.25 um)",
@@ -595,8 +617,8 @@ def main() -> None:
             for r in s2
         ],
     )
-    s4 = seed004(3.0)
-    figures["seed004"] = s4
+    s4 = ai_chapter_sinusoids(3.0)
+    figures["ai_chapter"] = s4
     print_table(
         "AI friction chapter: 1 Hz sinusoid tracking RMSE [deg]",
         [

@@ -3,11 +3,11 @@
 Goals (issue 8): LuGre fit < 10 s, GMS-4 fit < 60 s, static fit < 1 s on this 2-core machine;
 plus the ABB M19-S paper Table 1 analogue (validation NMSE high/low velocity, 10 s train + 40 s test)
 next to the paper's figures, and the fit -> controller round trip against the compensation
-benchmark's own truth (bench/compensation.py TRUTH003: GMS-4 with presliding damping sigma1 = 0.86):
-16 s record of that truth (envelope 0.05-5 rad/s, as test_identification_fit.py), fitted with the
-undamped (gms4) and the damped (gms4d) GMS-4, and two-stage (a plateau run of the same truth added:
-Stribeck curve from its plateaus, then gms4d), RMS of Tables 2/3 (seed 1, 40 s) relative to the
-true-coefficient feed-forward.
+benchmark's own truth (bench/compensation.py ABB_M19S_DAMPED_TRUTH: GMS-4 with presliding damping
+sigma1 = 0.86): 16 s record of that truth (envelope 0.05-5 rad/s, as test_identification_fit.py),
+fitted with the undamped (gms4) and the damped (gms4d) GMS-4, and two-stage (a plateau run of the same
+truth added: Stribeck curve from its plateaus, then gms4d), RMS of Tables 2/3 (seed 1, 40 s) relative
+to the true-coefficient feed-forward.
 
     .venv/bin/python bench/fitting.py            # full: 50 s record
     .venv/bin/python bench/fitting.py --quick    # 16 s record (smoke test)
@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.append(str(ROOT / "bench"))  # after site-packages: bench/can.py must not shadow python-can
 
 from _common import print_table, warm_kernels, write_results  # noqa: E402
-from compensation import J003, PD003, SENSING, TRUTH003  # noqa: E402
+from compensation import ABB_M19S_DAMPED_TRUTH, ABB_M19S_INERTIA, ABB_M19S_PD_GAINS, SENSING  # noqa: E402
 
 from friction_ros.core.harness import run_closed_loop  # noqa: E402
 from friction_ros.core.identification import fit_records, prepare  # noqa: E402
@@ -51,28 +51,32 @@ def _table23_rms(friction: dict, inertia: float, amplitude: float, duration: flo
     """RMS error of bench/compensation.py Tables 2/3 (damped truth plant, PD, seed 1 reference)."""
     plant = make_plant("abb_m19s", **SENSING["preset"])
     ref = {"type": "band_limited_random", "amplitude": amplitude, "duration": duration, "seed": 1}
-    ctrl = {"mode": "pid", "pid": PD003, "inertia": inertia, "friction": {"model": friction}}
+    ctrl = {"mode": "pid", "pid": ABB_M19S_PD_GAINS, "inertia": inertia, "friction": {"model": friction}}
     return run_closed_loop(plant, ctrl, ref, duration).metrics["rms_error"]
 
 
 def round_trip_damped() -> dict:
-    """Fit gms4 and gms4d to a 16 s record of TRUTH003 and compare their feed-forward on Tables 2/3."""
-    rec = plant_runs.seed003_experiment(
-        16.0, low=0.05, high=5.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
+    """Fit gms4 and gms4d to a 16 s record of ABB_M19S_DAMPED_TRUTH and compare their feed-forward on
+    Tables 2/3."""
+    rec = plant_runs.abb_m19s_excitation_experiment(
+        16.0, low=0.05, high=5.0, friction=ABB_M19S_DAMPED_TRUTH, overrides={"current_noise_std": 0.005}
     )
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(d, ["gms4", "gms4d"], identifiability_check=False)
     # two-stage: a plateau run of the same truth added, the Stribeck curve taken from its plateaus
     rp = plant_runs.plateau_experiment(
-        np.geomspace(0.005, 2.0, 24), hold=1.0, friction=TRUTH003, overrides={"current_noise_std": 0.005}
+        np.geomspace(0.005, 2.0, 24),
+        hold=1.0,
+        friction=ABB_M19S_DAMPED_TRUTH,
+        overrides={"current_noise_std": 0.005},
     )
     dp = prepare(rp.t, rp.position, rp.velocity, rp.effort, events=rp.events)
     two = fit_records([dp, d], ["stribeck", "gms4d"], identifiability_check=False)
     models = {**res.models, "gms4d two-stage": two.models["gms4d"]}
     amps = {"small (0.005 rad)": 0.005, "large (pi rad)": np.pi}
-    truth = {k: _table23_rms(TRUTH003, J003, a) for k, a in amps.items()}
-    out = {"truth_rms": truth, "truth_sigma1": TRUTH003["sigma1"]}
-    s_true = TRUTH003["sigma1"] / sum(TRUTH003["k"])
+    truth = {k: _table23_rms(ABB_M19S_DAMPED_TRUTH, ABB_M19S_INERTIA, a) for k, a in amps.items()}
+    out = {"truth_rms": truth, "truth_sigma1": ABB_M19S_DAMPED_TRUTH["sigma1"]}
+    s_true = ABB_M19S_DAMPED_TRUTH["sigma1"] / sum(ABB_M19S_DAMPED_TRUTH["k"])
     out["truth_s"] = s_true
     for n, m in models.items():
         c = m.coefficients
@@ -97,7 +101,9 @@ def main() -> None:
     figures: dict = {"duration_s": duration, "rate_hz": 1000}
 
     t0 = time.perf_counter()
-    rec = plant_runs.seed003_experiment(duration, low=0.05, overrides={"current_noise_std": 0.005})
+    rec = plant_runs.abb_m19s_excitation_experiment(
+        duration, low=0.05, overrides={"current_noise_std": 0.005}
+    )
     figures["simulate_s"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)

@@ -117,7 +117,7 @@ def _expect_error(argv, capsys, *words) -> str:
 @pytest.fixture(scope="module")
 def run():
     """20 s of ABB M19-S paper's excitation on the simulated ABB joint (deterministic)."""
-    return plant_runs.seed003_experiment(20.0, low=0.05)
+    return plant_runs.abb_m19s_excitation_experiment(20.0, low=0.05)
 
 
 @pytest.fixture(scope="module")

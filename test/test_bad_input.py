@@ -28,7 +28,7 @@ def small_bag(tmp_path_factory) -> Path:
     """A short recorded-style bag (written by the package's writer from a simulated joint)."""
     from friction_ros.core.synthetic import plant_runs
 
-    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.abb_m19s_excitation_experiment(12.0, low=0.05)
     return plant_runs.write_bag(tmp_path_factory.mktemp("bags") / "small", rec)
 
 

@@ -27,7 +27,7 @@ BAD_LUGRE = {
 }
 # a static fit of the same levels: nothing to bound, the full Coulomb level switches on the velocity
 BAD_STRIBECK = {"model": "stribeck", "fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0}
-SEED003_PD = {"p": 200.0, "d": 0.15}
+ABB_M19S_PD_GAINS = {"p": 200.0, "d": 0.15}
 REF = {"type": "band_limited_random", "amplitude": 0.05, "cutoff": 1.0, "duration": 10.0, "seed": 1}
 
 
@@ -63,7 +63,7 @@ def _summary(v):
 
 def test_the_known_bad_case_is_refused_with_a_reason(abb, unbounded):
     _, scale = abb
-    v = _gate(BAD_LUGRE, SEED003_PD, scale, reference=REF)
+    v = _gate(BAD_LUGRE, ABB_M19S_PD_GAINS, scale, reference=REF)
     assert not v["feedback"].enabled, _summary(v)
     assert v["feedback"].reason.startswith("refused: unstable: the error grows without bound")
     assert v["feedback"].reason.endswith("(+4 more cases)")  # every perturbed plant fails too
@@ -77,7 +77,7 @@ def test_with_the_bound_the_bad_case_is_stable_and_better_than_none(abb):
     _, scale = abb
     runs = {}
     for name, model, src in (("none", None, "none"), ("fb", BAD_LUGRE, "feedback")):
-        cfg = {"mode": "pid", "pid": SEED003_PD, "inertia": 0.0012, "limit_cycle_detection": False}
+        cfg = {"mode": "pid", "pid": ABB_M19S_PD_GAINS, "inertia": 0.0012, "limit_cycle_detection": False}
         if model:
             cfg["friction"] = {"model": model, "source": src}
         ctrl = CompensatingController(cfg)
@@ -86,7 +86,7 @@ def test_with_the_bound_the_bad_case_is_stable_and_better_than_none(abb):
     assert "presliding stiffness 1e+05 -> 100" in ctrl.feedback_bound_note
     assert runs["none"] == pytest.approx(0.00328, rel=0.05)
     assert runs["fb"] < 0.5 * runs["none"], runs
-    v = _gate(BAD_LUGRE, SEED003_PD, scale, reference=REF)
+    v = _gate(BAD_LUGRE, ABB_M19S_PD_GAINS, scale, reference=REF)
     assert v["feedback"].enabled and "limited for loop stability" in v["feedback"].reason, _summary(v)
     assert v["feedback"].worst_ratio < 0.95
 
@@ -103,7 +103,7 @@ def test_the_bound_applies_to_each_direction_of_an_asymmetric_model():
     }
     cfg = {
         "mode": "pid",
-        "pid": SEED003_PD,
+        "pid": ABB_M19S_PD_GAINS,
         "inertia": 0.0012,
         "friction": {"model": asym, "source": "feedback"},
     }
@@ -121,7 +121,7 @@ def test_a_static_fit_in_feedback_is_refused(abb):
     """The same Coulomb level as a static model (no presliding term to bound) switched on the
     measured velocity: refused, feed-forward of it enabled only if it is not worse in any case."""
     _, scale = abb
-    v = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
+    v = _gate(BAD_STRIBECK, ABB_M19S_PD_GAINS, scale, reference=REF)
     assert not v["feedback"].enabled and v["feedback"].reason.startswith("refused: unstable"), _summary(v)
     assert len(v["feedback"].cases) == 3  # static: nominal + forces +-20 %
 
@@ -138,15 +138,15 @@ def test_a_good_model_is_enabled_and_the_file_carries_the_verdicts(abb):
     assert v["feedback"].worst_ratio > 0.9 and "limited for loop stability" in v["feedback"].reason
     assert compensation_section(v)["source"] == "feedforward"
     # the stiffer ABB M19-S paper PD: every mode helps in every case (measured worst 0.58, 0.72, 0.36)
-    v = _gate(truth, SEED003_PD, scale, reference=REF)
+    v = _gate(truth, ABB_M19S_PD_GAINS, scale, reference=REF)
     assert all(x.enabled and x.worst_ratio < 0.8 for x in v.values()), _summary(v)
     assert compensation_section(v)["source"] == "blended" and "refused" not in compensation_section(v)
-    bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
+    bad = _gate(BAD_STRIBECK, ABB_M19S_PD_GAINS, scale, reference=REF)
     sec = compensation_section(bad)
     refused = [m for m, x in bad.items() if not x.enabled]
     assert refused and sec.get("refused") == refused
     assert sec["source"] in ("none", *[m for m, x in bad.items() if x.enabled])
-    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD, effort_limit=4.9)
+    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=ABB_M19S_PD_GAINS, effort_limit=4.9)
     comp = doc["compensating_controller"]["ros__parameters"]["compensation"]
     cfg = {"friction": {"model": BAD_STRIBECK, **{k: v for k, v in comp.items() if k != "source"}}}
     with pytest.raises(ParameterError, match="refused by the safety gate"):
@@ -219,8 +219,8 @@ def test_the_node_refuses_a_refused_source_from_the_fitted_file(tmp_path, abb):
     from friction_ros.core.identification.report.export import dump_yaml
 
     _, scale = abb
-    bad = _gate(BAD_STRIBECK, SEED003_PD, scale, reference=REF)
-    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=SEED003_PD, effort_limit=4.9)
+    bad = _gate(BAD_STRIBECK, ABB_M19S_PD_GAINS, scale, reference=REF)
+    doc = parameter_document(BAD_STRIBECK, 0.0012, gate=bad, gains=ABB_M19S_PD_GAINS, effort_limit=4.9)
     sec = doc["compensating_controller"]["ros__parameters"]
     assert "feedback" in sec["compensation"]["refused"]
 

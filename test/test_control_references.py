@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from friction_ros.core.experiment.references import (
+    GA_THESIS_PARABOLA_TABLE,
     REFERENCE_TYPES,
-    SEED001_PARABOLA_TABLE,
     reference_from_config,
 )
 from friction_ros.core.validation import ParameterError
@@ -15,8 +15,8 @@ from friction_ros.core.validation import ParameterError
 
 def test_parabola_reproduces_table_c1_and_is_c1():
     r = reference_from_config({"type": "parabola"})
-    expected_end = np.cumsum([2 * dA for _, dA, _ in SEED001_PARABOLA_TABLE])
-    for (_, _, end), a in zip(SEED001_PARABOLA_TABLE, expected_end):
+    expected_end = np.cumsum([2 * dA for _, dA, _ in GA_THESIS_PARABOLA_TABLE])
+    for (_, _, end), a in zip(GA_THESIS_PARABOLA_TABLE, expected_end):
         assert r.sample(end)[0] == pytest.approx(a, abs=1e-9)
     t = np.arange(0.0, 141.0, 1e-3)
     p, v, _ = r.arrays(t)
@@ -25,7 +25,7 @@ def test_parabola_reproduces_table_c1_and_is_c1():
     assert np.max(np.abs(v)) == pytest.approx(2.0 / 0.7, rel=1e-3)
 
 
-def test_chirp_first_peak_seed001():
+def test_chirp_first_peak_ga_thesis():
     r = reference_from_config({"type": "chirp"})
     t = np.arange(0.0, 10.0, 1e-3)
     p, v, a = r.arrays(t)
@@ -47,7 +47,7 @@ def test_random_steps_hold_two_seconds():
     assert len(np.unique(p)) == 10
 
 
-def test_band_limited_random_seed003():
+def test_band_limited_random_abb_m19s():
     r = reference_from_config(
         {"type": "band_limited_random", "amplitude": 0.005, "duration": 20.0, "seed": 1}
     )

@@ -14,7 +14,7 @@ from friction_ros.core.control import (
     describing_damping,
     describing_stiffness,
     maxwell_virgin_curve,
-    seed000_relay,
+    sliding_mode_relay,
 )
 from friction_ros.core.validation import ParameterError
 
@@ -41,7 +41,7 @@ GMS = dict(
         (0.01, 69.21, 91.32),
     ],
 )
-def test_describing_function_regression_seed003_e18(A, ke, ce):
+def test_describing_function_regression_abb_m19s_e18(A, ke, ce):
     y = maxwell_virgin_curve([190, 190, 142.5, 95], [0.1, 0.2, 0.3, 0.4], 0.95)
     assert describing_stiffness(y, A) == pytest.approx(ke, abs=0.02)
     assert describing_damping(y, A) == pytest.approx(ce, abs=0.02)
@@ -53,7 +53,7 @@ def test_describing_function_linear_spring():
     assert describing_damping(y, 0.01) == pytest.approx(0.0, abs=1e-9)
 
 
-def test_dnpf_law_seed003():
+def test_dnpf_law_abb_m19s():
     d = DNPF.from_dict({"q_h": 0.004, "tau_st": 0.95, "epsilon": 0.05, "kd": 0.0})
     assert d.kp == pytest.approx(250.0)  # continuous at |e| = Q_h
     assert d.proportional(0.001) == pytest.approx(1.0)  # constant tau_st + eps inside Q_h
@@ -108,7 +108,7 @@ def test_sliding_mode_and_relay():
     b = SlidingMode.from_dict({"lambda": 10.0, "gain": 2.0, "boundary_layer": 0.2})
     assert b.compute(0.01, 0.0, (0, 0, 0), (0, 0), 1e-3).friction_feedback == pytest.approx(1.0)
     # Chatterjee et al. 2017 A-T7
-    assert list(seed000_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]
+    assert list(sliding_mode_relay([0.02, 0.01, 0.005, -0.01, -0.05])) == [0.9, 0.9, 1.0, 1.1, 1.1]
 
 
 def test_compensator_sources_gain_smoothing():

@@ -16,7 +16,8 @@ import numpy as np
 
 
 def _start(out):
-    """friction-experiment (quick, seed004, lockstep) writing to ``out``; its output is read line by line."""
+    """friction-experiment (quick, seed004_dc_motor, lockstep) writing to ``out``; its output is read
+    line by line."""
     cmd = [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", "--preset",
            "seed004_dc_motor", "--mode", "lockstep", "-o", str(out), "--timeout", "120"]  # fmt: skip
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -98,7 +98,7 @@ def test_scalar_steady_state_equals_the_vectorised_one(name):
         assert isinstance(m.steady_scalar(x), float)
 
 
-def test_stribeck_family_seed004_eq5_and_lorentzian_eq7():
+def test_stribeck_family_ai_chapter_eq5_and_lorentzian_eq7():
     fc, fs, vs, fv = 0.3, 0.5, 0.1, 0.02
     t = make_model("tustin", fc=fc, fs=fs, vs=vs, fv=fv)
     g = make_model("gaussian", fc=fc, fs=fs, vs=vs, fv=fv)
@@ -116,7 +116,7 @@ def test_stribeck_family_seed004_eq5_and_lorentzian_eq7():
     assert t.torque(50.0) == pytest.approx(fc + fv * 50.0)
 
 
-def test_seed003_stribeck_eps_zone_extract_E11():
+def test_abb_m19s_stribeck_eps_zone_extract_E11():
     eps = 1e-4
     m = make_model("stribeck_eps", fc=0.8, fs=0.95, vs=0.05, delta=2.0, fv=0.01, eps=eps)
     assert m.torque(0.0) == 0.0
@@ -128,7 +128,7 @@ def test_seed003_stribeck_eps_zone_extract_E11():
     np.testing.assert_allclose(m.torque(-v), -m.torque(v))
 
 
-def test_seed001_identified_exponential_model_table():
+def test_ga_thesis_identified_exponential_model_table():
     m = make_model("ga_exponential", fs=1.5281, gamma=4.3743, delta=0.1992, fc=0.3303, sigma=0.0588)
     table = {
         1e-9: 1.5025,
@@ -431,7 +431,7 @@ def test_validation_errors_name_parameter_and_range():
         m.simulate_batch(pm[:, :3], np.zeros(5), 1e-3)
 
 
-def test_seed000_gear_mesh_regression_A_T1_and_A_T3():
+def test_chatterjee_gear_mesh_regression_A_T1_and_A_T3():
     r = spur_gear_dte()
     i = int(np.argmax(r["delta"]))
     assert r["delta"][i] == pytest.approx(0.58166, abs=2e-5)

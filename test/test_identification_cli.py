@@ -29,7 +29,7 @@ def _record(t, pos, eff, events=None):
 
 @pytest.fixture(scope="module")
 def small_bag(tmp_path_factory):
-    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.abb_m19s_excitation_experiment(12.0, low=0.05)
     return plant_runs.write_bag(tmp_path_factory.mktemp("cli") / "run", rec)
 
 
@@ -110,7 +110,7 @@ def test_too_little_excitation(tmp_path, capsys):
 
 
 def test_bag_without_effort_needs_current(tmp_path, capsys):
-    rec = plant_runs.seed003_experiment(3.0)
+    rec = plant_runs.abb_m19s_excitation_experiment(3.0)
     bag = plant_runs.write_bag(tmp_path / "noeff", rec, with_effort=False)
     _expect_error([str(bag), "--joint", "joint1", "--quiet"], capsys, "no effort", "--torque-constant")
 
@@ -297,7 +297,7 @@ def test_a_truncated_bag_is_fitted_with_a_warning(small_bag, tmp_path, capsys):
 
 def test_positions_all_nan_are_fitted_from_the_velocity_field_and_said_so(tmp_path, capsys):
     """The report names the velocity source it used and knows no encoder resolution (item 10)."""
-    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.abb_m19s_excitation_experiment(12.0, low=0.05)
     rec = dataclasses.replace(rec, position=np.full_like(rec.position, np.nan))
     bag = plant_runs.write_bag(tmp_path / "nanpos", rec, extra_joint=None)
     rc = main([str(bag), "--models", "coulomb", "--out", str(tmp_path / "f"), "--no-plots", "--quiet"])
@@ -311,7 +311,7 @@ def test_positions_all_nan_are_fitted_from_the_velocity_field_and_said_so(tmp_pa
 
 def test_a_model_that_explains_little_is_not_recommended_silently(tmp_path, capsys):
     """Torque that is pure noise: whatever wins says it explains little (validation NMSE > 30 %)."""
-    rec = plant_runs.seed003_experiment(12.0, low=0.05)
+    rec = plant_runs.abb_m19s_excitation_experiment(12.0, low=0.05)
     rng = np.random.default_rng(0)
     noise = rng.normal(0.0, 1.0, rec.effort.shape)
     rec = dataclasses.replace(rec, effort=noise)

@@ -26,7 +26,7 @@ def gms_fit(tmp_path_factory):
     With the default 1 rad/s (peaks 2.6 rad/s) the viscous coefficient was extrapolated ~6x and
     alone cost the large-stroke round trip a factor 2-4."""
     d = tmp_path_factory.mktemp("gms")
-    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
+    rec = plant_runs.abb_m19s_excitation_experiment(16.0, low=0.05, high=5.0, overrides=NOISY)
     bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
@@ -50,7 +50,7 @@ def test_gms4_nmse_at_or_below_table1(gms_fit):
     assert abs(c["J"] / 0.0012 - 1) < 0.10  # ABB M19-S paper: identified J within 10 %
 
 
-def test_seed003_ordering_low_velocity(gms_fit):
+def test_abb_m19s_ordering_low_velocity(gms_fit):
     _, res, _ = gms_fit
     low = {n: r.metrics["nmse_low_percent"] for n, r in res.models.items()}
     assert low["coulomb"] > low["stribeck"] > low["lugre"] > low["gms4"], low
@@ -193,18 +193,18 @@ def test_round_trip_within_10_percent_of_truth_over_references(round_trip):
         assert abs(rms["fitted"] / rms["truth"] - 1) <= 0.10, (amp, rms, r["per_seed"])
 
 
-def _benchmark_truth003() -> dict:
-    """The ABB M19-S paper truth of the compensation benchmark (bench/compensation.py TRUTH003): the
-    preset's GMS-4 with presliding micro-damping sigma1 = 0.86 N*m*s/rad."""
+def _benchmark_damped_truth() -> dict:
+    """The ABB M19-S paper truth of the compensation benchmark (bench/compensation.py
+    ABB_M19S_DAMPED_TRUTH): the preset's GMS-4 with presliding micro-damping sigma1 = 0.86 N*m*s/rad."""
     from friction_ros.core.presets import load_preset
 
     return dict(load_preset("abb_m19s").friction.to_config(), sigma1=0.86)
 
 
 def _round_trip_damped(out) -> dict:
-    """bench/compensation.py Tables 2/3 exactly: the damped truth plant (TRUTH003, 0.1 ms current
-    loop), PD Kp = 200, Kd = 0.15, 1 kHz, 40 s band-limited random reference seed 1."""
-    return _round_trip_benchmark_length(out, _benchmark_truth003(), none=True)
+    """bench/compensation.py Tables 2/3 exactly: the damped truth plant (ABB_M19S_DAMPED_TRUTH, 0.1 ms
+    current loop), PD Kp = 200, Kd = 0.15, 1 kHz, 40 s band-limited random reference seed 1."""
+    return _round_trip_benchmark_length(out, _benchmark_damped_truth(), none=True)
 
 
 @pytest.fixture(scope="module")
@@ -212,8 +212,8 @@ def damped_fit(tmp_path_factory):
     """As ``gms_fit`` (16 s, 10 s train) but recorded from the benchmark's damped truth and fitted
     with the damped GMS-4 (``gms4d``); the parameter file carries sigma1."""
     d = tmp_path_factory.mktemp("gms_damped")
-    truth = _benchmark_truth003()
-    rec = plant_runs.seed003_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
+    truth = _benchmark_damped_truth()
+    rec = plant_runs.abb_m19s_excitation_experiment(16.0, low=0.05, high=5.0, friction=truth, overrides=NOISY)
     bag = plant_runs.write_bag(d / "bag", rec)
     res = fit_bag(
         bag,
@@ -233,7 +233,7 @@ def test_damped_gms_fit_recovers_presliding_damping(damped_fit):
     parameter file carries sigma1 and the controller's GMS loads it."""
     res, out, _ = damped_fit
     c = res.models["gms4d"].coefficients
-    truth = _benchmark_truth003()
+    truth = _benchmark_damped_truth()
     assert abs(c["sigma1"] / truth["sigma1"] - 1) < 0.20, c  # measured -13 %
     assert abs(sum(c["k"]) / sum(truth["k"]) - 1) < 0.10, c  # measured -3 %
     assert abs(c["J"] / 0.0012 - 1) < 0.05, c
@@ -317,7 +317,7 @@ def test_lugre_sigma_recovery_within_15_percent():
         "vs": 0.05,
         "delta": 2.0,
     }
-    rec = plant_runs.seed003_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
+    rec = plant_runs.abb_m19s_excitation_experiment(11.5, low=0.05, friction=truth, overrides=NOISY)
     d = prepare(rec.t, rec.position, rec.velocity, rec.effort)
     res = fit_records(
         d, ["lugre"], identifiability_check=False, train_window="first"

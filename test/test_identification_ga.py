@@ -10,7 +10,7 @@ import pytest
 from friction_ros.core.identification.fit import ga
 
 # ------------------------------------------------------------------------------ item 6: mechanics
-from friction_ros.core.synthetic import seed001
+from friction_ros.core.synthetic import ga_thesis_loop
 
 
 # ------------------------------------------------------------------------------ item 6: mechanics
@@ -119,28 +119,28 @@ def test_fit_never_increases_per_parent_and_termination():
 
 # ------------------------------------------------------------------------------ item 5: self-recovery
 @pytest.fixture(scope="module")
-def seed001_run():
-    u = seed001.chirp_input(100.0)  # shortened from 300 s (test budget); h = 5 ms sub-steps
-    theta = seed001.simulate(seed001.THESIS, u, substeps=2)
-    res = seed001.fit(u, theta, substeps=2, max_generations=150, stagnation=10**6, seed=1)
+def ga_thesis_run():
+    u = ga_thesis_loop.chirp_input(100.0)  # shortened from 300 s (test budget); h = 5 ms sub-steps
+    theta = ga_thesis_loop.simulate(ga_thesis_loop.THESIS, u, substeps=2)
+    res = ga_thesis_loop.fit(u, theta, substeps=2, max_generations=150, stagnation=10**6, seed=1)
     return u, theta, res
 
 
-def test_ga_self_recovery_item5(seed001_run):
-    _u, _theta, res = seed001_run
-    P, T = res.best, seed001.THESIS
+def test_ga_self_recovery_item5(ga_thesis_run):
+    _u, _theta, res = ga_thesis_run
+    P, T = res.best, ga_thesis_loop.THESIS
     assert abs(P[5] / T[5] - 1) < 0.05  # J_m within 5 %
     assert abs((P[4] + P[6]) / (T[4] + T[6]) - 1) < 0.20  # sigma + B_m within 20 %
     v = np.concatenate([np.geomspace(0.05, 3.0, 40), -np.geomspace(0.05, 3.0, 40)])
-    rel = np.abs(seed001.friction_curve(P, v) / seed001.friction_curve(T, v) - 1)
+    rel = np.abs(ga_thesis_loop.friction_curve(P, v) / ga_thesis_loop.friction_curve(T, v) - 1)
     assert rel.max() < 0.10  # total curve F + B_m v within 10 % over 0.05..3 rad/s
     H = np.array(res.parent_history)
     assert np.all(np.diff(H, axis=0) <= 0)  # item 5 (a): monotone per Parent
 
 
-def test_sigma_and_bm_flagged_collinear(seed001_run):
-    u, theta, _ = seed001_run
-    rep = seed001.identifiability_report(seed001.THESIS, u, theta)
+def test_sigma_and_bm_flagged_collinear(ga_thesis_run):
+    u, theta, _ = ga_thesis_run
+    rep = ga_thesis_loop.identifiability_report(ga_thesis_loop.THESIS, u, theta)
     assert set(rep["not_identifiable"]) == {"sigma", "B_m"}
     nd = rep["collinear_groups"][0]["null_direction"]
     assert nd["sigma"] * nd["B_m"] < 0  # only the sum sigma + B_m is determined

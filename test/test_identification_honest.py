@@ -247,7 +247,7 @@ def test_breakaway_on_a_compliant_joint_is_within_5_percent(with_events):
 def test_training_chunks_by_content_span_speeds_and_reversals_in_both_sets():
     from friction_ros.core.synthetic import plant_runs
 
-    rec = plant_runs.seed003_experiment(40.0)
+    rec = plant_runs.abb_m19s_excitation_experiment(40.0)
     d = prepare(rec.t, rec.position, None, rec.effort)
     segs = training_segments(d, 10.0)
     train = np.zeros(d.n, bool)

@@ -27,7 +27,7 @@ BAD_LUGRE = {
     "delta": 2.0,
 }
 BAD_STRIBECK = {"model": "stribeck", "fc": 0.8, "fs": 0.95, "vs": 0.05, "delta": 2.0}
-SEED003_PD = {"p": 200.0, "d": 0.15}
+ABB_M19S_PD_GAINS = {"p": 200.0, "d": 0.15}
 REF = {"type": "band_limited_random", "amplitude": 0.05, "cutoff": 1.0, "duration": 10.0, "seed": 1}
 COUNT = 2.0 * math.pi / 60000.0  # abb_m19s: 20000 cpr at the motor x encoder_ratio 3
 
@@ -38,7 +38,7 @@ def unbounded(monkeypatch):
     monkeypatch.setattr(FrictionCompensator, "_apply_bound", lambda self, kp, kd: "")
 
 
-def _run(model, source, gains=SEED003_PD, ref=REF, duration=10.0, detect=True):
+def _run(model, source, gains=ABB_M19S_PD_GAINS, ref=REF, duration=10.0, detect=True):
     cfg = {"mode": "pid", "pid": gains, "inertia": 0.0012, "limit_cycle_detection": detect}
     if source != "none":
         cfg["friction"] = {"model": model, "source": source}
@@ -92,13 +92,19 @@ def test_the_detector_does_not_fire_on_normal_tracking(ref):
     truth = preset.friction.to_config()
     tuned = tracking_gains(JointScale.from_preset(preset))
     cases = [
-        (g, truth, s) for g in (tuned, SEED003_PD) for s in ("none", "feedforward", "feedback", "blended")
+        (g, truth, s)
+        for g in (tuned, ABB_M19S_PD_GAINS)
+        for s in ("none", "feedforward", "feedback", "blended")
     ]
     cases += [
-        (SEED003_PD, BAD_LUGRE, s) for s in ("feedforward", "feedback", "blended", "observer")
+        (ABB_M19S_PD_GAINS, BAD_LUGRE, s) for s in ("feedforward", "feedback", "blended", "observer")
     ]  # bounded
     for gains, model, source in cases:
-        if ref["type"] == "step" and gains is SEED003_PD and source in ("feedback", "blended", "observer"):
+        if (
+            ref["type"] == "step"
+            and gains is ABB_M19S_PD_GAINS
+            and source in ("feedback", "blended", "observer")
+        ):
             # documented limit: the ABB M19-S paper PD has damping ratio Kd / (2 sqrt(Kp J)) = 0.15 here;
             # feedback compensation removes the friction that damped its step response, which then
             # rings at +-35 mrad, ~50 Hz, for ~0.15 s: the detector takes that for a limit cycle
@@ -168,7 +174,7 @@ def test_the_node_reports_the_fallback_as_diagnostic_error_and_one_log_line(tmp_
                 "ros__parameters": {
                     "mode": "pid",
                     "effort_limit": 4.9,
-                    "pid": SEED003_PD,
+                    "pid": ABB_M19S_PD_GAINS,
                     "inertia": 0.0012,
                     "compensation": {"source": "feedback"},
                     "friction": BAD_STRIBECK,

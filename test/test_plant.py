@@ -97,7 +97,7 @@ def test_current_loop_lag_and_limits():
     assert out["true_motor_current"].max() == pytest.approx(1.5)
 
 
-def test_voltage_mode_reproduces_seed004_transfer_function_E113():
+def test_voltage_mode_reproduces_ai_chapter_transfer_function_E113():
     cfg = voltage_params_from_transfer_function(275.0, 0.1009)
     pl = GearheadServoPlant(PlantParams(**cfg))
     u = 0.01
@@ -179,7 +179,7 @@ def test_sensing_quantisation_filter_noise_delay_and_seed():
     np.testing.assert_allclose(c["true_position"][3:], b["true_position"][:-3])
 
 
-def test_seed004_current_sensor_calibration_E110():
+def test_ai_chapter_current_sensor_calibration_E110():
     assert current_from_sensor_voltage(2.531) == pytest.approx(0.22787, abs=1e-5)
     assert current_from_sensor_voltage(2.475) == pytest.approx(-0.21204, abs=1e-5)
     assert current_from_sensor_voltage(2.50199) == pytest.approx(0.0, abs=1e-4)

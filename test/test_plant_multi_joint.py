@@ -69,7 +69,7 @@ def test_per_joint_presets_and_sections_lie_over_the_node_level_values():
     assert b.params.gear_ratio == gear.params.gear_ratio == 10.0
     assert b.friction_motor["fc"] == 0.5 and b.friction_load.name == gear.friction_load.name
     assert c.friction_motor.name == "coulomb_viscous" and c.friction_motor["fc"] == 0.3
-    assert {p.control_period for p in (a, b, c)} == {0.001}  # the node's period, not seed000's own
+    assert {p.control_period for p in (a, b, c)} == {0.001}  # the node's period, not seed000_gearhead's own
 
 
 def test_one_joint_is_the_node_preset_with_its_sections():

@@ -30,7 +30,7 @@ def test_every_preset_loads_round_trips_and_runs(tmp_path):
         load_preset("nope")
 
 
-def test_abb_m19s_values_seed003():
+def test_abb_m19s_preset_values():
     pr = load_preset("abb_m19s")
     p, g = pr.params, pr.friction
     assert p.motor_inertia == 0.0012 and p.torque_constant == 0.49
@@ -41,7 +41,7 @@ def test_abb_m19s_values_seed003():
     assert g.virgin_curve(0.01) == pytest.approx(0.95)  # static friction
 
 
-def test_seed002_B_T1_to_B_T3_inertia_coulomb_gravity():
+def test_tilakaratna_B_T1_to_B_T3_inertia_coulomb_gravity():
     expect_j = {"x": 2.3833e-4, "y": 2.9351e-4, "z": 1.2988e-4}
     mass = {"x": 35, "y": 85, "z": 23}
     expect_tc = {"x": 0.04554, "y": 0.1106, "z": 0.01768}
@@ -73,7 +73,7 @@ def _pi_step(params, kp, ki, n=10000, dt=1e-3):
     return e_hist, v_hist
 
 
-def test_seed002_B_T6_p_control_dead_band():
+def test_tilakaratna_B_T6_p_control_dead_band():
     p = load_preset("seed002_x").params.replace(measurement_delay=0.0)
     kp = 0.3
     e, v = _pi_step(p, kp, 0.0, n=4000)
@@ -84,7 +84,7 @@ def test_seed002_B_T6_p_control_dead_band():
     assert abs(e[-1]) / count == pytest.approx(tc / kp / count, abs=1.5)  # ~21 counts for Kp = 0.3
 
 
-def test_seed002_B_T8_hunting_needs_stiction_above_coulomb():
+def test_tilakaratna_B_T8_hunting_needs_stiction_above_coulomb():
     base = load_preset("seed002_x").params.replace(
         measurement_delay=0.0, encoder_cpr=0, motor_damping=0.01, current_time_constant=0.0
     )
@@ -98,7 +98,7 @@ def test_seed002_B_T8_hunting_needs_stiction_above_coulomb():
     assert starts(v_s[-5000:]) >= 5 and np.max(np.abs(e_s[-5000:])) > 0.01  # stiction + PI hunts
 
 
-def test_seed001_identified_exponential_model_resimulated_section9():
+def test_ga_thesis_identified_exponential_model_resimulated_section9():
     pr = load_preset("seed001_harmonic_drive")
     dt = pr.control_period
     res = {}
@@ -125,7 +125,7 @@ def test_seed001_identified_exponential_model_resimulated_section9():
     assert abs(res[True][0] - 2.231) / 2.231 < 0.12
 
 
-def test_seed004_preset_asymmetric_stiction_and_voltage_plant():
+def test_seed004_dc_motor_preset_asymmetric_stiction_and_voltage_plant():
     pr = load_preset("seed004_dc_motor")
     f = pr.friction
     kt = pr.params.torque_constant

@@ -12,7 +12,7 @@ from friction_ros.core.control.schemes import (
     describing_damping,
     describing_stiffness,
     maxwell_virgin_curve,
-    seed000_relay,
+    sliding_mode_relay,
 )
 
 __all__ = [
@@ -33,5 +33,5 @@ __all__ = [
     "describing_damping",
     "describing_stiffness",
     "maxwell_virgin_curve",
-    "seed000_relay",
+    "sliding_mode_relay",
 ]

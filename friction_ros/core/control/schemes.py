@@ -9,7 +9,8 @@
   integrating baseline).
 * :class:`SlidingMode` Chatterjee et al. 2017 A.5.1 (b)-(d): ``S = e_dot + lambda e``,
   ``u = J_hat lambda e_dot + k_s S + M sat(S / phi)`` (phi = 0: relay ``M sign(S)``).
-* :func:`seed000_relay` Chatterjee et al. 2017 A.5.2 (``f_motor_smc.m``): ``u = u0 - du sign_dz(x; band)``.
+* :func:`sliding_mode_relay` Chatterjee et al. 2017 A.5.2 (``f_motor_smc.m``):
+  ``u = u0 - du sign_dz(x; band)``.
 
 Every scheme has ``compute(e, e_dot, ref, meas, dt) -> SchemeOutput`` and ``reset()``.
 """
@@ -410,7 +411,7 @@ class SlidingMode(_Scheme):
         )
 
 
-def seed000_relay(x, nominal: float = 1.0, amplitude: float = 0.1, deadband: float = 0.01):
+def sliding_mode_relay(x, nominal: float = 1.0, amplitude: float = 0.1, deadband: float = 0.01):
     """Chatterjee et al. 2017 A.5.2 ``f_motor_smc.m``: u = nominal - amplitude if x >= deadband,
     nominal + amplitude if x <= -deadband, else nominal (x: model-predicted friction signal)."""
     x = np.asarray(x, dtype=float)

@@ -43,7 +43,7 @@ import numpy as np
 
 from friction_ros.core.experiment.reference_base import Reference, _pwl_velocity
 from friction_ros.core.experiment.seed_references import (  # noqa: F401 (re-exported)
-    SEED001_PARABOLA_TABLE,
+    GA_THESIS_PARABOLA_TABLE,
     BandLimitedRandom,
     Chirp,
     Parabola,
@@ -60,7 +60,7 @@ __all__ = [
     "REFERENCE_TYPES",
     "Reference",
     "reference_from_config",
-    "SEED001_PARABOLA_TABLE",
+    "GA_THESIS_PARABOLA_TABLE",
 ]
 
 

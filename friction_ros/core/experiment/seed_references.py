@@ -18,7 +18,7 @@ from .butterworth import butter_lowpass_sos, sosfilt
 from .reference_base import Reference, _pwl_velocity
 
 #: GA friction thesis 2002 App. C Table C.1: (dt [s], dA [rad], end time [s]); dt = dA = 0 is a hold.
-SEED001_PARABOLA_TABLE: tuple[tuple[float, float, float], ...] = (
+GA_THESIS_PARABOLA_TABLE: tuple[tuple[float, float, float], ...] = (
     (3.5, 1.0, 7.0),
     (3.5, 1.0, 14.0),
     (3.5, 1.0, 21.0),
@@ -178,7 +178,7 @@ class Parabola(Reference):
 
     def __init__(self, sections=None, **kw):
         super().__init__(**kw)
-        rows = SEED001_PARABOLA_TABLE if sections is None else sections
+        rows = GA_THESIS_PARABOLA_TABLE if sections is None else sections
         tk, vk = [0.0], [0.0]
         t = 0.0
         clean = []

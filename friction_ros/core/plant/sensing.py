@@ -23,16 +23,20 @@ import numpy as np
 from friction_ros.core.plant.params import PlantParams
 
 # AI friction chapter eq. (13): I_s = 7.8555 V_s - 19.6544
-SEED004_SENSOR_GAIN = 7.8555
-SEED004_SENSOR_OFFSET = -19.6544
+AI_CHAPTER_CURRENT_SENSOR_GAIN = 7.8555
+AI_CHAPTER_CURRENT_SENSOR_OFFSET = -19.6544
 
 
-def current_from_sensor_voltage(v, gain: float = SEED004_SENSOR_GAIN, offset: float = SEED004_SENSOR_OFFSET):
+def current_from_sensor_voltage(
+    v, gain: float = AI_CHAPTER_CURRENT_SENSOR_GAIN, offset: float = AI_CHAPTER_CURRENT_SENSOR_OFFSET
+):
     """Current-sensor calibration of AI friction chapter eq. (13): I = gain * V + offset [A]."""
     return gain * np.asarray(v, dtype=float) + offset
 
 
-def sensor_voltage_from_current(i, gain: float = SEED004_SENSOR_GAIN, offset: float = SEED004_SENSOR_OFFSET):
+def sensor_voltage_from_current(
+    i, gain: float = AI_CHAPTER_CURRENT_SENSOR_GAIN, offset: float = AI_CHAPTER_CURRENT_SENSOR_OFFSET
+):
     """Inverse of :func:`current_from_sensor_voltage`: V = (I - offset) / gain [V]."""
     return (np.asarray(i, dtype=float) - offset) / gain
 

@@ -5,7 +5,7 @@ benchmarks fit what it generates and compare with its truth.
 
 ``plant_runs`` (known-truth runs of the simulated plant: ABB M19-S paper excitation, plateaus, as
 records or bags), ``realistic_joint`` with ``joint_truth`` (a realistic robot joint: gravity,
-load-dependent and rippling friction, noise), ``seed001`` with ``seed001_kernels`` (GA friction
-thesis 2002's unity-feedback loop and its GA fit) and ``logs`` (seeded logs of the machines users
+load-dependent and rippling friction, noise), ``ga_thesis_loop`` with ``ga_thesis_loop_kernels`` (GA
+friction thesis 2002's unity-feedback loop and its GA fit) and ``logs`` (seeded logs of the machines users
 bring: the gauntlet of friction-fit).
 """

@@ -1,7 +1,7 @@
 """Known-truth identification records from the simulated plant (tests, benchmarks, demos).
 
-``seed003_experiment`` runs ABB M19-S paper's identification excitation (A.3) on a plant preset
-(default ``abb_m19s``: J = 0.0012 kg m^2, GMS-4 truth, 1.05e-4 rad encoder, current noise) in
+``abb_m19s_excitation_experiment`` runs ABB M19-S paper's identification excitation (A.3) on a plant
+preset (default ``abb_m19s``: J = 0.0012 kg m^2, GMS-4 truth, 1.05e-4 rad encoder, current noise) in
 closed velocity loop at 1 kHz:
 
     v_ref(t) = e(t) r(t),  r = 4th-order Butterworth (4 Hz) band-limited white noise, unit RMS,
@@ -43,7 +43,9 @@ class Record:
     torque_constant: float = 1.0
 
 
-def seed003_velocity(duration: float, dt: float, high: float, low: float, seed: int = 3) -> np.ndarray:
+def abb_m19s_excitation_velocity(
+    duration: float, dt: float, high: float, low: float, seed: int = 3
+) -> np.ndarray:
     """ABB M19-S paper's excitation velocity (module docstring)."""
     n = int(round(duration / dt))
     t = np.arange(n) * dt
@@ -132,7 +134,7 @@ def run_velocity_loop(
     )
 
 
-def seed003_experiment(
+def abb_m19s_excitation_experiment(
     duration: float = 50.0,
     dt: float = 1e-3,
     *,
@@ -144,7 +146,7 @@ def seed003_experiment(
     overrides: dict | None = None,
 ) -> Record:
     """ABB M19-S paper's identification run (50 s at 1 kHz by default) on a plant preset."""
-    v = seed003_velocity(duration, dt, high, low, seed)
+    v = abb_m19s_excitation_velocity(duration, dt, high, low, seed)
     ev = [Event(0.0, "random", "seed003", 0, START, math.nan), Event(duration, "random", "seed003", 0, END)]
     return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=ev)
 

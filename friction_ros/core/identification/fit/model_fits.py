@@ -44,9 +44,9 @@ def learning_data(plateaus, train, J, eps):
 
 #: a breakaway reading is used only when the ramp's stated detection lag (an upper bound: one step
 #: plus the excess torque that moves 2 counts within a step, no Stribeck drop assumed) is below
-#: this share of it; sized ramps state 0.6-1 % (abb_m19s, seed001, seed004), 8-28 % (seed002, whose
-#: readings were within 0.3 % of the truth) and 250 % (seed000's 60-count encoder behind a damped
-#: voltage drive: readings 2.7 times the friction level)
+#: this share of it; sized ramps state 0.6-1 % (abb_m19s, seed001_harmonic_drive, seed004_dc_motor),
+#: 8-28 % (seed002_x/y/z, whose readings were within 0.3 % of the truth) and 250 % (seed000_gearhead's
+#: 60-count encoder behind a damped voltage drive: readings 2.7 times the friction level)
 BREAKAWAY_LAG_SHARE = 0.5
 
 

@@ -1,4 +1,4 @@
-"""Compiled (numba) kernels of GA friction thesis 2002's unity-feedback loop (:mod:`.seed001`).
+"""Compiled (numba) kernels of GA friction thesis 2002's unity-feedback loop (:mod:`.ga_thesis_loop`).
 
 Plant (thesis eqs. 20-21): ``J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi')``, explicit-Euler
 sub-steps (GA friction thesis 2002 section 9 item 4); fitness eq. (17) over a GA population.
@@ -26,7 +26,7 @@ def exp_friction(w, f_st, gamma, delta, f_kmin, sigma):
 
 
 @njit(cache=True)
-def seed001_simulate(P, u, substeps, h):
+def ga_thesis_loop_simulate(P, u, substeps, h):
     """Simulated output phi[k] of GA friction thesis 2002's loop J_m phi'' + B_m phi' = (u - phi) - F_Exp(phi').
 
     P = [F_ST, gamma, delta, F_kmin, sigma, J_m, B_m]; u is held over each sample (ZOH) and
@@ -48,7 +48,7 @@ def seed001_simulate(P, u, substeps, h):
 
 
 @njit(cache=True, parallel=True)
-def seed001_fit_batch(P, u, theta, substeps, h):
+def ga_thesis_loop_fit_batch(P, u, theta, substeps, h):
     """GA friction thesis 2002 eq. (17) Fit = sum_k (theta[k] - phi[k])^2 for every row of P (inf if invalid)."""
     npop = P.shape[0]
     n = u.shape[0]

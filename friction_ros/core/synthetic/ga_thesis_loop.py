@@ -23,7 +23,10 @@ import numpy as np
 
 from friction_ros.core.identification.fit import identifiability
 from friction_ros.core.identification.fit.ga import GAResult, run_ga
-from friction_ros.core.synthetic.seed001_kernels import seed001_fit_batch, seed001_simulate
+from friction_ros.core.synthetic.ga_thesis_loop_kernels import (
+    ga_thesis_loop_fit_batch,
+    ga_thesis_loop_simulate,
+)
 
 GENES = ["F_ST", "gamma", "delta", "F_kmin", "sigma", "J_m", "B_m"]
 #: Tables 5.2 / 5.3 of the thesis (GA friction thesis 2002 section 5)
@@ -38,7 +41,7 @@ def chirp_input(duration: float = 200.0, dt: float = 0.01) -> np.ndarray:
 
 def simulate(P, u, dt: float = 0.01, substeps: int = 10) -> np.ndarray:
     """Simulated position phi[k] for genes P on input u (ZOH, explicit-Euler sub-steps)."""
-    return seed001_simulate(np.asarray(P, float), np.asarray(u, float), substeps, dt / substeps)
+    return ga_thesis_loop_simulate(np.asarray(P, float), np.asarray(u, float), substeps, dt / substeps)
 
 
 def fit(u, theta, dt: float = 0.01, substeps: int = 10, **ga_options) -> GAResult:
@@ -50,7 +53,9 @@ def fit(u, theta, dt: float = 0.01, substeps: int = 10, **ga_options) -> GAResul
     opts.update(ga_options)
     lo = np.full(7, 0.01)
     hi = np.full(7, 1.5)
-    return run_ga(lambda P: seed001_fit_batch(np.ascontiguousarray(P), u, theta, substeps, h), lo, hi, **opts)
+    return run_ga(
+        lambda P: ga_thesis_loop_fit_batch(np.ascontiguousarray(P), u, theta, substeps, h), lo, hi, **opts
+    )
 
 
 def friction_curve(P, v) -> np.ndarray:
