@@ -29,7 +29,7 @@ Types (``type`` key):
 Time before ``start_time`` holds the initial value for every type.
 
 The base class is in :mod:`.reference_base`, the source documents' identification signals (band-limited
-random, chirp, parabola, random steps) in :mod:`.seed_references`.
+random, chirp, parabola, random steps) in :mod:`.source_references`.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from friction_ros.core.experiment.reference_base import Reference, _pwl_velocity
-from friction_ros.core.experiment.seed_references import (  # noqa: F401 (re-exported)
+from friction_ros.core.experiment.source_references import (  # noqa: F401 (re-exported)
     GA_THESIS_PARABOLA_TABLE,
     BandLimitedRandom,
     Chirp,

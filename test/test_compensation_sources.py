@@ -1,4 +1,4 @@
-"""Seed compensation experiments (shortened runs of bench/compensation.py): orderings and thresholds.
+"""The source documents' compensation experiments (shortened runs of bench/compensation.py): orderings and thresholds.
 
 Goals of issue 4 that the simulation does NOT reach are not asserted here; the benchmark prints
 their figures (see the report / README): the 0.4 rad PTP ranking (gain scheduling does not end
