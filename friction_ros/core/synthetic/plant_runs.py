@@ -147,7 +147,10 @@ def abb_m19s_excitation_experiment(
 ) -> Record:
     """ABB M19-S paper's identification run (50 s at 1 kHz by default) on a plant preset."""
     v = abb_m19s_excitation_velocity(duration, dt, high, low, seed)
-    ev = [Event(0.0, "random", "seed003", 0, START, math.nan), Event(duration, "random", "seed003", 0, END)]
+    ev = [
+        Event(0.0, "random", "abb_m19s_random", 0, START, math.nan),
+        Event(duration, "random", "abb_m19s_random", 0, END),
+    ]
     return run_velocity_loop(v, dt, preset=preset, friction=friction, overrides=overrides, events=ev)
 
 
