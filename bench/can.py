@@ -10,8 +10,9 @@ standard frames/s (~125 bit each with stuffing), i.e. at most ~2,660 such cycles
 
 Node CPU = CPU time (user + system, from /proc/self/task/*/stat) of every thread of the child
 process except the emulator's thread, over the measurement window (it starts ``WARM_UP_S`` after
-every drive is enabled and the loop runs, so no start-up work is in it), divided by wall time. So it includes the executor/control thread, the middleware's (Fast DDS) threads and any
-python-can thread, and also the node's side of the virtual bus: its ``send`` (python-can deep-copies
+every drive is enabled and the loop runs, so no start-up work is in it), divided by wall time. So
+it includes the executor/control thread, the middleware's (Fast DDS) threads and any python-can
+thread, and also the node's side of the virtual bus: its ``send`` (python-can deep-copies
 every frame into each receiver's queue, in the sender's thread; SocketCAN would spend a syscall there
 instead) and its ``recv`` calls. The emulator's own sends are charged to the emulator thread. Not
 counted: the parent (controller) process. The emulator shares the GIL with the node, which can only

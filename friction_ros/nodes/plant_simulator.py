@@ -144,6 +144,11 @@ class PlantSimulator(PlantHealth, ParameterNode):
         self._clock_ns = int(round(self.p["clock_period"] * 1e9))
         self.create_timer(self.p["diagnostics_period"], self._publish_diagnostics)
         self._subscribers_ready = not self.lockstep or self.p["wait_for_subscribers"] == 0
+        if not self._subscribers_ready:
+            self.get_logger().info(
+                f"lockstep: the first state waits for {self.p['wait_for_subscribers']} subscriber(s) "
+                "of joint_states (wait_for_subscribers)"
+            )
         if self.lockstep:
             self._last_publish = 0.0
             self.create_timer(self.p["resend_period"] / 4, self._resend)

@@ -30,6 +30,8 @@ from rclpy.qos import (
     qos_profile_sensor_data,
 )
 
+from friction_ros.core.bag.recording import subscription_qos
+
 COMMAND_QOS = QoSProfile(
     history=HistoryPolicy.KEEP_LAST,
     depth=1,
@@ -66,8 +68,6 @@ LATCHED_QOS = QoSProfile(
 def recording_qos(publishers, depth: int) -> QoSProfile:
     """A recorder's subscription QoS for a topic's publishers (``get_publishers_info_by_topic``):
     :func:`friction_ros.core.bag.recording.subscription_qos` of what they offer, as an rclpy profile."""
-    from friction_ros.core.bag.recording import subscription_qos
-
     offered = [
         (
             i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT,
