@@ -88,7 +88,7 @@ def run_group(
         stdout, stderr = group_run.communicate(timeout=1500)
         for name, r in reruns.items():  # the tracking runs again, from the group run's controller files
             summary = out / name / "demo_summary.json"
-            if tracking and summary.is_file():
+            if tracking and summary.is_file() and "none" in json.loads(summary.read_text()).get("runs", {}):
                 s = json.loads(summary.read_text())
                 r["duration"] = (s["runs"]["none"]["samples"] - 1) * s["control_period"]
                 # "best": the mode the demo found best for this preset

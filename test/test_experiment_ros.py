@@ -141,13 +141,23 @@ def test_bad_parameters_give_one_clear_line(tmp_path):
 
 # ---------------------------------------------------------------------------------------- failed runs
 def _experiment(tmp_path, *args, timeout=180):
-    return subprocess.run(
-        [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", *args],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        cwd=tmp_path,
-    )
+    """Run the CLI; past ``timeout`` it is stopped with SIGTERM (it then stops its nodes) before the
+    test fails, so that no node outlives the test and loads the rest of the suite."""
+    cmd = [sys.executable, "-m", "friction_ros.cli.experiment", "--profile", "quick", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        out, err = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        proc.terminate()
+        try:
+            out, err = proc.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            out, err = proc.communicate()
+        pytest.fail(
+            f"friction-experiment {' '.join(args)} ran past {timeout} s:\n{out[-3000:]}\n{err[-2000:]}"
+        )
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
 
 
 class _Joint:

@@ -351,6 +351,7 @@ def _run(args, specs, out: Path, created: str, timeout: float, joints, events: s
             status = "timeout"
             break
         if watch.seen:  # poll returns at once from now on: wait here, not in a busy loop
+            watch.close()  # once: the node is not needed any more
             stop.wait(0.05)
         elif not watch.poll(0.05) and time.monotonic() - t_started > state_timeout:
             status = "no_states"

@@ -9,10 +9,15 @@ decodes nothing and is destroyed as soon as the first message came.
 from __future__ import annotations
 
 import os
+import threading
 
 
 class FirstStateWatch:
-    """``poll(timeout)`` spins until the first message on ``topic`` (True once one came)."""
+    """``poll(timeout)`` waits up to ``timeout`` s for the first message on ``topic`` (True once one came).
+
+    The node spins in a daemon thread of its own, so that the caller's loop (and its wall-time limit)
+    never waits inside rclpy: ``poll`` and ``close`` return within their bounds whatever DDS does.
+    """
 
     def __init__(self, topic: str):
         import rclpy
@@ -22,7 +27,8 @@ class FirstStateWatch:
         from sensor_msgs.msg import JointState
 
         self.topic = topic
-        self.seen = False
+        self._seen = threading.Event()
+        self._done = threading.Event()
         self._context = rclpy.Context()
         rclpy.init(args=[], context=self._context, signal_handler_options=SignalHandlerOptions.NO)
         self._node = rclpy.create_node(
@@ -35,25 +41,40 @@ class FirstStateWatch:
         self._node.create_subscription(JointState, topic, self._on_state, qos, raw=True)
         self._executor = SingleThreadedExecutor(context=self._context)
         self._executor.add_node(self._node)
+        self._thread = threading.Thread(target=self._spin, name="state_watch", daemon=True)
+        self._thread.start()
+
+    @property
+    def seen(self) -> bool:
+        return self._seen.is_set()
 
     def _on_state(self, _raw: bytes) -> None:
-        self.seen = True
+        self._seen.set()
+
+    def _spin(self) -> None:
+        try:
+            while not (self._done.is_set() or self._seen.is_set()):
+                self._executor.spin_once(timeout_sec=0.05)
+        except Exception:  # the context was shut down under it: nothing more to watch
+            pass
 
     def poll(self, timeout: float) -> bool:
-        """Spin up to ``timeout`` s (or until a message came); True once the first state arrived."""
-        if not self.seen and self._node is not None:
-            self._executor.spin_once(timeout_sec=timeout)
-        if self.seen:
-            self.close()
-        return self.seen
+        """Wait up to ``timeout`` s (or until a message came); True once the first state arrived."""
+        return self._seen.wait(timeout)
 
-    def close(self) -> None:
+    def close(self, grace: float = 2.0) -> None:
+        """Stop the spin thread and destroy the node; a thread still inside rclpy after ``grace`` s is
+        left to the process's exit (it is a daemon) rather than waited for."""
         if self._node is None:
+            return
+        self._done.set()
+        self._thread.join(grace)
+        if self._thread.is_alive():
             return
         self._executor.remove_node(self._node)
         self._node.destroy_node()
         self._node = None
-        self._executor.shutdown()
+        self._executor.shutdown(timeout_sec=grace)
         self._context.try_shutdown()
 
 
