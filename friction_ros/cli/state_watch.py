@@ -65,8 +65,8 @@ class FirstStateWatch:
     def close(self, grace: float = 2.0) -> None:
         """Stop the spin thread and destroy the node; a thread still inside rclpy after ``grace`` s is
         left to the process's exit (it is a daemon) rather than waited for."""
-        if self._node is None:
-            return
+        if self._node is None or self._done.is_set():
+            return  # closed, or its thread is stuck and was left (one wait only)
         self._done.set()
         self._thread.join(grace)
         if self._thread.is_alive():
