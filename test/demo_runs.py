@@ -88,8 +88,8 @@ def run_group(
         stdout, stderr = group_run.communicate(timeout=1500)
         for name, r in reruns.items():  # the tracking runs again, from the group run's controller files
             summary = out / name / "demo_summary.json"
-            if tracking and summary.is_file() and "none" in json.loads(summary.read_text()).get("runs", {}):
-                s = json.loads(summary.read_text())
+            s = json.loads(summary.read_text()) if tracking and summary.is_file() else {}
+            if "none" in s.get("runs", {}):  # a preset whose run failed has no baseline to rerun
                 r["duration"] = (s["runs"]["none"]["samples"] - 1) * s["control_period"]
                 # "best": the mode the demo found best for this preset
                 r["labels"] = tuple(dict.fromkeys(s["best"] if m == BEST else m for m in tracking))
